@@ -1,0 +1,185 @@
+/*
+ * image.c — planar float buffers and the import/export between caller views
+ * (strided, float32 or float16, interleaved) and planes. Import is also where
+ * NaN/Inf input is caught, once, before any filter sees it.
+ */
+#include "core/image.h"
+
+#include "core/device.h"
+#include "core/half.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+float *hush__alloc_floats(size_t n) {
+  if (n == 0 || n > (SIZE_MAX - HUSH_ALIGN) / sizeof(float)) return NULL;
+  size_t bytes = (n * sizeof(float) + HUSH_ALIGN - 1) / HUSH_ALIGN * HUSH_ALIGN;
+  float *p = aligned_alloc(HUSH_ALIGN, bytes);
+  if (p) memset(p, 0, bytes);
+  return p;
+}
+
+void hush__free_floats(float *p) { free(p); }
+
+hush_status hush__planar_init(hush_device device, hush_planar *img, int channels, uint32_t width,
+                              uint32_t height) {
+  memset(img, 0, sizeof *img);
+  if (channels < 1 || channels > 4 || width == 0 || height == 0)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "planar image %dx%d with %d channels",
+                      (int)width, (int)height, channels);
+  const size_t n = (size_t)width * height;
+  for (int c = 0; c < channels; c++) {
+    img->plane[c] = hush__alloc_floats(n);
+    if (!img->plane[c]) {
+      hush__planar_free(img);
+      return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for a %ux%u image",
+                        width, height);
+    }
+  }
+  img->channels = channels;
+  img->width = width;
+  img->height = height;
+  return HUSH_OK;
+}
+
+void hush__planar_free(hush_planar *img) {
+  for (int c = 0; c < 4; c++) hush__free_floats(img->plane[c]);
+  memset(img, 0, sizeof *img);
+}
+
+int hush_format_channels(hush_format format) {
+  switch (format) {
+  case HUSH_FORMAT_FLOAT: case HUSH_FORMAT_HALF: return 1;
+  case HUSH_FORMAT_FLOAT2: case HUSH_FORMAT_HALF2: return 2;
+  case HUSH_FORMAT_FLOAT3: case HUSH_FORMAT_HALF3: return 3;
+  case HUSH_FORMAT_FLOAT4: case HUSH_FORMAT_HALF4: return 4;
+  default: return 0;
+  }
+}
+
+size_t hush__format_element_size(hush_format format) {
+  switch (format) {
+  case HUSH_FORMAT_FLOAT: case HUSH_FORMAT_FLOAT2: case HUSH_FORMAT_FLOAT3: case HUSH_FORMAT_FLOAT4:
+    return 4;
+  case HUSH_FORMAT_HALF: case HUSH_FORMAT_HALF2: case HUSH_FORMAT_HALF3: case HUSH_FORMAT_HALF4:
+    return 2;
+  default: return 0;
+  }
+}
+
+size_t hush_format_pixel_size(hush_format format) {
+  return hush__format_element_size(format) * (size_t)hush_format_channels(format);
+}
+
+size_t hush__view_pixel_stride(const hush_image_view *v) {
+  return v->pixel_stride ? v->pixel_stride : hush_format_pixel_size(v->format);
+}
+
+size_t hush__view_row_stride(const hush_image_view *v) {
+  return v->row_stride ? v->row_stride : (size_t)v->width * hush__view_pixel_stride(v);
+}
+
+hush_status hush__view_validate(hush_device device, const hush_image_view *v, const char *what,
+                                int min_channels, int exact) {
+  if (!v) return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "%s: view is NULL", what);
+  if (!v->data) return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "%s: data is NULL", what);
+  const int ch = hush_format_channels(v->format);
+  if (ch == 0)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "%s: invalid format %d", what,
+                      (int)v->format);
+  if (exact && ch != min_channels)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "%s: needs exactly %d channel(s), the view has %d", what, min_channels, ch);
+  if (ch < min_channels)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "%s: needs at least %d channel(s), the view has %d", what, min_channels, ch);
+  if (v->width == 0 || v->height == 0 || v->width > 65536 || v->height > 65536)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "%s: size %ux%u is outside 1..65536", what, v->width, v->height);
+  const size_t elem = hush__format_element_size(v->format);
+  const size_t ps = hush__view_pixel_stride(v);
+  const size_t rs = hush__view_row_stride(v);
+  if (ps % elem || rs % elem || v->byte_offset % elem)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "%s: strides and offset must be multiples of %zu bytes", what, elem);
+  if (ps < hush_format_pixel_size(v->format))
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "%s: pixel stride %zu is smaller than a pixel (%zu bytes)", what, ps,
+                      hush_format_pixel_size(v->format));
+  if (v->height > 1 && rs < ps * v->width)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "%s: row stride %zu is smaller than a row (%zu bytes): rows overlap", what,
+                      rs, ps * v->width);
+  return HUSH_OK;
+}
+
+static inline const char *pixel_at(const hush_image_view *v, size_t ps, size_t rs, uint32_t x,
+                                   uint32_t y) {
+  return (const char *)v->data + v->byte_offset + (size_t)y * rs + (size_t)x * ps;
+}
+
+hush_status hush__view_import(hush_device device, const hush_image_view *v, const char *what,
+                              hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced) {
+  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
+  const int half = hush__format_element_size(v->format) == 2;
+  const int nc = dst->channels;
+  const uint32_t w = v->width;
+  size_t bad = 0;
+  long first_bad = -1;
+  for (uint32_t y = 0; y < v->height; y++) {
+    float *out[4];
+    for (int c = 0; c < nc; c++) out[c] = dst->plane[c] + (size_t)y * w;
+    for (uint32_t x = 0; x < w; x++) {
+      const char *p = pixel_at(v, ps, rs, x, y);
+      for (int c = 0; c < nc; c++) {
+        float f;
+        if (half) {
+          uint16_t h;
+          memcpy(&h, p + 2 * c, 2);
+          f = hush__half_to_float(h);
+        } else {
+          memcpy(&f, p + 4 * c, 4);
+        }
+        out[c][x] = f;
+      }
+    }
+    /* Separate pass: keeps the copy loop free of branches. */
+    for (int c = 0; c < nc; c++)
+      for (uint32_t x = 0; x < w; x++)
+        if (!isfinite(out[c][x])) {
+          if (first_bad < 0) first_bad = (long)((size_t)y * w + x);
+          bad++;
+          out[c][x] = 0.0f;
+        }
+  }
+  if (replaced) *replaced = bad;
+  if (bad && policy == HUSH_NONFINITE_ERROR)
+    return hush__fail(device, HUSH_ERROR_NONFINITE,
+                      "%s: %zu NaN/Inf value(s), first at pixel (%ld, %ld); set nonfinite=replace "
+                      "to use 0 instead",
+                      what, bad, first_bad % (long)w, first_bad / (long)w);
+  return HUSH_OK;
+}
+
+void hush__view_export(const hush_planar *src, const hush_image_view *v) {
+  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
+  const int half = hush__format_element_size(v->format) == 2;
+  const int nc = src->channels;
+  const uint32_t w = v->width;
+  for (uint32_t y = 0; y < v->height; y++) {
+    char *row = (char *)v->data + v->byte_offset + (size_t)y * rs;
+    for (uint32_t x = 0; x < w; x++) {
+      char *p = row + (size_t)x * ps;
+      for (int c = 0; c < nc; c++) {
+        const float f = src->plane[c][(size_t)y * w + x];
+        if (half) {
+          const uint16_t h = hush__float_to_half(f);
+          memcpy(p + 2 * c, &h, 2);
+        } else {
+          memcpy(p + 4 * c, &f, 4);
+        }
+      }
+    }
+  }
+}

@@ -1,0 +1,71 @@
+/*
+ * image.h — planar float buffers (one 64-byte aligned plane per channel) and
+ * the conversion between caller views (strided, float or half, interleaved)
+ * and planes. Filters work on planes so their inner loops are plain,
+ * branch-free and vectorizable.
+ */
+#ifndef HUSH_CORE_IMAGE_H
+#define HUSH_CORE_IMAGE_H
+
+#include "hush.h"
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define HUSH_ALIGN 64
+
+/* 64-byte aligned allocation of n floats (zeroed); NULL on failure or n == 0.
+ * Free with hush__free_floats(). */
+float *hush__alloc_floats(size_t n);
+void hush__free_floats(float *p);
+
+/* A planar image: `channels` planes of width * height floats each, rows
+ * packed (plane[c][y * width + x]). Owned by whoever called hush__planar_init. */
+typedef struct hush_planar {
+  float *plane[4];
+  int channels;
+  uint32_t width, height;
+} hush_planar;
+
+/* Allocates zeroed planes. On failure returns HUSH_ERROR_OUT_OF_MEMORY
+ * (reported on device) and leaves *img empty. */
+hush_status hush__planar_init(hush_device device, hush_planar *img, int channels, uint32_t width,
+                              uint32_t height);
+void hush__planar_free(hush_planar *img);
+static inline size_t hush__planar_pixels(const hush_planar *img) {
+  return (size_t)img->width * img->height;
+}
+
+/* Element size of a format's channel (4 or 2), 0 if invalid. */
+size_t hush__format_element_size(hush_format format);
+
+/*
+ * Checks a view: non-NULL data, valid format, non-zero size, strides that are
+ * multiples of the element size, pixels that do not overlap, and the given
+ * channel count (at least min_channels, or exactly if exact). `what` names
+ * the image in the message ("color"). Returns HUSH_OK or reports on device.
+ */
+hush_status hush__view_validate(hush_device device, const hush_image_view *view, const char *what,
+                                int min_channels, int exact);
+
+/* Resolved strides (0 replaced by the packed values). */
+size_t hush__view_pixel_stride(const hush_image_view *view);
+size_t hush__view_row_stride(const hush_image_view *view);
+
+typedef enum hush_nonfinite_policy {
+  HUSH_NONFINITE_ERROR = 0,   /* report HUSH_ERROR_NONFINITE naming the pixel */
+  HUSH_NONFINITE_REPLACE = 1  /* write 0 instead and count it */
+} hush_nonfinite_policy;
+
+/*
+ * Copies the first dst->channels channels of a validated view into dst's
+ * planes (same size). NaN/Inf are handled by policy; *replaced (if not NULL)
+ * receives how many values were replaced.
+ */
+hush_status hush__view_import(hush_device device, const hush_image_view *view, const char *what,
+                              hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced);
+
+/* Copies src's planes into a validated view with src->channels channels. */
+void hush__view_export(const hush_planar *src, const hush_image_view *view);
+
+#endif

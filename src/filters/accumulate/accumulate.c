@@ -1,0 +1,262 @@
+/*
+ * accumulate.c — the "accumulate" filter: temporal accumulation only.
+ * Reprojects the history (camera matrices or motion vectors), tests each
+ * tap for consistency (depth, normal, id), blends with
+ * alpha = max(alpha_min, 1/age) and outputs the accumulated colour, the
+ * luminance variance from the accumulated moments and the history length.
+ * Optionally demodulates by the albedo before accumulating and remodulates
+ * after.
+ *
+ * Follows Dundr 2018 §4.1.3, Koskela et al. 2019 §3.2 and Higginson 2023
+ * §1.3 / §1.3.1; the work is done by src/temporal/ (reproject.h,
+ * accumulation.h), which the later filters share.
+ */
+#include "filters/filter.h"
+#include "temporal/accumulation.h"
+#include "temporal/reproject.h"
+
+#include <stdlib.h>
+#include <string.h>
+
+/* Albedo below this is clamped before dividing (demodulation). */
+#define ACCUMULATE_ALBEDO_EPS 1e-3f
+
+enum {
+  P_NONFINITE = 0,
+  P_ALPHA_MIN,
+  P_ALPHA_MOMENTS_MIN,
+  P_MAX_AGE,
+  P_DEPTH_TOLERANCE,
+  P_DEPTH_GRADIENT,
+  P_NORMAL_THRESHOLD,
+  P_USE_ID,
+  P_FALLBACK_3X3,
+  P_DEMODULATE,
+  P_COUNT
+};
+
+static const hush_param_info accumulate_params[P_COUNT] = {
+    HUSH_PARAM_NONFINITE_ENTRY,
+    {"alpha_min", HUSH_PARAM_FLOAT, 0.2, 0.0, 1.0,
+     "minimum weight of the new frame in the colour blend: alpha = max(alpha_min, 1/age)", NULL},
+    {"alpha_moments_min", HUSH_PARAM_FLOAT, 0.2, 0.0, 1.0,
+     "minimum weight of the new frame in the luminance-moment blend", NULL},
+    {"max_age", HUSH_PARAM_INT, 256, 1, 65535,
+     "history length cap in frames (256: with alpha_min 0, a plain average of up to 256 frames)",
+     NULL},
+    {"depth_tolerance", HUSH_PARAM_FLOAT, 0.1, 0.0, 1e6,
+     "a history tap is kept when |z_prev - z_expected| <= depth_tolerance * z_expected + "
+     "depth_gradient * |grad z . tap offset|",
+     NULL},
+    {"depth_gradient", HUSH_PARAM_FLOAT, 1.0, 0.0, 1e3,
+     "weight of the screen-space depth gradient in the depth test (keeps grazing surfaces; "
+     "0: relative test only)",
+     NULL},
+    {"normal_threshold", HUSH_PARAM_FLOAT, 0.9, -1.0, 1.0,
+     "a history tap is kept when dot(normal, previous normal) >= this cosine (-1: off)", NULL},
+    {"use_id", HUSH_PARAM_BOOL, 1, 0, 1,
+     "reject history from a pixel with another id (when 'id' is bound)", NULL},
+    {"fallback_3x3", HUSH_PARAM_BOOL, 1, 0, 1,
+     "search the 3x3 neighbourhood when no tap of the bilinear footprint is consistent", NULL},
+    {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'albedo' bound: accumulate color / max(albedo, 1e-3), multiply back after", NULL},
+};
+
+enum {
+  I_COLOR = 0,
+  I_DEPTH,
+  I_NORMAL,
+  I_POSITION,
+  I_ID,
+  I_MOTION,
+  I_ALBEDO,
+  I_OUTPUT,
+  I_VARIANCE,
+  I_HISTORY_LENGTH,
+  I_COUNT
+};
+
+static const hush_image_info accumulate_images[I_COUNT] = {
+    {"color", HUSH_IMAGE_INPUT, 1, 3, "noisy radiance of this frame"},
+    {"depth", HUSH_IMAGE_INPUT, 1, 1, "linear view depth (0: background)"},
+    {"normal", HUSH_IMAGE_INPUT, 1, 3, "world-space shading normal"},
+    {"position", HUSH_IMAGE_INPUT, 0, 3,
+     "world-space position (camera reprojection; else reconstructed from depth)"},
+    {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"},
+    {"motion", HUSH_IMAGE_INPUT, 0, 2,
+     "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
+    {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation"},
+    {"output", HUSH_IMAGE_OUTPUT, 1, 3, "accumulated radiance"},
+    {"variance", HUSH_IMAGE_OUTPUT, 0, 1,
+     "luminance variance from the accumulated moments (of the demodulated signal when "
+     "demodulating)"},
+    {"history_length", HUSH_IMAGE_OUTPUT, 0, 1,
+     "frames accumulated per pixel (1: no history was reused)"},
+};
+
+static const hush_filter_class_info accumulate_info = {
+    "accumulate",
+    "temporal accumulation with reprojection, consistency tests and luminance moments",
+    "Dundr 2018 §4.1.3; Koskela et al. 2019 §3.2; Higginson 2023 §1.3, §1.3.1",
+    accumulate_params,
+    P_COUNT,
+    accumulate_images,
+    I_COUNT,
+};
+
+typedef struct accumulate_state {
+  hush_reprojector rp; /* previous G-buffer + plan */
+  hush_accum acc;      /* colour (3), moments, age */
+  hush_planar color;   /* this frame's colour, demodulated in place */
+  /* allocated on first use: */
+  hush_planar albedo;   /* imported albedo, then the remodulated output */
+  hush_planar position; /* 3 */
+  hush_planar motion;   /* 2 */
+  hush_planar variance; /* 1 */
+} accumulate_state;
+
+static void accumulate_destroy(void *state) {
+  accumulate_state *st = state;
+  if (!st) return;
+  hush__reprojector_free(&st->rp);
+  hush__accum_free(&st->acc);
+  hush__planar_free(&st->color);
+  hush__planar_free(&st->albedo);
+  hush__planar_free(&st->position);
+  hush__planar_free(&st->motion);
+  hush__planar_free(&st->variance);
+  free(st);
+}
+
+static hush_status accumulate_create(hush_filter f, void **state) {
+  accumulate_state *st = calloc(1, sizeof *st);
+  if (!st) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "accumulate: out of memory");
+  hush_status s = hush__reprojector_init(f->device, &st->rp, f->width, f->height);
+  if (!s) s = hush__accum_init(f->device, &st->acc, 3, f->width, f->height);
+  if (!s) s = hush__planar_init(f->device, &st->color, 3, f->width, f->height);
+  if (s) {
+    accumulate_destroy(st);
+    return s;
+  }
+  *state = st;
+  return HUSH_OK;
+}
+
+/* Allocates a scratch planar image the first time it is needed. */
+static hush_status ensure(hush_filter f, hush_planar *img, int channels) {
+  if (img->plane[0]) return HUSH_OK;
+  return hush__planar_init(f->device, img, channels, f->width, f->height);
+}
+
+/* color[c] /= max(albedo[c], eps) */
+static void demodulate(hush_planar *color, const hush_planar *albedo, int threads) {
+  const int H = (int)color->height;
+  const size_t W = color->width;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++)
+    for (int c = 0; c < 3; c++) {
+      float *col = color->plane[c] + (size_t)y * W;
+      const float *alb = albedo->plane[c] + (size_t)y * W;
+      for (size_t x = 0; x < W; x++) {
+        const float a = alb[x] > ACCUMULATE_ALBEDO_EPS ? alb[x] : ACCUMULATE_ALBEDO_EPS;
+        col[x] = col[x] / a;
+      }
+    }
+}
+
+/* albedo[c] = accumulated[c] * max(albedo[c], eps), in place */
+static void remodulate(hush_planar *albedo, const hush_planar *accumulated, int threads) {
+  const int H = (int)albedo->height;
+  const size_t W = albedo->width;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++)
+    for (int c = 0; c < 3; c++) {
+      float *alb = albedo->plane[c] + (size_t)y * W;
+      const float *acc = accumulated->plane[c] + (size_t)y * W;
+      for (size_t x = 0; x < W; x++) {
+        const float a = alb[x] > ACCUMULATE_ALBEDO_EPS ? alb[x] : ACCUMULATE_ALBEDO_EPS;
+        alb[x] = acc[x] * a;
+      }
+    }
+}
+
+static hush_status accumulate_execute(hush_filter f, void *state, const hush_frame_info *info) {
+  accumulate_state *st = state;
+  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  hush_status s;
+  hush__filter_timing_begin(f);
+
+  const int has_motion = hush__filter_view(f, I_MOTION) != NULL;
+  if (info->motion == HUSH_MOTION_VECTORS && !has_motion)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "accumulate: the motion source is HUSH_MOTION_VECTORS but the 'motion' "
+                      "image is not bound");
+  const int has_position = hush__filter_view(f, I_POSITION) != NULL;
+  const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
+  const int with_id = hush__param_i(f, P_USE_ID) && hush__filter_view(f, I_ID);
+  const int use_motion = has_motion && info->motion == HUSH_MOTION_VECTORS;
+
+  /* ---- import (into the reprojector's next G-buffer and scratch planes;
+   * nothing of the history changes until every input has been read) */
+  if (has_position && (s = ensure(f, &st->position, 3))) return s;
+  if (use_motion && (s = ensure(f, &st->motion, 2))) return s;
+  if (demod && (s = ensure(f, &st->albedo, 3))) return s;
+  if (hush__filter_view(f, I_VARIANCE) && (s = ensure(f, &st->variance, 1))) return s;
+  if (with_id && (s = hush__reprojector_want_id(f->device, &st->rp))) return s;
+
+  hush_gbuffer_store *g = hush__reprojector_next(&st->rp);
+  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  if ((s = hush__filter_import(f, I_DEPTH, &g->depth))) return s;
+  if ((s = hush__filter_import(f, I_NORMAL, &g->normal))) return s;
+  if (with_id && (s = hush__filter_import(f, I_ID, &g->id))) return s;
+  if (has_position && (s = hush__filter_import(f, I_POSITION, &st->position))) return s;
+  if (use_motion && (s = hush__filter_import(f, I_MOTION, &st->motion))) return s;
+  if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  g->has_id = with_id;
+  hush__filter_timing_stage(f, "import");
+
+  /* ---- reproject */
+  hush_reproject_params rp;
+  rp.depth_tolerance = hush__param_f(f, P_DEPTH_TOLERANCE);
+  rp.depth_gradient = hush__param_f(f, P_DEPTH_GRADIENT);
+  rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
+  rp.use_id = hush__param_i(f, P_USE_ID);
+  rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
+  s = hush__reprojector_build(f->device, &st->rp,
+                              has_position ? (const float *const *)st->position.plane : NULL,
+                              use_motion ? (const float *const *)st->motion.plane : NULL, info,
+                              &rp, threads);
+  if (s) return s;
+  hush__filter_timing_stage(f, "reproject");
+
+  /* ---- accumulate */
+  if (demod) demodulate(&st->color, &st->albedo, threads);
+  hush_accum_params ap;
+  ap.alpha_min = hush__param_f(f, P_ALPHA_MIN);
+  ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS_MIN);
+  ap.max_age = hush__param_i(f, P_MAX_AGE);
+  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE);
+  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap,
+                    var_view ? st->variance.plane[0] : NULL, threads);
+  hush__filter_timing_stage(f, "accumulate");
+
+  /* ---- export */
+  const hush_planar *result = hush__accum_color(&st->acc);
+  if (demod) {
+    remodulate(&st->albedo, result, threads);
+    result = &st->albedo;
+  }
+  hush__view_export(result, hush__filter_view(f, I_OUTPUT));
+  if (var_view) hush__view_export(&st->variance, var_view);
+  const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
+  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view);
+  hush__filter_timing_stage(f, "export");
+  return HUSH_OK;
+}
+
+const hush_filter_class hush__filter_accumulate = {
+    &accumulate_info,
+    accumulate_create,
+    accumulate_destroy,
+    accumulate_execute,
+};

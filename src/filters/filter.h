@@ -1,0 +1,86 @@
+/*
+ * filter.h — the contract between the generic filter object (filter.c:
+ * handles, parameters by name, image bindings, commit checks, timings) and
+ * each filter class (one folder per method under src/filters/).
+ *
+ * A class provides a static hush_filter_class: its public info (parameter
+ * and image tables, declared once) and four functions. Parameter values are
+ * stored by filter.c as doubles in table order; a class reads them by index
+ * with hush__param(). By convention parameter 0 of every class is
+ * HUSH_PARAM_NONFINITE ("nonfinite": error | replace).
+ */
+#ifndef HUSH_FILTERS_FILTER_H
+#define HUSH_FILTERS_FILTER_H
+
+#include "hush.h"
+#include "core/device.h"
+#include "core/image.h"
+
+#define HUSH_MAX_STAGES 16
+#define HUSH_MAX_IMAGES 24
+
+typedef struct hush_filter_class {
+  const hush_filter_class_info *info;
+  /* Allocates the class state (history, scratch) for filter->width/height.
+   * Called by commit; the previous state, if any, was destroyed first. */
+  hush_status (*create)(hush_filter filter, void **state);
+  void (*destroy)(void *state);
+  /* Runs one frame. Bindings were validated by filter.c: every required
+   * image is bound and all bound images have the committed size. */
+  hush_status (*execute)(hush_filter filter, void *state, const hush_frame_info *info);
+} hush_filter_class;
+
+struct hush_filter_t {
+  int refcount;
+  hush_device device;
+  const hush_filter_class *cls;
+  double *params;                        /* cls->info->param_count values */
+  hush_image_view views[HUSH_MAX_IMAGES]; /* by image index */
+  int bound[HUSH_MAX_IMAGES];
+  uint32_t width, height;                /* committed size, 0 before commit */
+  int committed;                         /* 0 until commit, or after a binding changed size */
+  void *state;
+  /* timings of the last execute */
+  const char *stage_names[HUSH_MAX_STAGES];
+  double stage_ms[HUSH_MAX_STAGES];
+  uint32_t stage_count;
+  double stage_start;
+};
+
+/* The common first parameter of every class table. */
+#define HUSH_PARAM_NONFINITE_ENTRY                                                            \
+  {"nonfinite", HUSH_PARAM_ENUM, 0, 0, 1,                                                    \
+   "NaN/Inf input pixels: error (fail the frame) or replace (use 0 and continue)",         \
+   hush__nonfinite_names}
+extern const char *const hush__nonfinite_names[];
+
+static inline double hush__param(const struct hush_filter_t *f, int index) {
+  return f->params[index];
+}
+static inline float hush__param_f(const struct hush_filter_t *f, int index) {
+  return (float)f->params[index];
+}
+static inline int hush__param_i(const struct hush_filter_t *f, int index) {
+  return (int)f->params[index];
+}
+
+/* Index of an image in the class table, -1 if unknown. */
+int hush__filter_image_index(const struct hush_filter_t *f, const char *name);
+/* Bound view of image index i, or NULL when unbound. */
+static inline const hush_image_view *hush__filter_view(const struct hush_filter_t *f, int i) {
+  return f->bound[i] ? &f->views[i] : NULL;
+}
+/* Imports bound input image i into dst (already sized), honouring the
+ * "nonfinite" parameter; reports errors naming the image. */
+hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar *dst);
+
+/* Stage timing: call begin at the start of execute, then stage(name) at the
+ * end of each stage; the time since the previous mark goes to that name. */
+void hush__filter_timing_begin(struct hush_filter_t *f);
+void hush__filter_timing_stage(struct hush_filter_t *f, const char *name);
+
+/* The registry (registry.c): every class this build has. */
+extern const hush_filter_class *const hush__filter_classes[];
+extern const uint32_t hush__filter_class_count;
+
+#endif

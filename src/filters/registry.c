@@ -1,0 +1,14 @@
+/*
+ * registry.c — the filter classes this build provides, in listing order.
+ * A new method adds its class object here.
+ */
+#include "filters/filter.h"
+
+extern const hush_filter_class hush__filter_accumulate;
+
+const hush_filter_class *const hush__filter_classes[] = {
+    &hush__filter_accumulate,
+};
+
+const uint32_t hush__filter_class_count =
+    (uint32_t)(sizeof hush__filter_classes / sizeof hush__filter_classes[0]);

@@ -1,0 +1,93 @@
+/*
+ * accumulation.h — temporal accumulation of a 1..4 channel signal and of
+ * the first two moments of its luminance, with a per-pixel history length
+ * ("age"), through a reprojection plan (reproject.h).
+ *
+ * Follows Dundr 2018 §4.1.3 (c = lerp(history, new, r), r = max(r0, 1/age);
+ * moments sum x, sum x^2 with the same rule; variance = m2 - m1^2),
+ * Koskela et al. 2019 §3.2 (cumulative average first, exponential average
+ * once 1/age < alpha_min; the sample count is gathered with the same
+ * renormalised bilinear weights and rounded to the nearest integer),
+ * Higginson 2023 §1.3 (eqs. 1.2 and 1.3) and SVGF (papers/NOTES.md).
+ *
+ * Per pixel, with the plan's taps t and weights w_t (summing to 1):
+ *   no tap:   age = 1, c = new, m = (l, l^2)             (history dropped)
+ *   else:     age = min(round(sum w_t age_t) + 1, max_age)
+ *             a  = max(alpha_min, 1 / age),  am = max(alpha_moments_min, 1 / age)
+ *             c  = (1 - a) sum w_t c_t + a new
+ *             m  = (1 - am) sum w_t m_t + am (l, l^2)
+ *   variance = max(0, m2 - m1^2)
+ * l is the luminance of the new sample: Rec. 709 of the first three channels
+ * for 3 or 4 channels, channel 0 for 1 or 2.
+ *
+ * Buffers are ping-ponged (no per-frame allocation): a blend reads the
+ * previous frame's set and writes the other one, which then becomes the
+ * latest. Deterministic whatever the thread count.
+ */
+#ifndef HUSH_TEMPORAL_ACCUMULATION_H
+#define HUSH_TEMPORAL_ACCUMULATION_H
+
+#include "hush.h"
+#include "core/hmath.h"
+#include "core/image.h"
+#include "temporal/reproject.h"
+
+typedef struct hush_accum_params {
+  float alpha_min;         /* colour: minimum weight of the new sample, [0, 1] */
+  float alpha_moments_min; /* moments: the same for the luminance moments */
+  int max_age;             /* history length cap, >= 1 */
+} hush_accum_params;
+
+typedef struct hush_accum {
+  uint32_t width, height;
+  int channels;           /* 1..4 */
+  hush_planar color[2];   /* `channels` planes */
+  hush_planar moments[2]; /* 2 planes: E[l], E[l^2] */
+  hush_planar age[2];     /* 1 plane: history length, >= 1 (a float) */
+  int latest;             /* the set written by the last blend */
+  int has_history;        /* set[latest] holds a frame */
+} hush_accum;
+
+hush_status hush__accum_init(hush_device device, hush_accum *acc, int channels, uint32_t width,
+                             uint32_t height);
+void hush__accum_free(hush_accum *acc);
+/* Forgets the history: the next blend starts over (age 1 everywhere). */
+void hush__accum_reset(hush_accum *acc);
+
+/*
+ * Blends this frame's samples (acc->channels planes) with the history
+ * gathered through plan (plan may be NULL: no history anywhere). Writes the
+ * luminance variance to `variance` when not NULL. Afterwards
+ * hush__accum_color/moments/age give this frame's result, which is the
+ * history of the next blend (a caller such as SVGF may overwrite the colour
+ * before then).
+ */
+void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
+                       const float *const *sample, const hush_accum_params *params,
+                       float *variance, int threads);
+
+static inline hush_planar *hush__accum_color(hush_accum *acc) { return &acc->color[acc->latest]; }
+static inline hush_planar *hush__accum_moments(hush_accum *acc) {
+  return &acc->moments[acc->latest];
+}
+static inline hush_planar *hush__accum_age(hush_accum *acc) { return &acc->age[acc->latest]; }
+
+/* Luminance of pixel i of a 1..4 channel planar signal (see above). */
+static inline float hush__accum_luminance(const float *const *c, int channels, size_t i) {
+  return channels >= 3 ? hush_luminance(c[0][i], c[1][i], c[2][i]) : c[0][i];
+}
+
+/*
+ * One more history through an existing plan, with ages computed elsewhere
+ * (e.g. BMFR's second accumulation, on the fitted result, with phase I's
+ * plan and ages): per pixel with taps,
+ *   out = (1 - a) sum w_t prev_t + a sample,  a = max(alpha_min, 1 / age[i]),
+ * else out = sample (ages below 1 count as 1). channels 1..8; plan gives the
+ * size; prev == NULL means no history anywhere (out = sample). out may alias
+ * sample but not prev.
+ */
+void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *prev,
+                          const float *const *sample, int channels, const float *age,
+                          float alpha_min, float *const *out, int threads);
+
+#endif

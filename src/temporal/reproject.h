@@ -1,0 +1,296 @@
+/*
+ * reproject.h — back-projection of every pixel into the previous frame and a
+ * per-tap consistency test, producing a "reprojection plan": for each pixel
+ * the taps of the previous frame its history is gathered from, with their
+ * renormalised weights. Any number of history buffers (colour, moments,
+ * history length, a filter's own second history) can then be gathered with
+ * the same plan, so the geometry work is done once per frame.
+ *
+ * Follows: Higginson 2023 §1.3.1 (naive back-projection, then a 2x2
+ * bilinear footprint of the consistent taps renormalised by the sum of their
+ * weights, then a 3x3 footprint weighted by the kernel k, else no history);
+ * Koskela et al. 2019 §3.2 (per-tap discard test, normalisation by the
+ * accepted weights only); Dundr 2018 §4.1.3 (motion vectors or camera
+ * matrices; disocclusion by predicted vs actual depth); SVGF (Schied 2017,
+ * see papers/NOTES.md: depth, normal and mesh-id tests per tap).
+ *
+ * Conventions are hush.h's. The tap grid is at pixel centres: pixel (x, y)
+ * of the previous frame is sampled at continuous coordinate (x+0.5, y+0.5).
+ * The coordinate a pixel is back-projected to is that of its pixel CENTRE:
+ *   - HUSH_MOTION_VECTORS: (x + 0.5, y + 0.5) + motion;
+ *   - HUSH_MOTION_CAMERA without "position": the point at the pixel's depth
+ *     on the ray through its centre (unjittered), projected with the
+ *     previous matrices. Exact for any camera rotation; under translation
+ *     the only error is the parallax of the depth difference between the
+ *     jittered sample and the centre (as in TAA's depth reprojection);
+ *   - HUSH_MOTION_CAMERA with "position": the hit point of the jittered
+ *     sample projected with the previous matrices, minus this frame's
+ *     jitter (exact for a static camera, first order otherwise);
+ *   - background pixels (depth <= 0), CAMERA: the direction of the centre
+ *     ray, projected as a point at infinity.
+ * The previous frame's jitter is ignored: a history buffer holds values for
+ * pixel centres. The expected previous depth of a surface (for the depth
+ * test) is the view depth of that point in the previous camera; with
+ * VECTORS, of this frame's point (position, or reconstructed from depth),
+ * falling back to this frame's depth when the camera cannot be inverted.
+ *
+ * Perspective and orthographic projections (view_to_clip's z and w rows
+ * depending on view z only) take a vectorised path: one matrix maps the
+ * pixel's homogeneous clip vector to the previous clip space. Any other
+ * invertible projection takes a general per-pixel path.
+ *
+ * Every function is deterministic and independent of the thread count
+ * (each pixel is computed on its own; rows are split statically).
+ */
+#ifndef HUSH_TEMPORAL_REPROJECT_H
+#define HUSH_TEMPORAL_REPROJECT_H
+
+#include "hush.h"
+#include "core/image.h"
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* One frame's geometry as planes (width * height floats each, not owned).
+ * NULL members are absent. */
+typedef struct hush_gbuffer {
+  const float *depth;     /* linear view depth; <= 0 is background. Required. */
+  const float *normal[3]; /* world-space unit normal. Required. */
+  const float *id;        /* mesh/material id; compared only when both frames have it */
+} hush_gbuffer;
+
+/* What the plan is built from, besides the previous frame's hush_gbuffer. */
+typedef struct hush_reproject_input {
+  hush_gbuffer cur;          /* this frame */
+  const float *position[3];  /* optional world positions (all three or none) */
+  const float *motion[2];    /* required for HUSH_MOTION_VECTORS, else ignored */
+} hush_reproject_input;
+
+typedef struct hush_reproject_params {
+  /* Depth test: a tap is consistent when
+   *   |z_tap - z_expected| <= depth_tolerance * z_expected
+   *                           + depth_gradient * |grad z . (tap - p)|,
+   * z_expected being the view depth of the back-projected point p in the
+   * previous camera, grad z this pixel's screen-space depth gradient (the
+   * smaller one-sided difference per axis, so a depth edge does not widen
+   * it; scaled by z_expected / z) and tap - p the tap's offset in pixels.
+   * The gradient term (SVGF's "relative to the depth derivative") keeps
+   * surfaces seen at grazing angles; depth_gradient = 0 gives the plain
+   * relative test. */
+  float depth_tolerance;
+  float depth_gradient;
+  /* Normal test: dot(n, n_tap) >= normal_threshold (a cosine; -1 disables). */
+  float normal_threshold;
+  int use_id;       /* compare ids when both frames have them */
+  int fallback_3x3; /* search the 3x3 neighbourhood when no bilinear tap is consistent */
+} hush_reproject_params;
+
+/* Default parameters: depth_tolerance 0.1, depth_gradient 1, normal_threshold
+ * 0.9, use_id 1, fallback_3x3 1. */
+void hush__reproject_params_default(hush_reproject_params *p);
+
+typedef enum hush_footprint {
+  HUSH_FOOTPRINT_NONE = 0,     /* no consistent tap: history dropped */
+  HUSH_FOOTPRINT_BILINEAR = 1, /* 2x2 taps at origin + {0,1} x {0,1} */
+  HUSH_FOOTPRINT_3X3 = 2       /* 3x3 taps at origin + {0,1,2} x {0,1,2} */
+} hush_footprint;
+
+/* A bilinear tap whose weight is below this is not used (the back-projected
+ * point sits on another tap's centre): float noise of ~1e-5 pixel must not
+ * decide whether a neighbour's history is taken. */
+#define HUSH_REPROJECT_MIN_WEIGHT 1e-3f
+
+/* The 3x3 fallback kernel k of Higginson 2023 §1.3.1, row-major. */
+extern const float hush__reproject_k3x3[9];
+
+/*
+ * A reprojection plan: per pixel i (row-major, i = y * width + x),
+ *   kind[i]   hush_footprint;
+ *   mask[i]   the consistent taps: bit (j * 2 + i) of the 2x2 footprint,
+ *             bit (j * 3 + i) of the 3x3 one (i across, j down); 0 with NONE;
+ *   origin[i] previous-frame pixel index of the footprint's top-left tap.
+ *             BILINEAR (in images at least 2x2): the 2x2 block origin,
+ *             origin + 1, origin + width, origin + width + 1 always lies
+ *             inside the image: a footprint that overhangs the border is
+ *             moved inside, with its mask bits and fractions (fx = 0 or 1,
+ *             fy likewise), so the taps and weights stay the same. 3X3 (and
+ *             BILINEAR in a 1-pixel-wide or -high image): the top-left tap
+ *             may lie outside the image and the index even be negative;
+ *             only masked taps are ever read;
+ *   fx[i], fy[i] the bilinear fractions (BILINEAR only): the weights are
+ *             (1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx fy; a tap is in the mask
+ *             only if it is on-screen, consistent and its weight is at least
+ *             HUSH_REPROJECT_MIN_WEIGHT.
+ *   blocks    width >= 2 && height >= 2: BILINEAR pixels may be gathered as
+ *             blocks (hush__reproject_weights4).
+ * Built by hush__reproject_build; read with hush__reproject_taps /
+ * hush__reproject_weights4 or gathered with hush__reproject_gather.
+ */
+typedef struct hush_reproject_plan {
+  uint32_t width, height;
+  int blocks;
+  int32_t *origin;
+  uint16_t *mask;
+  uint8_t *kind;
+  float *fx, *fy;
+} hush_reproject_plan;
+
+hush_status hush__reproject_plan_init(hush_device device, hush_reproject_plan *plan,
+                                      uint32_t width, uint32_t height);
+void hush__reproject_plan_free(hush_reproject_plan *plan);
+/* Marks every pixel NONE (no history). */
+void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads);
+
+/*
+ * Builds the plan of this frame against the previous frame's G-buffer prev.
+ * With prev == NULL or info->history == HUSH_HISTORY_RESET the plan is
+ * cleared. Fails (and leaves the plan untouched) with
+ * HUSH_ERROR_INVALID_OPERATION when info->motion is VECTORS and no motion is
+ * given, or with HUSH_ERROR_INVALID_ARGUMENT when the CAMERA source has no
+ * position and this frame's matrices cannot be inverted.
+ */
+hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
+                                  const hush_reproject_input *in, const hush_gbuffer *prev,
+                                  const hush_frame_info *info, const hush_reproject_params *params,
+                                  int threads);
+
+/* The four bilinear weights (1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx fy. */
+static inline void hush__reproject_bilinear(float fx, float fy, float w[4]) {
+  w[0] = (1.0f - fx) * (1.0f - fy);
+  w[1] = fx * (1.0f - fy);
+  w[2] = (1.0f - fx) * fy;
+  w[3] = fx * fy;
+}
+
+/* Whether pixel i is gathered as a 2x2 block (the common case): then its
+ * taps are origin, origin + 1, origin + width, origin + width + 1, all inside
+ * the image, with the weights of hush__reproject_weights4. */
+static inline int hush__reproject_is_block(const hush_reproject_plan *plan, size_t i) {
+  return plan->kind[i] == HUSH_FOOTPRINT_BILINEAR && plan->blocks;
+}
+
+/* The renormalised weights of a block pixel's four taps (0 for the taps not
+ * in the mask), summing to 1 up to rounding. Branch-free. */
+static inline void hush__reproject_weights4(const hush_reproject_plan *plan, size_t i,
+                                            float w[4]) {
+  const unsigned m = plan->mask[i];
+  hush__reproject_bilinear(plan->fx[i], plan->fy[i], w);
+  w[0] = (m & 1u) ? w[0] : 0.0f;
+  w[1] = (m & 2u) ? w[1] : 0.0f;
+  w[2] = (m & 4u) ? w[2] : 0.0f;
+  w[3] = (m & 8u) ? w[3] : 0.0f;
+  const float inv = 1.0f / (w[0] + w[1] + w[2] + w[3]);
+  w[0] *= inv;
+  w[1] *= inv;
+  w[2] *= inv;
+  w[3] *= inv;
+}
+
+/*
+ * The taps of pixel i and their renormalised weights (summing to 1 up to
+ * rounding): writes up to 9 previous-frame pixel indices to idx and weights
+ * to w, returns the count (0: no history): the weights of the valid taps
+ * divided by their sum (for BILINEAR, those of hush__reproject_weights4).
+ */
+static inline int hush__reproject_taps(const hush_reproject_plan *plan, size_t i, int32_t idx[9],
+                                       float w[9]) {
+  const unsigned mask = plan->mask[i];
+  if (!mask) return 0;
+  const int32_t o = plan->origin[i];
+  const int32_t W = (int32_t)plan->width;
+  int n = 0;
+  if (plan->kind[i] == HUSH_FOOTPRINT_BILINEAR) {
+    float bw[4];
+    hush__reproject_weights4(plan, i, bw);
+    for (int t = 0; t < 4; t++)
+      if (mask & (1u << t)) {
+        idx[n] = o + (t >> 1) * W + (t & 1);
+        w[n] = bw[t];
+        n++;
+      }
+  } else {
+    float sum = 0.0f;
+    for (int t = 0; t < 9; t++)
+      if (mask & (1u << t)) sum += hush__reproject_k3x3[t];
+    const float inv = 1.0f / sum;
+    for (int t = 0; t < 9; t++)
+      if (mask & (1u << t)) {
+        idx[n] = o + (t / 3) * W + (t % 3);
+        w[n] = hush__reproject_k3x3[t] * inv;
+        n++;
+      }
+  }
+  return n;
+}
+
+/* sum_t w_t p[idx_t] over n taps. */
+static inline float hush__reproject_apply(const float *p, const int32_t *idx, const float *w,
+                                          int n) {
+  float s = 0.0f;
+  for (int t = 0; t < n; t++) s += w[t] * p[idx[t]];
+  return s;
+}
+
+/* The block gather: w from hush__reproject_weights4. */
+static inline float hush__reproject_apply4(const float *p, size_t o, size_t width,
+                                           const float w[4]) {
+  return w[0] * p[o] + w[1] * p[o + 1] + w[2] * p[o + width] + w[3] * p[o + width + 1];
+}
+
+/*
+ * Gathers `channels` (1..8) previous-frame planes through the plan:
+ * out[c][i] = sum_t w_t * prev[c][idx_t]; pixels with no history get
+ * fill_value. out must not alias prev.
+ */
+void hush__reproject_gather(const hush_reproject_plan *plan, const float *const *prev,
+                            int channels, float *const *out, float fill_value, int threads);
+
+/*
+ * A reprojector: the previous frame's G-buffer (ping-pong, so no copy per
+ * frame) and the plan. Per frame:
+ *   hush_gbuffer_store *g = hush__reprojector_next(r);  // import depth,
+ *       // normal (and, after hush__reprojector_want_id, id) into g's planes,
+ *       // set g->has_id
+ *   hush__reprojector_build(...);  // builds r->plan; this frame becomes
+ *                                  // the previous one of the next frame
+ * A failure before build leaves the history as it was.
+ */
+typedef struct hush_gbuffer_store {
+  hush_planar depth;  /* 1 channel */
+  hush_planar normal; /* 3 channels */
+  hush_planar id;     /* 1 channel, allocated by hush__reprojector_want_id */
+  int has_id;         /* the id plane holds this frame's ids */
+} hush_gbuffer_store;
+
+typedef struct hush_reprojector {
+  uint32_t width, height;
+  hush_gbuffer_store store[2];
+  int latest;      /* store holding the last built frame */
+  int has_history; /* store[latest] is valid */
+  hush_reproject_plan plan;
+} hush_reprojector;
+
+hush_status hush__reprojector_init(hush_device device, hush_reprojector *r, uint32_t width,
+                                   uint32_t height);
+void hush__reprojector_free(hush_reprojector *r);
+/* Forgets the previous frame (the next build has no history). */
+void hush__reprojector_reset(hush_reprojector *r);
+/* The store this frame's G-buffer goes into. */
+static inline hush_gbuffer_store *hush__reprojector_next(hush_reprojector *r) {
+  return &r->store[1 - r->latest];
+}
+/* The store of the last built frame (after build: this frame's). */
+static inline const hush_gbuffer_store *hush__reprojector_latest(const hush_reprojector *r) {
+  return &r->store[r->latest];
+}
+/* Allocates the id planes (once); call before importing ids. */
+hush_status hush__reprojector_want_id(hush_device device, hush_reprojector *r);
+/* Builds r->plan for the G-buffer in hush__reprojector_next(r) plus the
+ * optional position/motion planes (each array NULL or all its planes), then
+ * makes this frame the previous one. On failure nothing changes. */
+hush_status hush__reprojector_build(hush_device device, hush_reprojector *r,
+                                    const float *const *position, const float *const *motion,
+                                    const hush_frame_info *info,
+                                    const hush_reproject_params *params, int threads);
+
+#endif

@@ -1,0 +1,1439 @@
+/*
+ * test_accumulate.c — the temporal module (src/temporal: reprojection plan,
+ * gather, accumulation) and the "accumulate" filter.
+ *
+ * Filter tests use only the public API (hush.h) on analytic scenes: planes
+ * and quads ray-traced here, with depth, normal, position, id and motion
+ * computed exactly. The module tests call src/temporal directly.
+ *
+ * Set HUSH_BENCH=1 to also print the time per 1280x720 frame (not a check).
+ */
+#include "hush.h"
+
+#include "check.h"
+#include "core/half.h"
+#include "core/hmath.h"
+#include "core/rng.h"
+#include "core/timer.h"
+#include "temporal/accumulation.h"
+#include "temporal/reproject.h"
+
+#include <float.h>
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* ======================================================================== */
+/* Analytic scenes                                                          */
+/* ======================================================================== */
+
+typedef struct camera {
+  float w2v[16], v2c[16], vp[16], v2w[16];
+  float tan_half, aspect;
+  int W, H;
+} camera;
+
+static void camera_setup(camera *c, hush_vec3 eye, hush_vec3 target, int W, int H) {
+  hush_m4_look_at(c->w2v, eye, target, hush_v3(0.0f, 1.0f, 0.0f));
+  c->aspect = (float)W / (float)H;
+  hush_m4_perspective(c->v2c, 60.0f, c->aspect, 0.1f, 100.0f);
+  hush_m4_mul(c->vp, c->v2c, c->w2v);
+  REQUIRE(hush_m4_invert(c->v2w, c->w2v));
+  c->tan_half = tanf(30.0f * 3.14159265358979f / 180.0f);
+  c->W = W;
+  c->H = H;
+}
+
+/* World-space direction through continuous pixel coordinate (px, py). */
+static hush_vec3 camera_ray(const camera *c, float px, float py) {
+  const float nx = 2.0f * px / (float)c->W - 1.0f;
+  const float ny = 1.0f - 2.0f * py / (float)c->H;
+  const hush_vec4 d =
+      hush_m4_mul_v4(c->v2w, nx * c->tan_half * c->aspect, ny * c->tan_half, -1.0f, 0.0f);
+  return hush_v3_normalize(hush_v3(d.x, d.y, d.z));
+}
+
+static hush_vec3 camera_eye(const camera *c) {
+  const hush_vec4 e = hush_m4_mul_v4(c->v2w, 0.0f, 0.0f, 0.0f, 1.0f);
+  return hush_v3(e.x, e.y, e.z);
+}
+
+/* Continuous pixel coordinate of a world point (w = 1) or direction (w = 0). */
+static int camera_project(const camera *c, hush_vec3 p, float w, float *px, float *py) {
+  const hush_vec4 q = hush_m4_mul_v4(c->vp, p.x, p.y, p.z, w);
+  if (!(q.w > 0.0f)) return 0;
+  *px = (q.x / q.w + 1.0f) * 0.5f * (float)c->W;
+  *py = (1.0f - q.y / q.w) * 0.5f * (float)c->H;
+  return 1;
+}
+
+/* n . X = d, optionally bounded in x and y (for planes of constant z). */
+typedef struct plane {
+  hush_vec3 n;
+  float d;
+  int bounded;
+  float x0, x1, y0, y1;
+  float id;
+  hush_vec3 prev_offset; /* the surface point X was at X + prev_offset last frame */
+} plane;
+
+typedef struct hit {
+  int ok;
+  hush_vec3 X, n;
+  const plane *pl;
+} hit;
+
+static hit trace(const plane *pl, int np, hush_vec3 o, hush_vec3 d) {
+  hit h;
+  memset(&h, 0, sizeof h);
+  float best = FLT_MAX;
+  for (int k = 0; k < np; k++) {
+    const float den = hush_v3_dot(pl[k].n, d);
+    if (fabsf(den) < 1e-8f) continue;
+    const float t = (pl[k].d - hush_v3_dot(pl[k].n, o)) / den;
+    if (!(t > 1e-4f) || t >= best) continue;
+    const hush_vec3 X = hush_v3_add(o, hush_v3_scale(d, t));
+    if (pl[k].bounded && (X.x < pl[k].x0 || X.x > pl[k].x1 || X.y < pl[k].y0 || X.y > pl[k].y1))
+      continue;
+    best = t;
+    h.ok = 1;
+    h.X = X;
+    h.n = den > 0.0f ? hush_v3_scale(pl[k].n, -1.0f) : pl[k].n;
+    h.pl = &pl[k];
+  }
+  return h;
+}
+
+/* Interleaved float buffers of one frame, as a renderer would hand them over. */
+typedef struct frame {
+  int W, H;
+  float *color, *depth, *normal, *position, *id, *motion, *albedo; /* 3,1,3,3,1,2,3 */
+  float *X;       /* hit point of the jittered primary ray (3) */
+  float *Xc;      /* hit point of the pixel-centre ray (3) */
+  int *hit;       /* pixel-centre ray hit something */
+  float *hit_id;  /* id of the pixel-centre hit (0 = none) */
+} frame;
+
+static void frame_init(frame *f, int W, int H) {
+  const size_t n = (size_t)W * H;
+  f->W = W;
+  f->H = H;
+  f->color = calloc(n * 3, sizeof(float));
+  f->depth = calloc(n, sizeof(float));
+  f->normal = calloc(n * 3, sizeof(float));
+  f->position = calloc(n * 3, sizeof(float));
+  f->id = calloc(n, sizeof(float));
+  f->motion = calloc(n * 2, sizeof(float));
+  f->albedo = calloc(n * 3, sizeof(float));
+  f->X = calloc(n * 3, sizeof(float));
+  f->Xc = calloc(n * 3, sizeof(float));
+  f->hit = calloc(n, sizeof(int));
+  f->hit_id = calloc(n, sizeof(float));
+  REQUIRE(f->color && f->depth && f->normal && f->position && f->id && f->motion && f->albedo &&
+          f->X && f->Xc && f->hit && f->hit_id);
+}
+
+static void frame_free(frame *f) {
+  free(f->color);
+  free(f->depth);
+  free(f->normal);
+  free(f->position);
+  free(f->id);
+  free(f->motion);
+  free(f->albedo);
+  free(f->X);
+  free(f->Xc);
+  free(f->hit);
+  free(f->hit_id);
+}
+
+/* Fills the G-buffer (depth, normal, position, id, motion, albedo) of the
+ * scene seen by cur with jitter (jx, jy); motion is against prev, at pixel
+ * centres, from each plane's prev_offset. Colour is left to the caller. */
+static void render(frame *f, const plane *pl, int np, const camera *cur, const camera *prev,
+                   float jx, float jy) {
+  const hush_vec3 eye = camera_eye(cur);
+  for (int y = 0; y < f->H; y++)
+    for (int x = 0; x < f->W; x++) {
+      const size_t i = (size_t)y * f->W + x;
+      const hit h = trace(pl, np, eye, camera_ray(cur, (float)x + 0.5f + jx, (float)y + 0.5f + jy));
+      if (h.ok) {
+        const hush_vec4 v = hush_m4_mul_v4(cur->w2v, h.X.x, h.X.y, h.X.z, 1.0f);
+        f->depth[i] = -v.z;
+        f->normal[3 * i] = h.n.x;
+        f->normal[3 * i + 1] = h.n.y;
+        f->normal[3 * i + 2] = h.n.z;
+        f->position[3 * i] = h.X.x;
+        f->position[3 * i + 1] = h.X.y;
+        f->position[3 * i + 2] = h.X.z;
+        f->id[i] = h.pl->id;
+        f->X[3 * i] = h.X.x;
+        f->X[3 * i + 1] = h.X.y;
+        f->X[3 * i + 2] = h.X.z;
+        for (int c = 0; c < 3; c++)
+          f->albedo[3 * i + c] = 0.45f + 0.1f * (float)c + 0.2f * sinf(0.9f * h.X.x + 0.5f * h.X.y);
+      } else {
+        f->depth[i] = 0.0f;
+        for (int c = 0; c < 3; c++) {
+          f->normal[3 * i + c] = f->position[3 * i + c] = f->X[3 * i + c] = 0.0f;
+          f->albedo[3 * i + c] = 1.0f;
+        }
+        f->id[i] = 0.0f;
+      }
+      const hush_vec3 dc = camera_ray(cur, (float)x + 0.5f, (float)y + 0.5f);
+      const hit hc = trace(pl, np, eye, dc);
+      f->hit[i] = hc.ok;
+      f->hit_id[i] = hc.ok ? hc.pl->id : 0.0f;
+      /* motion = previous minus current projection of the centre's point
+       * (exactly 0 for a static point under a static camera) */
+      float px = -1e6f, py = -1e6f, cx = (float)x + 0.5f, cy = (float)y + 0.5f;
+      if (hc.ok) {
+        f->Xc[3 * i] = hc.X.x;
+        f->Xc[3 * i + 1] = hc.X.y;
+        f->Xc[3 * i + 2] = hc.X.z;
+        camera_project(prev, hush_v3_add(hc.X, hc.pl->prev_offset), 1.0f, &px, &py);
+        camera_project(cur, hc.X, 1.0f, &cx, &cy);
+      } else {
+        camera_project(prev, dc, 0.0f, &px, &py);
+        camera_project(cur, dc, 0.0f, &cx, &cy);
+      }
+      f->motion[2 * i] = px - cx;
+      f->motion[2 * i + 1] = py - cy;
+    }
+}
+
+/* A smooth texture on the surfaces (slow along z: the ground is seen at
+ * grazing angles). */
+static float pattern(const float *X, int c) {
+  return 0.5f + 0.2f * sinf(1.3f * X[0] + 0.1f * X[2] + (float)c) * cosf(1.1f * X[1] + 0.15f * X[2]);
+}
+
+/* Uniform noise of standard deviation sigma. */
+static float noise(uint32_t seed, uint32_t stream, uint32_t counter, float sigma) {
+  return (hush_rng_float(seed, stream, counter) - 0.5f) * 3.46410161f * sigma;
+}
+
+static hush_frame_info make_info(const camera *cur, const camera *prev, float jx, float jy,
+                                 hush_motion_source motion, hush_history_mode history) {
+  hush_frame_info info;
+  hush_frame_info_init(&info);
+  memcpy(info.world_to_view, cur->w2v, sizeof info.world_to_view);
+  memcpy(info.view_to_clip, cur->v2c, sizeof info.view_to_clip);
+  memcpy(info.prev_world_to_view, prev->w2v, sizeof info.prev_world_to_view);
+  memcpy(info.prev_view_to_clip, prev->v2c, sizeof info.prev_view_to_clip);
+  info.jitter[0] = jx;
+  info.jitter[1] = jy;
+  info.motion = motion;
+  info.history = history;
+  return info;
+}
+
+/* ======================================================================== */
+/* Filter helpers                                                           */
+/* ======================================================================== */
+
+enum {
+  B_POSITION = 1,
+  B_MOTION = 2,
+  B_ID = 4,
+  B_ALBEDO = 8,
+};
+
+static hush_image_view view_of(void *data, hush_format fmt, int W, int H) {
+  hush_image_view v;
+  memset(&v, 0, sizeof v);
+  v.data = data;
+  v.format = fmt;
+  v.width = (uint32_t)W;
+  v.height = (uint32_t)H;
+  return v;
+}
+
+static void bind(hush_filter f, const char *name, void *data, hush_format fmt, int W, int H) {
+  const hush_image_view v = view_of(data, fmt, W, H);
+  const hush_status s = hush_filter_set_image(f, name, &v);
+  CHECK_MSG(s == HUSH_OK, "binding %s: %s", name, hush_status_name(s));
+}
+
+typedef struct outputs {
+  float *out, *var, *age; /* 3, 1, 1 channels */
+} outputs;
+
+static void outputs_init(outputs *o, int W, int H) {
+  const size_t n = (size_t)W * H;
+  o->out = calloc(3 * n, sizeof(float));
+  o->var = calloc(n, sizeof(float));
+  o->age = calloc(n, sizeof(float));
+  REQUIRE(o->out && o->var && o->age);
+}
+
+static void outputs_free(outputs *o) {
+  free(o->out);
+  free(o->var);
+  free(o->age);
+}
+
+/* An accumulate filter with the frame's buffers bound (and committed). */
+static hush_filter make_filter(hush_device dev, frame *fr, outputs *o, int binds) {
+  hush_filter f = hush_filter_new(dev, "accumulate");
+  REQUIRE(f != NULL);
+  const int W = fr->W, H = fr->H;
+  bind(f, "color", fr->color, HUSH_FORMAT_FLOAT3, W, H);
+  bind(f, "depth", fr->depth, HUSH_FORMAT_FLOAT, W, H);
+  bind(f, "normal", fr->normal, HUSH_FORMAT_FLOAT3, W, H);
+  if (binds & B_POSITION) bind(f, "position", fr->position, HUSH_FORMAT_FLOAT3, W, H);
+  if (binds & B_MOTION) bind(f, "motion", fr->motion, HUSH_FORMAT_FLOAT2, W, H);
+  if (binds & B_ID) bind(f, "id", fr->id, HUSH_FORMAT_FLOAT, W, H);
+  if (binds & B_ALBEDO) bind(f, "albedo", fr->albedo, HUSH_FORMAT_FLOAT3, W, H);
+  bind(f, "output", o->out, HUSH_FORMAT_FLOAT3, W, H);
+  bind(f, "variance", o->var, HUSH_FORMAT_FLOAT, W, H);
+  bind(f, "history_length", o->age, HUSH_FORMAT_FLOAT, W, H);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+  return f;
+}
+
+static hush_status run(hush_filter f, const hush_frame_info *info) {
+  const hush_status s = hush_filter_execute(f, info);
+  if (s != HUSH_OK) fprintf(stderr, "execute: %s\n", hush_status_name(s));
+  return s;
+}
+
+/* ======================================================================== */
+/* (a) convergence: 1/sqrt(n) with alpha_min = 0, EMA plateau otherwise     */
+/* ======================================================================== */
+
+static void test_convergence(hush_device dev) {
+  const int W = 64, H = 64;
+  const size_t n = (size_t)W * H;
+  const float sigma = 0.1f, mu[3] = {0.5f, 0.3f, 0.2f};
+  camera cam;
+  camera_setup(&cam, hush_v3(0, 0, 0), hush_v3(0, 0, -1), W, H);
+  const plane wall = {{0, 0, 1}, -5.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}};
+  frame fr;
+  frame_init(&fr, W, H);
+  render(&fr, &wall, 1, &cam, &cam, 0.0f, 0.0f);
+  CHECK_NEAR(fr.depth[0], 5.0f, 1e-4f);
+  CHECK_NEAR(fr.depth[n / 2 + 7], 5.0f, 1e-4f);
+
+  for (int mode = 0; mode < 2; mode++) {
+    const float alpha = mode == 0 ? 0.0f : 0.2f;
+    outputs o;
+    outputs_init(&o, W, H);
+    hush_filter f = make_filter(dev, &fr, &o, 0);
+    CHECK(hush_filter_set_float(f, "alpha_min", alpha) == HUSH_OK);
+    CHECK(hush_filter_set_float(f, "alpha_moments_min", alpha) == HUSH_OK);
+    CHECK(hush_filter_set_int(f, "max_age", 256) == HUSH_OK);
+    const hush_frame_info info = make_info(&cam, &cam, 0, 0, HUSH_MOTION_CAMERA,
+                                           HUSH_HISTORY_CONTINUE);
+    double rmse_at[129];
+    const int frames = mode == 0 ? 64 : 128;
+    for (int k = 1; k <= frames; k++) {
+      for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++)
+          fr.color[3 * i + c] = mu[c] + noise(11u + (uint32_t)mode, (uint32_t)(k * 3 + c), (uint32_t)i, sigma);
+      REQUIRE(run(f, &info) == HUSH_OK);
+      double se = 0.0;
+      for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++) {
+          const double e = (double)o.out[3 * i + c] - mu[c];
+          se += e * e;
+        }
+      rmse_at[k] = sqrt(se / (double)(3 * n));
+    }
+    if (mode == 0) {
+      /* cumulative average: rmse = sigma / sqrt(n) */
+      const int ns[3] = {4, 16, 64};
+      for (int k = 0; k < 3; k++) {
+        const double ratio = rmse_at[ns[k]] * sqrt((double)ns[k]) / sigma;
+        CHECK_MSG(fabs(ratio - 1.0) < 0.15, "n = %d: rmse * sqrt(n) / sigma = %.3f", ns[k], ratio);
+      }
+      CHECK_MSG(fabs(rmse_at[64] / rmse_at[16] - 0.5) < 0.075, "rmse64/rmse16 = %.3f",
+                rmse_at[64] / rmse_at[16]);
+      /* every pixel has the full history; the moments give the luminance
+       * variance (biased by (n-1)/n) */
+      int ages_ok = 1;
+      double vsum = 0.0;
+      for (size_t i = 0; i < n; i++) {
+        ages_ok &= o.age[i] == 64.0f;
+        vsum += o.var[i];
+      }
+      CHECK(ages_ok);
+      const double lum_var = (double)sigma * sigma *
+                             (0.2126 * 0.2126 + 0.7152 * 0.7152 + 0.0722 * 0.0722) * 63.0 / 64.0;
+      CHECK_MSG(fabs(vsum / (double)n / lum_var - 1.0) < 0.1, "mean variance %.4g, expected %.4g",
+                vsum / (double)n, lum_var);
+    } else {
+      /* exponential average: rmse = sqrt(alpha / (2 - alpha)) sigma, flat */
+      const double expected = sqrt(alpha / (2.0 - alpha)) * sigma;
+      CHECK_MSG(fabs(rmse_at[64] / expected - 1.0) < 0.15, "EMA rmse %.4f, expected %.4f",
+                rmse_at[64], expected);
+      CHECK_MSG(fabs(rmse_at[128] / expected - 1.0) < 0.15, "EMA rmse %.4f, expected %.4f",
+                rmse_at[128], expected);
+      CHECK_MSG(rmse_at[128] / rmse_at[32] > 0.85, "EMA still falling: %.4f -> %.4f",
+                rmse_at[32], rmse_at[128]);
+      CHECK(o.age[0] == 128.0f && o.age[n - 1] == 128.0f);
+    }
+    hush_filter_release(f);
+    outputs_free(&o);
+  }
+  frame_free(&fr);
+}
+
+/* A static camera with a different subpixel jitter every frame keeps the
+ * history on its pixels: a per-pixel checkerboard does not blur. */
+static void test_static_jitter(hush_device dev) {
+  const int W = 40, H = 30;
+  const size_t n = (size_t)W * H;
+  camera cam;
+  camera_setup(&cam, hush_v3(0.0f, 0.0f, 0.0f), hush_v3(0.0f, 0.0f, -1.0f), W, H);
+  /* a plane turned 30 degrees about y through (0, 0, -6): depth varies */
+  const plane pl[1] = {{{0.5f, 0, 0.8660254f}, -6.0f * 0.8660254f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}}};
+  frame fr;
+  frame_init(&fr, W, H);
+  for (int pos = 0; pos < 2; pos++) {
+    outputs o;
+    outputs_init(&o, W, H);
+    hush_filter f = make_filter(dev, &fr, &o, pos ? B_POSITION : 0);
+    CHECK(hush_filter_set_float(f, "alpha_min", 0.0f) == HUSH_OK);
+    for (int k = 0; k < 8; k++) {
+      const float jx = hush_rng_float(5, 0, (uint32_t)k) - 0.5f;
+      const float jy = hush_rng_float(5, 1, (uint32_t)k) - 0.5f;
+      render(&fr, pl, 1, &cam, &cam, jx, jy);
+      for (size_t i = 0; i < n; i++)
+        for (int c = 0; c < 3; c++)
+          fr.color[3 * i + c] = (float)(((i % (size_t)W) + i / (size_t)W) & 1) + 0.1f * (float)c;
+      const hush_frame_info info = make_info(&cam, &cam, jx, jy, HUSH_MOTION_CAMERA,
+                                             HUSH_HISTORY_CONTINUE);
+      REQUIRE(run(f, &info) == HUSH_OK);
+    }
+    double max_err = 0.0;
+    int full = 1;
+    for (size_t i = 0; i < n; i++) {
+      full &= o.age[i] == 8.0f;
+      for (int c = 0; c < 3; c++) {
+        const double e = fabs((double)o.out[3 * i + c] - fr.color[3 * i + c]);
+        if (e > max_err) max_err = e;
+      }
+    }
+    CHECK_MSG(full, "position bound: %d", pos);
+    CHECK_MSG(max_err < 1e-3, "jittered static camera blurs the history: max error %.3g (position %d)",
+              max_err, pos);
+    hush_filter_release(f);
+    outputs_free(&o);
+  }
+  frame_free(&fr);
+}
+
+/* ======================================================================== */
+/* (b) a known camera move reprojects onto the right pixels                 */
+/* ======================================================================== */
+
+static void camera_move_case(hush_device dev, float j1x, float j1y) {
+  const int W = 96, H = 64;
+  const size_t n = (size_t)W * H;
+  camera A, B;
+  camera_setup(&A, hush_v3(0.0f, 1.5f, 4.0f), hush_v3(0.0f, 0.8f, -4.0f), W, H);
+  /* B: moved right, up and back, turned right: the right edge is new */
+  camera_setup(&B, hush_v3(0.35f, 1.62f, 4.15f), hush_v3(0.9f, 0.75f, -4.0f), W, H);
+  const plane pl[2] = {{{0, 1, 0}, 0.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}},
+                       {{0, 0, 1}, -8.0f, 0, 0, 0, 0, 0, 2.0f, {0, 0, 0}}};
+  const int jittered = j1x != 0.0f || j1y != 0.0f;
+  frame f0, f1;
+  frame_init(&f0, W, H);
+  frame_init(&f1, W, H);
+  render(&f0, pl, 2, &A, &A, 0.0f, 0.0f);
+  for (size_t i = 0; i < n; i++)
+    for (int c = 0; c < 3; c++) f0.color[3 * i + c] = pattern(&f0.X[3 * i], c);
+  render(&f1, pl, 2, &B, &A, j1x, j1y);
+  memset(f1.color, 0, 3 * n * sizeof(float));
+
+  /* control: the error of reusing the same pixel without reprojection */
+  double naive = 0.0;
+  for (size_t i = 0; i < n; i++)
+    for (int c = 0; c < 3; c++) {
+      const double e = (double)f0.color[3 * i + c] - pattern(&f1.Xc[3 * i], c);
+      naive += e * e;
+    }
+  naive = sqrt(naive / (double)(3 * n));
+
+  /* the same cameras with an oblique near plane (Lengyel): only the z row
+   * of view_to_clip changes, which sends the reprojection down its general
+   * (non perspective/orthographic) path */
+  camera Ao = A, Bo = B;
+  Ao.v2c[2] = Bo.v2c[2] = 0.05f;
+  Ao.v2c[6] = Bo.v2c[6] = -0.03f;
+  hush_m4_mul(Ao.vp, Ao.v2c, Ao.w2v);
+  hush_m4_mul(Bo.vp, Bo.v2c, Bo.w2v);
+
+  static const char *const names[4] = {"camera+position", "camera+depth", "vectors",
+                                       "camera+depth, oblique"};
+  for (int variant = 0; variant < 4; variant++) {
+    outputs o;
+    outputs_init(&o, W, H);
+    const int binds = variant == 0 ? B_POSITION : variant == 2 ? B_MOTION : 0;
+    const camera *ca = variant == 3 ? &Ao : &A, *cb = variant == 3 ? &Bo : &B;
+    /* one filter, two frames: bind frame 0, run, rebind frame 1 (same size) */
+    hush_filter f = make_filter(dev, &f0, &o, binds | B_ID);
+    CHECK(hush_filter_set_float(f, "alpha_min", 0.0f) == HUSH_OK);
+    const hush_motion_source ms = variant == 2 ? HUSH_MOTION_VECTORS : HUSH_MOTION_CAMERA;
+    hush_frame_info info = make_info(ca, ca, 0.0f, 0.0f, ms, HUSH_HISTORY_CONTINUE);
+    REQUIRE(run(f, &info) == HUSH_OK);
+    bind(f, "color", f1.color, HUSH_FORMAT_FLOAT3, W, H);
+    bind(f, "depth", f1.depth, HUSH_FORMAT_FLOAT, W, H);
+    bind(f, "normal", f1.normal, HUSH_FORMAT_FLOAT3, W, H);
+    bind(f, "id", f1.id, HUSH_FORMAT_FLOAT, W, H);
+    if (binds & B_POSITION) bind(f, "position", f1.position, HUSH_FORMAT_FLOAT3, W, H);
+    if (binds & B_MOTION) bind(f, "motion", f1.motion, HUSH_FORMAT_FLOAT2, W, H);
+    info = make_info(cb, ca, j1x, j1y, ms, HUSH_HISTORY_CONTINUE);
+    REQUIRE(run(f, &info) == HUSH_OK);
+
+    /* Input 0 at frame 1 with alpha 1/2: output = history / 2. Checked
+     * against (1) the bilinear interpolation of frame 0 at the analytic
+     * previous location of the pixel-centre point, where all four taps lie
+     * on the pixel's own plane (the reprojection geometry), and (2) the
+     * texture at that point. */
+    size_t with_history = 0, interior = 0;
+    double se = 0.0, se_interp = 0.0, max_err = 0.0, max_interp = 0.0;
+    int ages_ok = 1;
+    for (size_t i = 0; i < n; i++) {
+      ages_ok &= o.age[i] == 1.0f || o.age[i] == 2.0f;
+      if (o.age[i] != 2.0f) continue;
+      with_history++;
+      /* a jittered sample may hit another surface than the pixel centre */
+      const int same_surface = f1.hit[i] && f1.id[i] == f1.hit_id[i];
+      double pattern_err = 0.0;
+      for (int c = 0; c < 3; c++) {
+        const double e = 2.0 * o.out[3 * i + c] - pattern(&f1.Xc[3 * i], c);
+        se += e * e;
+        if (fabs(e) > pattern_err) pattern_err = fabs(e);
+      }
+      float px, py;
+      const float *X = &f1.Xc[3 * i];
+      if (!same_surface || !camera_project(&A, hush_v3(X[0], X[1], X[2]), 1.0f, &px, &py))
+        continue;
+      const float sx = px - 0.5f, sy = py - 0.5f;
+      const int x0 = (int)floorf(sx), y0 = (int)floorf(sy);
+      if (x0 < 0 || y0 < 0 || x0 + 1 >= W || y0 + 1 >= H) continue;
+      const float fx = sx - (float)x0, fy = sy - (float)y0;
+      const size_t t00 = (size_t)y0 * W + x0;
+      if (f0.id[t00] != f1.id[i] || f0.id[t00 + 1] != f1.id[i] || f0.id[t00 + W] != f1.id[i] ||
+          f0.id[t00 + W + 1] != f1.id[i])
+        continue;
+      interior++;
+      if (pattern_err > max_err) max_err = pattern_err;
+      for (int c = 0; c < 3; c++) {
+        const float *C = f0.color;
+        const double want = (1 - fx) * (1 - fy) * C[3 * t00 + c] + fx * (1 - fy) * C[3 * (t00 + 1) + c] +
+                            (1 - fx) * fy * C[3 * (t00 + W) + c] + fx * fy * C[3 * (t00 + W + 1) + c];
+        const double e = fabs(2.0 * o.out[3 * i + c] - want);
+        se_interp += e * e;
+        if (e > max_interp) max_interp = e;
+      }
+    }
+    const double rms = sqrt(se / (double)(3 * (with_history ? with_history : 1)));
+    const double rms_interp = sqrt(se_interp / (double)(3 * (interior ? interior : 1)));
+    CHECK(ages_ok);
+    CHECK_MSG(with_history > n * 80 / 100, "%s: only %zu of %zu pixels kept history",
+              names[variant], with_history, n);
+    CHECK_MSG(interior > n * 2 / 3, "%s: %zu interior pixels", names[variant], interior);
+    /* Exact up to float rounding, except that with jitter the camera source
+     * estimates the centre's location to first order (position: the hit
+     * point's location minus the jitter; depth: the centre ray at the
+     * sample's depth), which is off at grazing angles under translation. */
+    const int approx = jittered && variant != 2;
+    CHECK_MSG(max_interp < (approx ? 1e-2 : 2e-3),
+              "%s, jitter %d: max error vs the exact bilinear history %.4g", names[variant],
+              jittered, max_interp);
+    CHECK_MSG(rms_interp < (approx ? 1.5e-3 : 5e-4),
+              "%s, jitter %d: rms error vs the exact bilinear history %.4g", names[variant],
+              jittered, rms_interp);
+    CHECK_MSG(rms < 0.004, "%s, jitter %d: rms error %.4g (no reprojection: %.4g)", names[variant],
+              jittered, rms, naive);
+    /* over the interior (the texture is undersampled on the far ground) */
+    CHECK_MSG(max_err < 0.03, "%s, jitter %d: max error %.4g", names[variant], jittered, max_err);
+    CHECK_MSG(naive > 8.0 * rms, "%s: the move is too small to test (naive %.4g, ours %.4g)",
+              names[variant], naive, rms);
+    /* pixels that were off-screen in frame 0 have no history */
+    size_t new_ok = 0, new_total = 0;
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const size_t i = (size_t)y * W + x;
+        float px, py;
+        const float *X = &f1.Xc[3 * i];
+        if (!camera_project(&A, hush_v3(X[0], X[1], X[2]), 1.0f, &px, &py)) continue;
+        if (px < -2.0f || px > (float)W + 2.0f || py < -2.0f || py > (float)H + 2.0f) {
+          new_total++;
+          new_ok += o.age[i] == 1.0f;
+        }
+      }
+    CHECK_MSG(new_ok == new_total, "%s: %zu of %zu newly visible pixels kept history",
+              names[variant], new_total - new_ok, new_total);
+    CHECK(new_total > (size_t)H);
+    hush_filter_release(f);
+    outputs_free(&o);
+  }
+  frame_free(&f0);
+  frame_free(&f1);
+}
+
+static void test_camera_move(hush_device dev) {
+  camera_move_case(dev, 0.0f, 0.0f);
+  camera_move_case(dev, 0.25f, -0.35f);
+}
+
+/* ======================================================================== */
+/* (c) disocclusion: a quad moves and reveals the wall behind it            */
+/* ======================================================================== */
+
+static void test_disocclusion(hush_device dev) {
+  const int W = 80, H = 48;
+  const size_t n = (size_t)W * H;
+  camera cam;
+  camera_setup(&cam, hush_v3(0, 0, 0), hush_v3(0, 0, -1), W, H);
+  plane pl[2] = {{{0, 0, 1}, -10.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}},
+                 {{0, 0, 1}, -4.0f, 1, -1.2f, 0.4f, -0.8f, 0.8f, 2.0f, {0, 0, 0}}};
+  frame prev, cur;
+  frame_init(&prev, W, H);
+  frame_init(&cur, W, H);
+  render(&prev, pl, 2, &cam, &cam, 0, 0);
+
+  for (int variant = 0; variant < 3; variant++) {
+    /* 0: ids bound; 1: depth/normal tests only; 2: no 3x3 fallback */
+    outputs o;
+    outputs_init(&o, W, H);
+    render(&cur, pl, 2, &cam, &cam, 0, 0);
+    for (size_t i = 0; i < 3 * n; i++) cur.color[i] = 0.5f;
+    hush_filter f = make_filter(dev, &cur, &o, B_MOTION | (variant == 0 ? B_ID : 0));
+    if (variant == 2) CHECK(hush_filter_set_bool(f, "fallback_3x3", 0) == HUSH_OK);
+    const hush_frame_info info = make_info(&cam, &cam, 0, 0, HUSH_MOTION_VECTORS,
+                                           HUSH_HISTORY_CONTINUE);
+    for (int k = 0; k < 4; k++) REQUIRE(run(f, &info) == HUSH_OK);
+    /* the quad moves right by 0.5 (about 5 pixels) */
+    plane moved[2] = {pl[0], pl[1]};
+    moved[1].x0 += 0.5f;
+    moved[1].x1 += 0.5f;
+    moved[1].prev_offset = hush_v3(-0.5f, 0, 0);
+    render(&cur, moved, 2, &cam, &cam, 0, 0);
+    REQUIRE(run(f, &info) == HUSH_OK);
+
+    size_t revealed_inner = 0, inner_ok = 0, revealed_all = 0, revealed_all_ok = 0;
+    size_t rest = 0, rest_ok = 0;
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const size_t i = (size_t)y * W + x;
+        const int was_quad = prev.hit_id[i] == 2.0f, is_wall = cur.hit_id[i] == 1.0f;
+        if (is_wall && was_quad) {
+          int all_quad = 1;
+          for (int dy = -1; dy <= 1; dy++)
+            for (int dx = -1; dx <= 1; dx++) {
+              const int xx = x + dx, yy = y + dy;
+              if (xx < 0 || yy < 0 || xx >= W || yy >= H) continue;
+              all_quad &= prev.hit_id[(size_t)yy * W + xx] == 2.0f;
+            }
+          revealed_all++;
+          revealed_all_ok += o.age[i] == 1.0f;
+          if (all_quad) {
+            revealed_inner++;
+            inner_ok += o.age[i] == 1.0f;
+          }
+        } else {
+          rest++;
+          rest_ok += o.age[i] == 5.0f;
+        }
+      }
+    CHECK_MSG(revealed_inner >= 30, "variant %d: revealed interior has %zu pixels", variant,
+              revealed_inner);
+    CHECK_MSG(inner_ok == revealed_inner, "variant %d: %zu of %zu revealed pixels kept history",
+              variant, revealed_inner - inner_ok, revealed_inner);
+    CHECK_MSG(rest_ok == rest, "variant %d: %zu of %zu other pixels lost history", variant,
+              rest - rest_ok, rest);
+    if (variant == 2)
+      CHECK_MSG(revealed_all_ok == revealed_all, "no fallback: %zu of %zu revealed kept history",
+                revealed_all - revealed_all_ok, revealed_all);
+    else
+      CHECK_MSG(revealed_all_ok < revealed_all, "the 3x3 fallback never helped a border pixel");
+    /* the history dropped: output = the new sample */
+    int fresh = 1;
+    for (size_t i = 0; i < n; i++)
+      if (o.age[i] == 1.0f)
+        for (int c = 0; c < 3; c++) fresh &= o.out[3 * i + c] == cur.color[3 * i + c];
+    CHECK(fresh);
+    hush_filter_release(f);
+    outputs_free(&o);
+  }
+  frame_free(&prev);
+  frame_free(&cur);
+}
+
+/* ======================================================================== */
+/* (d) RESET                                                                */
+/* ======================================================================== */
+
+static void test_reset(hush_device dev) {
+  const int W = 32, H = 24;
+  const size_t n = (size_t)W * H;
+  camera cam;
+  camera_setup(&cam, hush_v3(0, 1, 3), hush_v3(0, 0, -5), W, H);
+  const plane pl[2] = {{{0, 1, 0}, 0.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}},
+                       {{0, 0, 1}, -8.0f, 0, 0, 0, 0, 0, 2.0f, {0, 0, 0}}};
+  frame fr;
+  frame_init(&fr, W, H);
+  render(&fr, pl, 2, &cam, &cam, 0, 0);
+  outputs o;
+  outputs_init(&o, W, H);
+  hush_filter f = make_filter(dev, &fr, &o, B_ID | B_POSITION);
+  hush_frame_info info = make_info(&cam, &cam, 0, 0, HUSH_MOTION_CAMERA, HUSH_HISTORY_CONTINUE);
+  for (int k = 0; k < 5; k++) {
+    for (size_t i = 0; i < 3 * n; i++) fr.color[i] = 0.2f + noise(3, (uint32_t)k, (uint32_t)i, 0.1f);
+    REQUIRE(run(f, &info) == HUSH_OK);
+  }
+  CHECK(o.age[0] == 5.0f && o.age[n - 1] == 5.0f);
+  info.history = HUSH_HISTORY_RESET;
+  for (size_t i = 0; i < 3 * n; i++) fr.color[i] = 0.7f + noise(4, 0, (uint32_t)i, 0.1f);
+  REQUIRE(run(f, &info) == HUSH_OK);
+  int ages1 = 1, same = 1, var0 = 1;
+  for (size_t i = 0; i < n; i++) {
+    ages1 &= o.age[i] == 1.0f;
+    var0 &= o.var[i] == 0.0f;
+  }
+  for (size_t i = 0; i < 3 * n; i++) same &= o.out[i] == fr.color[i];
+  CHECK(ages1);
+  CHECK(same);
+  CHECK(var0);
+  info.history = HUSH_HISTORY_CONTINUE;
+  REQUIRE(run(f, &info) == HUSH_OK);
+  int ages2 = 1;
+  for (size_t i = 0; i < n; i++) ages2 &= o.age[i] == 2.0f;
+  CHECK(ages2);
+  hush_filter_release(f);
+  outputs_free(&o);
+  frame_free(&fr);
+}
+
+/* ======================================================================== */
+/* (e) determinism, (f) formats and strides                                 */
+/* ======================================================================== */
+
+/* A moving-camera noisy sequence: frame k of it into fr (all layers). */
+static void sequence_frame(frame *fr, int k, camera *cur, camera *prev, float *jx, float *jy) {
+  const int W = fr->W, H = fr->H;
+  const plane pl[3] = {{{0, 1, 0}, 0.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}},
+                       {{0, 0, 1}, -8.0f, 0, 0, 0, 0, 0, 2.0f, {0, 0, 0}},
+                       {{0, 0, 1}, -3.0f, 1, -0.8f, 0.6f, 0.2f, 1.4f, 3.0f, {0, 0, 0}}};
+  camera_setup(prev, hush_v3(0.4f * (float)(k - 1), 1.5f, 4.0f), hush_v3(0, 0.8f, -4.0f), W, H);
+  camera_setup(cur, hush_v3(0.4f * (float)k, 1.5f, 4.0f), hush_v3(0, 0.8f, -4.0f), W, H);
+  *jx = hush_rng_float(9, 0, (uint32_t)k) - 0.5f;
+  *jy = hush_rng_float(9, 1, (uint32_t)k) - 0.5f;
+  render(fr, pl, 3, cur, prev, *jx, *jy);
+  const size_t n = (size_t)W * H;
+  for (size_t i = 0; i < n; i++)
+    for (int c = 0; c < 3; c++)
+      fr->color[3 * i + c] =
+          fr->albedo[3 * i + c] * (pattern(&fr->X[3 * i], c) + noise(21, (uint32_t)(3 * k + c), (uint32_t)i, 0.3f));
+}
+
+static int bits_equal(const float *a, const float *b, size_t count) {
+  return memcmp(a, b, count * sizeof(float)) == 0;
+}
+
+static void test_determinism(void) {
+  const int W = 61, H = 37; /* odd sizes: uneven row split between threads */
+  const size_t n = (size_t)W * H;
+  hush_device d1 = hush_device_new("threads=1");
+  hush_device d2 = hush_device_new("threads=2");
+  REQUIRE(d1 && d2);
+  CHECK(hush_device_threads(d1) == 1);
+  CHECK(hush_device_threads(d2) == 2);
+  frame fr;
+  frame_init(&fr, W, H);
+  outputs o[3];
+  hush_filter f[3];
+  for (int k = 0; k < 3; k++) {
+    outputs_init(&o[k], W, H);
+    f[k] = make_filter(k == 0 ? d1 : d2, &fr, &o[k], B_POSITION | B_ID | B_ALBEDO);
+  }
+  int equal = 1;
+  for (int k = 0; k < 6; k++) {
+    camera cur, prev;
+    float jx, jy;
+    sequence_frame(&fr, k, &cur, &prev, &jx, &jy);
+    const hush_frame_info info = make_info(&cur, &prev, jx, jy, HUSH_MOTION_CAMERA,
+                                           HUSH_HISTORY_CONTINUE);
+    for (int j = 0; j < 3; j++) REQUIRE(run(f[j], &info) == HUSH_OK);
+    for (int j = 1; j < 3; j++)
+      equal &= bits_equal(o[0].out, o[j].out, 3 * n) && bits_equal(o[0].var, o[j].var, n) &&
+               bits_equal(o[0].age, o[j].age, n);
+  }
+  CHECK_MSG(equal, "outputs differ between runs or thread counts");
+  /* the sequence did exercise partial histories */
+  size_t young = 0;
+  for (size_t i = 0; i < n; i++) young += o[0].age[i] < 6.0f;
+  CHECK_MSG(young > 0 && young < n / 2, "young %zu of %zu", young, n);
+  for (int k = 0; k < 3; k++) {
+    hush_filter_release(f[k]);
+    outputs_free(&o[k]);
+  }
+  frame_free(&fr);
+  hush_device_release(d1);
+  hush_device_release(d2);
+}
+
+/* Rounds every value through binary16. */
+static void round_half(float *p, size_t count, uint16_t *h) {
+  for (size_t i = 0; i < count; i++) {
+    h[i] = hush__float_to_half(p[i]);
+    p[i] = hush__half_to_float(h[i]);
+  }
+}
+
+/* Copies a packed interleaved image into a strided one: pixel stride ps
+ * floats, row stride rs floats, offset off floats. */
+static void to_strided(const float *src, int ch, int W, int H, float *dst, int ps, int rs, int off) {
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++)
+      for (int c = 0; c < ch; c++) dst[off + y * rs + x * ps + c] = src[((size_t)y * W + x) * ch + c];
+}
+
+static void from_strided(const float *src, int ch, int W, int H, float *dst, int ps, int rs, int off) {
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++)
+      for (int c = 0; c < ch; c++) dst[((size_t)y * W + x) * ch + c] = src[off + y * rs + x * ps + c];
+}
+
+static void test_formats(hush_device dev) {
+  const int W = 33, H = 21;
+  const size_t n = (size_t)W * H;
+  frame fr;
+  frame_init(&fr, W, H);
+  /* half copies of every input */
+  uint16_t *hc = malloc(3 * n * 2), *hd = malloc(n * 2), *hn = malloc(3 * n * 2),
+           *hp = malloc(3 * n * 2), *hi = malloc(n * 2), *ha = malloc(3 * n * 2);
+  /* strided copies: 4-float pixels (3 used), 5 floats of row padding, 3 floats offset */
+  const int ps = 4, rs = 4 * W + 5, off = 3;
+  const size_t big = (size_t)rs * H + off + 4;
+  float *sc = calloc(big, 4), *sd = calloc(big, 4), *sn = calloc(big, 4), *sp = calloc(big, 4),
+        *si = calloc(big, 4), *sa = calloc(big, 4), *so = calloc(big, 4), *sv = calloc(big, 4),
+        *sg = calloc(big, 4);
+  float *tmp = malloc(3 * n * sizeof(float));
+  REQUIRE(hc && hd && hn && hp && hi && ha && sc && sd && sn && sp && si && sa && so && sv && sg && tmp);
+
+  outputs o_ref, o_half, o_str;
+  outputs_init(&o_ref, W, H);
+  outputs_init(&o_half, W, H);
+  outputs_init(&o_str, W, H);
+  const int binds = B_POSITION | B_ID | B_ALBEDO;
+  hush_filter fref = make_filter(dev, &fr, &o_ref, binds);
+
+  hush_filter fh = hush_filter_new(dev, "accumulate");
+  REQUIRE(fh);
+  bind(fh, "color", hc, HUSH_FORMAT_HALF3, W, H);
+  bind(fh, "depth", hd, HUSH_FORMAT_HALF, W, H);
+  bind(fh, "normal", hn, HUSH_FORMAT_HALF3, W, H);
+  bind(fh, "position", hp, HUSH_FORMAT_HALF3, W, H);
+  bind(fh, "id", hi, HUSH_FORMAT_HALF, W, H);
+  bind(fh, "albedo", ha, HUSH_FORMAT_HALF3, W, H);
+  bind(fh, "output", o_half.out, HUSH_FORMAT_FLOAT3, W, H);
+  bind(fh, "variance", o_half.var, HUSH_FORMAT_FLOAT, W, H);
+  bind(fh, "history_length", o_half.age, HUSH_FORMAT_FLOAT, W, H);
+  REQUIRE(hush_filter_commit(fh) == HUSH_OK);
+
+  hush_filter fs = hush_filter_new(dev, "accumulate");
+  REQUIRE(fs);
+  {
+    float *bufs[9] = {sc, sd, sn, sp, si, sa, so, sv, sg};
+    static const char *const nm[9] = {"color", "depth",  "normal",   "position",      "id",
+                                      "albedo", "output", "variance", "history_length"};
+    static const hush_format fm[9] = {HUSH_FORMAT_FLOAT3, HUSH_FORMAT_FLOAT,  HUSH_FORMAT_FLOAT3,
+                                      HUSH_FORMAT_FLOAT3, HUSH_FORMAT_FLOAT,  HUSH_FORMAT_FLOAT3,
+                                      HUSH_FORMAT_FLOAT3, HUSH_FORMAT_FLOAT,  HUSH_FORMAT_FLOAT};
+    for (int k = 0; k < 9; k++) {
+      hush_image_view v = view_of(bufs[k], fm[k], W, H);
+      v.byte_offset = (size_t)off * 4;
+      v.pixel_stride = (size_t)ps * 4;
+      v.row_stride = (size_t)rs * 4;
+      CHECK(hush_filter_set_image(fs, nm[k], &v) == HUSH_OK);
+    }
+  }
+  REQUIRE(hush_filter_commit(fs) == HUSH_OK);
+
+  int half_equal = 1, strided_equal = 1, guard_ok = 1;
+  for (int k = 0; k < 4; k++) {
+    camera cur, prev;
+    float jx, jy;
+    sequence_frame(&fr, k, &cur, &prev, &jx, &jy);
+    round_half(fr.color, 3 * n, hc);
+    round_half(fr.depth, n, hd);
+    round_half(fr.normal, 3 * n, hn);
+    round_half(fr.position, 3 * n, hp);
+    round_half(fr.id, n, hi);
+    round_half(fr.albedo, 3 * n, ha);
+    to_strided(fr.color, 3, W, H, sc, ps, rs, off);
+    to_strided(fr.depth, 1, W, H, sd, ps, rs, off);
+    to_strided(fr.normal, 3, W, H, sn, ps, rs, off);
+    to_strided(fr.position, 3, W, H, sp, ps, rs, off);
+    to_strided(fr.id, 1, W, H, si, ps, rs, off);
+    to_strided(fr.albedo, 3, W, H, sa, ps, rs, off);
+    const hush_frame_info info = make_info(&cur, &prev, jx, jy, HUSH_MOTION_CAMERA,
+                                           HUSH_HISTORY_CONTINUE);
+    REQUIRE(run(fref, &info) == HUSH_OK);
+    REQUIRE(run(fh, &info) == HUSH_OK);
+    REQUIRE(run(fs, &info) == HUSH_OK);
+    half_equal &= bits_equal(o_ref.out, o_half.out, 3 * n) &&
+                  bits_equal(o_ref.var, o_half.var, n) && bits_equal(o_ref.age, o_half.age, n);
+    from_strided(so, 3, W, H, tmp, ps, rs, off);
+    strided_equal &= bits_equal(o_ref.out, tmp, 3 * n);
+    from_strided(sv, 1, W, H, tmp, ps, rs, off);
+    strided_equal &= bits_equal(o_ref.var, tmp, n);
+    from_strided(sg, 1, W, H, tmp, ps, rs, off);
+    strided_equal &= bits_equal(o_ref.age, tmp, n);
+  }
+  /* the padding around strided outputs is untouched */
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < rs; x++) {
+      const int in_pixel = x < W * ps && x % ps < 3;
+      if (!in_pixel) guard_ok &= so[off + y * rs + x] == 0.0f;
+      const int in_pixel1 = x < W * ps && x % ps < 1;
+      if (!in_pixel1) guard_ok &= sg[off + y * rs + x] == 0.0f;
+    }
+  CHECK_MSG(half_equal, "half inputs differ from their float values");
+  CHECK_MSG(strided_equal, "strided views differ from packed ones");
+  CHECK(guard_ok);
+
+  hush_filter_release(fref);
+  hush_filter_release(fh);
+  hush_filter_release(fs);
+  outputs_free(&o_ref);
+  outputs_free(&o_half);
+  outputs_free(&o_str);
+  free(hc);
+  free(hd);
+  free(hn);
+  free(hp);
+  free(hi);
+  free(ha);
+  free(sc);
+  free(sd);
+  free(sn);
+  free(sp);
+  free(si);
+  free(sa);
+  free(so);
+  free(sv);
+  free(sg);
+  free(tmp);
+  frame_free(&fr);
+}
+
+/* ======================================================================== */
+/* (g) misuse, class table, timings                                         */
+/* ======================================================================== */
+
+static void test_misuse(hush_device dev) {
+  const int W = 16, H = 12;
+  const size_t n = (size_t)W * H;
+  camera cam;
+  camera_setup(&cam, hush_v3(0, 0, 0), hush_v3(0, 0, -1), W, H);
+  const plane wall = {{0, 0, 1}, -5.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}};
+  frame fr;
+  frame_init(&fr, W, H);
+  render(&fr, &wall, 1, &cam, &cam, 0, 0);
+  for (size_t i = 0; i < 3 * n; i++) fr.color[i] = 0.25f;
+  outputs o;
+  outputs_init(&o, W, H);
+  const char *msg = NULL;
+  hush_device_get_error(dev, &msg); /* clear */
+
+  /* the class table */
+  const hush_filter_class_info *ci = hush_filter_class_find("accumulate");
+  REQUIRE(ci != NULL);
+  CHECK(ci->param_count == 10 && strcmp(ci->params[0].name, "nonfinite") == 0);
+  CHECK(ci->image_count == 10);
+  for (uint32_t k = 0; k < ci->param_count; k++) CHECK(ci->params[k].doc && ci->params[k].doc[0]);
+
+  /* execute before commit */
+  hush_filter f = hush_filter_new(dev, "accumulate");
+  REQUIRE(f);
+  bind(f, "color", fr.color, HUSH_FORMAT_FLOAT3, W, H);
+  bind(f, "depth", fr.depth, HUSH_FORMAT_FLOAT, W, H);
+  bind(f, "normal", fr.normal, HUSH_FORMAT_FLOAT3, W, H);
+  bind(f, "output", o.out, HUSH_FORMAT_FLOAT3, W, H);
+  bind(f, "history_length", o.age, HUSH_FORMAT_FLOAT, W, H);
+  hush_frame_info info = make_info(&cam, &cam, 0, 0, HUSH_MOTION_CAMERA, HUSH_HISTORY_CONTINUE);
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_INVALID_OPERATION);
+  hush_device_get_error(dev, &msg);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+
+  /* parameters out of range */
+  CHECK(hush_filter_set_float(f, "alpha_min", 1.5f) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(hush_filter_set_int(f, "max_age", 0) == HUSH_ERROR_OUT_OF_RANGE);
+  hush_device_get_error(dev, &msg);
+
+  /* motion vectors requested but not bound */
+  info.motion = HUSH_MOTION_VECTORS;
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_INVALID_OPERATION);
+  CHECK(hush_device_get_error(dev, &msg) == HUSH_ERROR_INVALID_OPERATION);
+  CHECK(msg && strstr(msg, "motion") != NULL);
+  info.motion = HUSH_MOTION_CAMERA;
+
+  REQUIRE(run(f, &info) == HUSH_OK);
+  REQUIRE(run(f, &info) == HUSH_OK);
+  CHECK(o.age[0] == 2.0f);
+
+  /* timings: the four stages */
+  const char *const *names = NULL;
+  const double *ms = NULL;
+  uint32_t count = 0;
+  CHECK(hush_filter_get_timings(f, &names, &ms, &count) == HUSH_OK);
+  CHECK(count == 4);
+  if (count == 4) {
+    CHECK(strcmp(names[0], "import") == 0 && strcmp(names[1], "reproject") == 0 &&
+          strcmp(names[2], "accumulate") == 0 && strcmp(names[3], "export") == 0);
+    CHECK(ms[0] >= 0.0 && ms[1] >= 0.0 && ms[2] >= 0.0 && ms[3] >= 0.0);
+  }
+
+  /* NaN in colour: error naming the pixel; the history is untouched */
+  fr.color[3 * (7 * (size_t)W + 5) + 1] = NAN;
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_NONFINITE);
+  CHECK(hush_device_get_error(dev, &msg) == HUSH_ERROR_NONFINITE);
+  CHECK_MSG(msg && strstr(msg, "color") && strstr(msg, "(5, 7)"), "message: %s", msg ? msg : "");
+  CHECK(o.age[0] == 2.0f);
+  /* Inf in depth likewise */
+  fr.color[3 * (7 * (size_t)W + 5) + 1] = 0.25f;
+  fr.depth[3] = INFINITY;
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_NONFINITE);
+  CHECK(hush_device_get_error(dev, &msg) == HUSH_ERROR_NONFINITE);
+  CHECK(msg && strstr(msg, "depth") && strstr(msg, "(3, 0)"));
+  fr.depth[3] = 5.0f;
+  fr.color[3 * (7 * (size_t)W + 5) + 1] = NAN;
+  CHECK(hush_filter_set_string(f, "nonfinite", "replace") == HUSH_OK);
+  CHECK(run(f, &info) == HUSH_OK);
+  CHECK(o.age[0] == 3.0f); /* the failed frames did not count */
+  int finite = 1;
+  for (size_t i = 0; i < 3 * n; i++) finite &= isfinite(o.out[i]) != 0;
+  CHECK(finite);
+  /* the bad channel was replaced by 0 and blended: (2 * 0.25 + 0) / 3 */
+  CHECK_NEAR(o.out[3 * (7 * (size_t)W + 5) + 1], 0.5f / 3.0f, 1e-6f);
+  CHECK_NEAR(o.out[3 * (7 * (size_t)W + 5) + 0], 0.25f, 1e-6f);
+
+  /* camera reprojection without position needs invertible matrices */
+  memset(info.view_to_clip, 0, sizeof info.view_to_clip);
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_INVALID_ARGUMENT);
+  hush_device_get_error(dev, &msg);
+  hush_filter_release(f);
+  outputs_free(&o);
+  frame_free(&fr);
+}
+
+/* Demodulation: a constant irradiance under a texture accumulates to the
+ * exact product, while without it the albedo is ignored. */
+static void test_demodulate(hush_device dev) {
+  const int W = 24, H = 16;
+  const size_t n = (size_t)W * H;
+  camera cam;
+  camera_setup(&cam, hush_v3(0, 0, 0), hush_v3(0, 0, -1), W, H);
+  const plane wall = {{0, 0, 1}, -5.0f, 0, 0, 0, 0, 0, 1.0f, {0, 0, 0}};
+  frame fr;
+  frame_init(&fr, W, H);
+  render(&fr, &wall, 1, &cam, &cam, 0, 0);
+  for (size_t i = 0; i < n; i++) fr.albedo[3 * i + 2] = 0.0f; /* eps path */
+  outputs o;
+  outputs_init(&o, W, H);
+  hush_filter f = make_filter(dev, &fr, &o, B_ALBEDO);
+  CHECK(hush_filter_set_float(f, "alpha_min", 0.0f) == HUSH_OK);
+  CHECK(hush_filter_set_float(f, "alpha_moments_min", 0.0f) == HUSH_OK);
+  const hush_frame_info info = make_info(&cam, &cam, 0, 0, HUSH_MOTION_CAMERA,
+                                         HUSH_HISTORY_CONTINUE);
+  const float E[2] = {2.0f, 4.0f};
+  for (int k = 0; k < 2; k++) {
+    for (size_t i = 0; i < 3 * n; i++) fr.color[i] = fr.albedo[i] * E[k];
+    REQUIRE(run(f, &info) == HUSH_OK);
+  }
+  double max_rel = 0.0, var_err = 0.0;
+  for (size_t i = 0; i < 3 * n; i++) {
+    const double want = fr.albedo[i] * 3.0;
+    const double e = fabs(o.out[i] - want) / (want > 1e-6 ? want : 1.0);
+    if (e > max_rel) max_rel = e;
+  }
+  /* the moments are of the demodulated luminance: (2, 4) -> variance 1,
+   * except for the clamped blue channel (albedo 0 -> 1e-3) which adds 0 */
+  for (size_t i = 0; i < n; i++) {
+    const double l2 = 0.2126 * 2 + 0.7152 * 2, l4 = 0.2126 * 4 + 0.7152 * 4;
+    const double want = (l4 - l2) * (l4 - l2) / 4.0;
+    var_err = fmax(var_err, fabs(o.var[i] - want));
+  }
+  CHECK_MSG(max_rel < 1e-5, "demodulated accumulation: max relative error %.3g", max_rel);
+  CHECK_MSG(var_err < 1e-4, "variance error %.3g", var_err);
+  CHECK(hush_filter_set_bool(f, "demodulate", 0) == HUSH_OK);
+  for (size_t i = 0; i < 3 * n; i++) fr.color[i] = 0.3f;
+  const hush_frame_info reset = make_info(&cam, &cam, 0, 0, HUSH_MOTION_CAMERA, HUSH_HISTORY_RESET);
+  REQUIRE(run(f, &reset) == HUSH_OK);
+  int raw = 1;
+  for (size_t i = 0; i < 3 * n; i++) raw &= o.out[i] == 0.3f;
+  CHECK(raw);
+  hush_filter_release(f);
+  outputs_free(&o);
+  frame_free(&fr);
+}
+
+/* ======================================================================== */
+/* The temporal module directly                                             */
+/* ======================================================================== */
+
+/* A W x H G-buffer pair, constant depth 5 and normal +z, id 1, and a
+ * constant motion (mx, my) for VECTORS plans. */
+typedef struct gpair {
+  int W, H;
+  float *cz, *cn[3], *cid, *pz, *pn[3], *pid, *mot[2];
+} gpair;
+
+static void gpair_init(gpair *g, int W, int H, float mx, float my) {
+  const size_t n = (size_t)W * H;
+  g->W = W;
+  g->H = H;
+  float **all[12] = {&g->cz, &g->cn[0], &g->cn[1], &g->cn[2], &g->cid, &g->pz,
+                     &g->pn[0], &g->pn[1], &g->pn[2], &g->pid, &g->mot[0], &g->mot[1]};
+  for (int k = 0; k < 12; k++) {
+    *all[k] = calloc(n, sizeof(float));
+    REQUIRE(*all[k]);
+  }
+  for (size_t i = 0; i < n; i++) {
+    g->cz[i] = g->pz[i] = 5.0f;
+    g->cn[2][i] = g->pn[2][i] = 1.0f;
+    g->cid[i] = g->pid[i] = 1.0f;
+    g->mot[0][i] = mx;
+    g->mot[1][i] = my;
+  }
+}
+
+static void gpair_free(gpair *g) {
+  float *all[12] = {g->cz, g->cn[0], g->cn[1], g->cn[2], g->cid, g->pz,
+                    g->pn[0], g->pn[1], g->pn[2], g->pid, g->mot[0], g->mot[1]};
+  for (int k = 0; k < 12; k++) free(all[k]);
+}
+
+static hush_status gpair_build(hush_device dev, gpair *g, hush_reproject_plan *plan,
+                               const hush_reproject_params *p) {
+  hush_reproject_input in;
+  memset(&in, 0, sizeof in);
+  in.cur.depth = g->cz;
+  in.cur.id = g->cid;
+  hush_gbuffer prev;
+  memset(&prev, 0, sizeof prev);
+  prev.depth = g->pz;
+  prev.id = g->pid;
+  for (int k = 0; k < 3; k++) {
+    in.cur.normal[k] = g->cn[k];
+    prev.normal[k] = g->pn[k];
+  }
+  in.motion[0] = g->mot[0];
+  in.motion[1] = g->mot[1];
+  hush_frame_info info;
+  hush_frame_info_init(&info);
+  info.motion = HUSH_MOTION_VECTORS;
+  return hush__reproject_build(dev, plan, &in, &prev, &info, p, 2);
+}
+
+static void test_module_plan(hush_device dev) {
+  const int W = 7, H = 6;
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 0.25f, 0.5f);
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  CHECK(p.depth_tolerance == 0.1f && p.depth_gradient == 1.0f && p.normal_threshold == 0.9f &&
+        p.use_id && p.fallback_3x3);
+
+  float *v = malloc(n * sizeof(float)), *out = malloc(n * sizeof(float));
+  REQUIRE(v && out);
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) v[(size_t)y * W + x] = (float)x + 10.0f * (float)y;
+  const float *prevs[1] = {v};
+  float *outs[1] = {out};
+
+  /* all consistent: exact bilinear interpolation at (x + 0.25, y + 0.5) */
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  hush__reproject_gather(&plan, prevs, 1, outs, -1.0f, 2);
+  int interior_ok = 1;
+  for (int y = 0; y < H - 1; y++)
+    for (int x = 0; x < W - 1; x++) {
+      const size_t i = (size_t)y * W + x;
+      interior_ok &= plan.kind[i] == HUSH_FOOTPRINT_BILINEAR && plan.mask[i] == 0xf &&
+                     fabsf(out[i] - ((float)x + 0.25f + 10.0f * ((float)y + 0.5f))) < 1e-4f;
+    }
+  CHECK(interior_ok);
+  /* right column: taps x + 1 are off-screen -> renormalised onto column x;
+   * the footprint is moved inside the image (column x becomes its right
+   * column) */
+  {
+    const size_t i = (size_t)2 * W + (W - 1);
+    CHECK(plan.kind[i] == HUSH_FOOTPRINT_BILINEAR && plan.mask[i] == 0xa);
+    CHECK(plan.origin[i] == 2 * W + (W - 2) && plan.fx[i] == 1.0f);
+    CHECK_NEAR(out[i], (float)(W - 1) + 25.0f, 1e-4f);
+    int32_t idx[9];
+    float w[9];
+    CHECK(hush__reproject_taps(&plan, i, idx, w) == 2 && idx[0] == 2 * W + W - 1 &&
+          idx[1] == 3 * W + W - 1);
+    /* bottom-right corner: one tap left */
+    const size_t k = (size_t)(H - 1) * W + (W - 1);
+    CHECK(plan.mask[k] == 0x8 && plan.origin[k] == (H - 2) * W + (W - 2));
+    CHECK_NEAR(out[k], v[k], 1e-5f);
+  }
+
+  /* one inconsistent tap (depth) at pixel (2, 2): taps (2,2) (3,2) (2,3) (3,3),
+   * weights .375 .125 .375 .125; make (3, 2) fail */
+  g.pz[2 * W + 3] = 6.0f; /* 20% off */
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  hush__reproject_gather(&plan, prevs, 1, outs, -1.0f, 2);
+  {
+    const size_t i = (size_t)2 * W + 2;
+    CHECK(plan.kind[i] == HUSH_FOOTPRINT_BILINEAR && plan.mask[i] == (0xf & ~0x2u));
+    const float want = (0.375f * v[2 * W + 2] + 0.375f * v[3 * W + 2] + 0.125f * v[3 * W + 3]) / 0.875f;
+    CHECK_NEAR(out[i], want, 1e-4f);
+    int32_t idx[9];
+    float w[9];
+    const int nt = hush__reproject_taps(&plan, i, idx, w);
+    CHECK(nt == 3 && idx[0] == 2 * W + 2 && idx[1] == 3 * W + 2 && idx[2] == 3 * W + 3);
+    CHECK_NEAR(w[0] + w[1] + w[2], 1.0f, 1e-6f);
+  }
+  /* a looser tolerance keeps it */
+  p.depth_tolerance = 0.25f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  CHECK(plan.mask[2 * W + 2] == 0xf);
+  p.depth_tolerance = 0.1f;
+  g.pz[2 * W + 3] = 5.0f;
+
+  /* normal and id tests */
+  g.pn[2][3 * W + 2] = 0.8f; /* cos 0.8 < 0.9 */
+  g.pn[0][3 * W + 2] = 0.6f;
+  g.pid[3 * W + 3] = 2.0f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  CHECK(plan.mask[2 * W + 2] == 0x3);
+  p.use_id = 0;
+  p.normal_threshold = 0.7f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  CHECK(plan.mask[2 * W + 2] == 0xf);
+  p.use_id = 1;
+  p.normal_threshold = 0.9f;
+  g.pn[2][3 * W + 2] = 1.0f;
+  g.pn[0][3 * W + 2] = 0.0f;
+  g.pid[3 * W + 3] = 1.0f;
+
+  /* 3x3 fallback: the four bilinear taps of (2, 2) fail, the 3x3 around the
+   * pixel containing (2.75, 3.0), i.e. (2, 3), has 5 others */
+  const int bil[4][2] = {{2, 2}, {3, 2}, {2, 3}, {3, 3}};
+  for (int k = 0; k < 4; k++) g.pz[bil[k][1] * W + bil[k][0]] = 50.0f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  hush__reproject_gather(&plan, prevs, 1, outs, -1.0f, 2);
+  {
+    const size_t i = (size_t)2 * W + 2;
+    CHECK(plan.kind[i] == HUSH_FOOTPRINT_3X3);
+    CHECK(plan.origin[i] == 2 * W + 1);
+    /* taps of the 3x3 at rows 2..4, columns 1..3; failing: (2,2) (3,2) (2,3) (3,3) */
+    float num = 0.0f, den = 0.0f;
+    unsigned want_mask = 0;
+    for (int t = 0; t < 9; t++) {
+      const int xt = 1 + t % 3, yt = 2 + t / 3;
+      if (g.pz[yt * W + xt] != 5.0f) continue;
+      want_mask |= 1u << t;
+      num += hush__reproject_k3x3[t] * v[yt * W + xt];
+      den += hush__reproject_k3x3[t];
+    }
+    CHECK(plan.mask[i] == want_mask);
+    CHECK_NEAR(out[i], num / den, 1e-4f);
+  }
+  p.fallback_3x3 = 0;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  hush__reproject_gather(&plan, prevs, 1, outs, -1.0f, 2);
+  CHECK(plan.kind[2 * W + 2] == HUSH_FOOTPRINT_NONE && plan.mask[2 * W + 2] == 0);
+  CHECK(out[2 * W + 2] == -1.0f);
+  p.fallback_3x3 = 1;
+  for (int k = 0; k < 4; k++) g.pz[bil[k][1] * W + bil[k][0]] = 5.0f;
+
+  /* background never matches a surface, and matches background */
+  g.cz[1 * W + 1] = 0.0f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  CHECK(plan.kind[1 * W + 1] == HUSH_FOOTPRINT_NONE);
+  CHECK(plan.mask[0 * W + 1] == 0xf); /* neighbours unaffected: taps are all surface */
+  for (int k = 0; k < 4; k++) g.pz[(1 + k / 2) * W + 1 + k % 2] = 0.0f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  CHECK(plan.mask[1 * W + 1] == 0xf);
+  CHECK(plan.mask[0 * W + 1] == 0x3); /* surface pixel: its lower taps are background now */
+
+  /* motion pointing off-screen: no history */
+  for (size_t i = 0; i < n; i++) g.mot[0][i] = -100.0f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  size_t none = 0;
+  for (size_t i = 0; i < n; i++) none += plan.kind[i] == HUSH_FOOTPRINT_NONE;
+  CHECK(none == n);
+
+  /* VECTORS without motion fails and leaves the plan alone */
+  {
+    hush_reproject_input in;
+    memset(&in, 0, sizeof in);
+    in.cur.depth = g.cz;
+    for (int k = 0; k < 3; k++) in.cur.normal[k] = g.cn[k];
+    hush_frame_info info;
+    hush_frame_info_init(&info);
+    info.motion = HUSH_MOTION_VECTORS;
+    hush_gbuffer prev = in.cur;
+    CHECK(hush__reproject_build(dev, &plan, &in, &prev, &info, &p, 1) == HUSH_ERROR_INVALID_OPERATION);
+    /* RESET clears */
+    info.motion = HUSH_MOTION_CAMERA;
+    info.history = HUSH_HISTORY_RESET;
+    CHECK(hush__reproject_build(dev, &plan, &in, &prev, &info, &p, 1) == HUSH_OK);
+    const char *msg;
+    hush_device_get_error(dev, &msg);
+  }
+  free(v);
+  free(out);
+  hush__reproject_plan_free(&plan);
+  gpair_free(&g);
+}
+
+/* Accumulation of 1 and 4 channels, and hush__temporal_blend. */
+static void test_module_accum(hush_device dev) {
+  const int W = 9, H = 5;
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 0.0f, 0.0f);
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+
+  for (int ch = 1; ch <= 4; ch += 3) {
+    hush_accum acc;
+    REQUIRE(hush__accum_init(dev, &acc, ch, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+    hush_accum_params ap = {0.0f, 0.0f, 3};
+    float *s[4], *var = malloc(n * sizeof(float));
+    REQUIRE(var);
+    for (int c = 0; c < ch; c++) REQUIRE((s[c] = malloc(n * sizeof(float))) != NULL);
+    const float vals[4] = {1.0f, 2.0f, 6.0f, 3.0f};
+    for (int k = 0; k < 4; k++) {
+      for (int c = 0; c < ch; c++)
+        for (size_t i = 0; i < n; i++) s[c][i] = vals[k] * (float)(c + 1);
+      hush__accum_blend(&acc, &plan, (const float *const *)s, &ap, var, 2);
+    }
+    /* ages 1, 2, 3, 3 (cap): means 1, 1.5, 3, then alpha 1/3: 3 * 2/3 + 3/3 = 3 */
+    const hush_planar *col = hush__accum_color(&acc);
+    CHECK(col->channels == ch);
+    CHECK(hush__accum_age(&acc)->plane[0][0] == 3.0f);
+    CHECK_NEAR(col->plane[0][n - 1], 3.0f, 1e-5f);
+    CHECK_NEAR(col->plane[ch - 1][0], 3.0f * (float)ch, 1e-5f);
+    /* luminance: channel 0 (1 channel) or Rec. 709 of 1, 2, 3 times the value */
+    const float lw = ch == 1 ? 1.0f : 0.2126f + 2.0f * 0.7152f + 3.0f * 0.0722f;
+    const float m1 = hush__accum_moments(&acc)->plane[0][4];
+    CHECK_NEAR(m1, 3.0f * lw, 1e-5f);
+    CHECK(var[4] >= 0.0f);
+    hush__accum_reset(&acc);
+    hush__accum_blend(&acc, &plan, (const float *const *)s, &ap, NULL, 1);
+    CHECK(hush__accum_age(&acc)->plane[0][7] == 1.0f);
+    CHECK(hush__accum_color(&acc)->plane[0][7] == s[0][7]);
+    for (int c = 0; c < ch; c++) free(s[c]);
+    free(var);
+    hush__accum_free(&acc);
+  }
+
+  /* temporal_blend: prev 10, sample 0, age 4, alpha_min 0.1 -> 7.5; age 20 -> 9 */
+  {
+    float *prev = malloc(n * sizeof(float)), *smp = malloc(n * sizeof(float)),
+          *age = malloc(n * sizeof(float)), *out = malloc(n * sizeof(float));
+    REQUIRE(prev && smp && age && out);
+    for (size_t i = 0; i < n; i++) {
+      prev[i] = 10.0f;
+      smp[i] = 0.0f;
+      age[i] = i % 2 ? 4.0f : 20.0f;
+    }
+    const float *pp[1] = {prev}, *sp[1] = {smp};
+    float *op[1] = {out};
+    hush__temporal_blend(&plan, pp, sp, 1, age, 0.1f, op, 2);
+    CHECK_NEAR(out[1], 7.5f, 1e-5f);
+    CHECK_NEAR(out[2], 9.0f, 1e-5f);
+    hush__temporal_blend(&plan, NULL, sp, 1, age, 0.1f, op, 2);
+    CHECK(out[1] == 0.0f);
+    free(prev);
+    free(smp);
+    free(age);
+    free(out);
+  }
+  hush__reproject_plan_free(&plan);
+  gpair_free(&g);
+}
+
+/* ======================================================================== */
+/* Timing note (HUSH_BENCH=1)                                               */
+/* ======================================================================== */
+
+static int cmp_double(const void *a, const void *b) {
+  const double x = *(const double *)a, y = *(const double *)b;
+  return x < y ? -1 : x > y;
+}
+
+static void bench(void) {
+  const int W = 1280, H = 720, frames = 25, skip = 5;
+  hush_device dev = hush_device_new(NULL);
+  REQUIRE(dev);
+  frame fr;
+  frame_init(&fr, W, H);
+  outputs o;
+  outputs_init(&o, W, H);
+  hush_filter f = make_filter(dev, &fr, &o, B_ID | B_ALBEDO);
+  double total[32], stage[4][32];
+  const char *stage_names[4] = {"", "", "", ""};
+  for (int k = 0; k < frames; k++) {
+    camera cur, prev;
+    float jx, jy;
+    sequence_frame(&fr, k, &cur, &prev, &jx, &jy);
+    const hush_frame_info info = make_info(&cur, &prev, jx, jy, HUSH_MOTION_CAMERA,
+                                           HUSH_HISTORY_CONTINUE);
+    const double t0 = hush__now_ms();
+    REQUIRE(run(f, &info) == HUSH_OK);
+    total[k] = hush__now_ms() - t0;
+    const char *const *names;
+    const double *ms;
+    uint32_t count;
+    hush_filter_get_timings(f, &names, &ms, &count);
+    for (uint32_t s = 0; s < count && s < 4; s++) {
+      stage[s][k] = ms[s];
+      stage_names[s] = names[s];
+    }
+  }
+  qsort(total + skip, (size_t)(frames - skip), sizeof(double), cmp_double);
+  printf("note: accumulate %dx%d, %d threads, color+depth+normal+id+albedo, camera motion: "
+         "median %.2f ms/frame over %d frames (min %.2f, max %.2f)\n",
+         W, H, hush_device_threads(dev), total[skip + (frames - skip) / 2], frames - skip,
+         total[skip], total[frames - 1]);
+  for (int s = 0; s < 4; s++) {
+    qsort(stage[s] + skip, (size_t)(frames - skip), sizeof(double), cmp_double);
+    printf("note:   %-10s %.2f ms\n", stage_names[s], stage[s][skip + (frames - skip) / 2]);
+  }
+  hush_filter_release(f);
+  outputs_free(&o);
+  frame_free(&fr);
+  hush_device_release(dev);
+}
+
+int main(void) {
+  hush_device dev = hush_device_new(NULL);
+  REQUIRE(dev != NULL);
+  test_module_plan(dev);
+  test_module_accum(dev);
+  test_convergence(dev);
+  test_static_jitter(dev);
+  test_camera_move(dev);
+  test_disocclusion(dev);
+  test_reset(dev);
+  test_determinism();
+  test_formats(dev);
+  test_misuse(dev);
+  test_demodulate(dev);
+  hush_device_release(dev);
+  const char *b = getenv("HUSH_BENCH");
+  if (b && b[0] == '1') bench();
+  return check_summary();
+}

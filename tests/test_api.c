@@ -1,0 +1,270 @@
+/*
+ * test_api.c — the public API contract, through hush.h only: class tables
+ * are well formed, and every kind of misuse returns the documented status
+ * with a message that names the culprit (NULL handles, unknown names, type
+ * and range errors, missing or mismatched images, execute before commit,
+ * bad frame info, overlapping output).
+ */
+#include "check.h"
+
+#include "hush.h"
+
+#include <string.h>
+
+#define W 16
+#define H 8
+
+static hush_device dev;
+
+/* Reads the device error and checks its status and a word of its message. */
+static int expect_error(hush_device d, hush_status want, const char *word) {
+  const char *msg = NULL;
+  const hush_status got = hush_device_get_error(d, &msg);
+  if (got != want || !msg || (word && !strstr(msg, word))) {
+    fprintf(stderr, "  expected %s with '%s', got %s: %s\n", hush_status_name(want),
+            word ? word : "", hush_status_name(got), msg ? msg : "(null)");
+    return 0;
+  }
+  return 1;
+}
+
+static void test_class_tables(void) {
+  const uint32_t n = hush_filter_class_count();
+  CHECK(n >= 1);
+  CHECK(hush_filter_class_at(n) == NULL);
+  CHECK(hush_filter_class_find("accumulate") != NULL);
+  CHECK(hush_filter_class_find("no-such-filter") == NULL);
+  CHECK(hush_filter_class_find(NULL) == NULL);
+  for (uint32_t i = 0; i < n; i++) {
+    const hush_filter_class_info *c = hush_filter_class_at(i);
+    REQUIRE(c && c->name && c->doc && c->paper);
+    CHECK(c->param_count >= 1 && strcmp(c->params[0].name, "nonfinite") == 0);
+    int has_output = 0;
+    for (uint32_t k = 0; k < c->image_count; k++) {
+      const hush_image_info *im = &c->images[k];
+      CHECK(im->name && im->doc && im->doc[0] && im->channels >= 1 && im->channels <= 4);
+      if (!strcmp(im->name, "output") && im->role == HUSH_IMAGE_OUTPUT && im->required) has_output = 1;
+      for (uint32_t j = 0; j < k; j++) CHECK(strcmp(c->images[j].name, im->name) != 0);
+    }
+    CHECK_MSG(has_output, "%s has no required 'output'", c->name);
+    for (uint32_t k = 0; k < c->param_count; k++) {
+      const hush_param_info *p = &c->params[k];
+      CHECK(p->name && p->doc && p->doc[0]);
+      for (uint32_t j = 0; j < k; j++) CHECK(strcmp(c->params[j].name, p->name) != 0);
+      if (p->type != HUSH_PARAM_BOOL)
+        CHECK_MSG(p->default_value >= p->min_value && p->default_value <= p->max_value,
+                  "%s.%s default outside its range", c->name, p->name);
+      if (p->type == HUSH_PARAM_ENUM) {
+        CHECK(p->enum_names != NULL && p->min_value == 0);
+        for (int e = 0; p->enum_names && e <= (int)p->max_value; e++) CHECK(p->enum_names[e] != NULL);
+      }
+      if (p->type == HUSH_PARAM_INT || p->type == HUSH_PARAM_ENUM)
+        CHECK(p->default_value == (double)(int)p->default_value);
+    }
+  }
+}
+
+static void test_params(void) {
+  CHECK(hush_filter_new(NULL, "accumulate") == NULL);
+  CHECK(expect_error(NULL, HUSH_ERROR_INVALID_ARGUMENT, "device"));
+  CHECK(hush_filter_new(dev, "nope") == NULL);
+  CHECK(expect_error(dev, HUSH_ERROR_NOT_FOUND, "accumulate")); /* lists the known ones */
+  CHECK(hush_filter_new(dev, NULL) == NULL);
+  CHECK(expect_error(dev, HUSH_ERROR_NOT_FOUND, NULL));
+
+  hush_filter f = hush_filter_new(dev, "accumulate");
+  REQUIRE(f != NULL);
+  CHECK(strcmp(hush_filter_get_class(f)->name, "accumulate") == 0);
+
+  /* Defaults read back as the table says. */
+  const hush_filter_class_info *c = hush_filter_get_class(f);
+  for (uint32_t k = 0; k < c->param_count; k++) {
+    const hush_param_info *p = &c->params[k];
+    if (p->type == HUSH_PARAM_FLOAT) {
+      float v = -1;
+      CHECK(hush_filter_get_float(f, p->name, &v) == HUSH_OK && v == (float)p->default_value);
+    } else {
+      int v = -1;
+      CHECK(hush_filter_get_int(f, p->name, &v) == HUSH_OK && v == (int)p->default_value);
+    }
+  }
+
+  CHECK(hush_filter_set_float(f, "no_such_param", 1.0f) == HUSH_ERROR_NOT_FOUND);
+  CHECK(expect_error(dev, HUSH_ERROR_NOT_FOUND, "no_such_param"));
+  CHECK(hush_filter_set_float(f, "alpha_min", 1.5f) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(expect_error(dev, HUSH_ERROR_OUT_OF_RANGE, "alpha_min"));
+  CHECK(hush_filter_set_float(f, "alpha_min", NAN) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(expect_error(dev, HUSH_ERROR_OUT_OF_RANGE, "finite"));
+  CHECK(hush_filter_set_bool(f, "alpha_min", 1) == HUSH_ERROR_TYPE_MISMATCH);
+  CHECK(expect_error(dev, HUSH_ERROR_TYPE_MISMATCH, "float"));
+  CHECK(hush_filter_set_float(f, "alpha_min", 0.25f) == HUSH_OK);
+  float a = 0;
+  CHECK(hush_filter_get_float(f, "alpha_min", &a) == HUSH_OK && a == 0.25f);
+  CHECK(hush_filter_set_string(f, "alpha_min", "0.5") == HUSH_OK);
+  CHECK(hush_filter_get_float(f, "alpha_min", &a) == HUSH_OK && a == 0.5f);
+  CHECK(hush_filter_set_string(f, "alpha_min", "half") == HUSH_ERROR_TYPE_MISMATCH);
+  CHECK(expect_error(dev, HUSH_ERROR_TYPE_MISMATCH, "half"));
+  CHECK(hush_filter_set_string(f, "max_age", "2.5") == HUSH_ERROR_TYPE_MISMATCH);
+  CHECK(expect_error(dev, HUSH_ERROR_TYPE_MISMATCH, "max_age"));
+  CHECK(hush_filter_set_float(f, "max_age", 2.5f) == HUSH_ERROR_TYPE_MISMATCH);
+  CHECK(expect_error(dev, HUSH_ERROR_TYPE_MISMATCH, "int"));
+  CHECK(hush_filter_set_int(f, "max_age", 0) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(expect_error(dev, HUSH_ERROR_OUT_OF_RANGE, "max_age"));
+  CHECK(hush_filter_set_string(f, "nonfinite", "replace") == HUSH_OK);
+  int e = -1;
+  CHECK(hush_filter_get_int(f, "nonfinite", &e) == HUSH_OK && e == 1);
+  CHECK(hush_filter_set_string(f, "nonfinite", "ignore") == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(expect_error(dev, HUSH_ERROR_OUT_OF_RANGE, "error, replace"));
+  CHECK(hush_filter_set_int(f, "nonfinite", 2) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(expect_error(dev, HUSH_ERROR_OUT_OF_RANGE, NULL));
+  CHECK(hush_filter_set_string(f, "use_id", "maybe") == HUSH_ERROR_TYPE_MISMATCH);
+  CHECK(expect_error(dev, HUSH_ERROR_TYPE_MISMATCH, "bool"));
+  CHECK(hush_filter_set_string(f, "use_id", "false") == HUSH_OK);
+  CHECK(hush_filter_set_string(f, "use_id", NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, NULL));
+  CHECK(hush_filter_get_float(f, "alpha_min", NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, NULL));
+
+  /* NULL filter handles: an error, never a crash. */
+  CHECK(hush_filter_set_float(NULL, "alpha_min", 0.1f) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_filter_commit(NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_filter_execute(NULL, NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_filter_set_image(NULL, "color", NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  hush_device_get_error(NULL, NULL);
+  hush_filter_release(NULL);
+  hush_filter_retain(NULL);
+  hush_device_release(NULL);
+  hush_filter_release(f);
+}
+
+static float color[W * H * 3], depth[W * H], normal[W * H * 3], out[W * H * 3];
+static float small[4 * 4 * 3];
+
+static hush_image_view view(void *p, hush_format fmt, uint32_t w, uint32_t h) {
+  hush_image_view v = {p, fmt, w, h, 0, 0, 0};
+  return v;
+}
+
+static void test_images_and_commit(void) {
+  for (int i = 0; i < W * H; i++) {
+    depth[i] = 2.0f;
+    normal[3 * i + 2] = 1.0f;
+    color[3 * i] = color[3 * i + 1] = color[3 * i + 2] = 0.5f;
+  }
+  hush_filter f = hush_filter_new(dev, "accumulate");
+  REQUIRE(f != NULL);
+  hush_image_view vc = view(color, HUSH_FORMAT_FLOAT3, W, H);
+  hush_image_view vd = view(depth, HUSH_FORMAT_FLOAT, W, H);
+  hush_image_view vn = view(normal, HUSH_FORMAT_FLOAT3, W, H);
+  hush_image_view vo = view(out, HUSH_FORMAT_FLOAT3, W, H);
+
+  CHECK(hush_filter_set_image(f, "colour", &vc) == HUSH_ERROR_NOT_FOUND);
+  CHECK(expect_error(dev, HUSH_ERROR_NOT_FOUND, "colour"));
+  CHECK(hush_filter_set_image(f, "color", NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "color"));
+  CHECK(hush_filter_set_image(f, "color", &vd) == HUSH_ERROR_INVALID_ARGUMENT); /* 1 channel */
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "channel"));
+  hush_image_view v4 = view(out, HUSH_FORMAT_FLOAT4, W, H / 2);
+  CHECK(hush_filter_set_image(f, "output", &v4) == HUSH_ERROR_INVALID_ARGUMENT); /* exactly 3 */
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "exactly"));
+
+  CHECK(hush_filter_execute(f, NULL) == HUSH_ERROR_INVALID_OPERATION);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_OPERATION, "commit"));
+  CHECK(hush_filter_commit(f) == HUSH_ERROR_INVALID_OPERATION); /* nothing bound */
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_OPERATION, NULL));
+
+  CHECK(hush_filter_set_image(f, "color", &vc) == HUSH_OK);
+  CHECK(hush_filter_set_image(f, "depth", &vd) == HUSH_OK);
+  CHECK(hush_filter_set_image(f, "output", &vo) == HUSH_OK);
+  CHECK(hush_filter_commit(f) == HUSH_ERROR_INVALID_OPERATION); /* normal missing */
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_OPERATION, "normal"));
+
+  hush_image_view vs = view(small, HUSH_FORMAT_FLOAT3, 4, 4);
+  CHECK(hush_filter_set_image(f, "normal", &vs) == HUSH_OK);
+  CHECK(hush_filter_commit(f) == HUSH_ERROR_INVALID_ARGUMENT); /* sizes differ */
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "4x4"));
+
+  CHECK(hush_filter_set_image(f, "normal", &vn) == HUSH_OK);
+  hush_image_view overlap = view(color, HUSH_FORMAT_FLOAT3, W, H);
+  CHECK(hush_filter_set_image(f, "output", &overlap) == HUSH_OK);
+  CHECK(hush_filter_commit(f) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "overlaps"));
+  CHECK(hush_filter_set_image(f, "output", &vo) == HUSH_OK);
+  CHECK(hush_filter_commit(f) == HUSH_OK);
+
+  hush_frame_info info;
+  hush_frame_info_init(&info);
+  CHECK(info.size == sizeof info && info.motion == HUSH_MOTION_CAMERA);
+  CHECK(hush_filter_execute(f, &info) == HUSH_OK);
+  CHECK(out[0] == 0.5f);
+
+  const char *const *names;
+  const double *ms;
+  uint32_t count = 0;
+  CHECK(hush_filter_get_timings(f, &names, &ms, &count) == HUSH_OK);
+  CHECK(count >= 1 && names[0] != NULL && ms[0] >= 0.0);
+
+  hush_frame_info bad = info;
+  bad.size = 3;
+  CHECK(hush_filter_execute(f, &bad) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "size"));
+  bad = info;
+  bad.world_to_view[5] = INFINITY;
+  CHECK(hush_filter_execute(f, &bad) == HUSH_ERROR_NONFINITE);
+  CHECK(expect_error(dev, HUSH_ERROR_NONFINITE, "matrix"));
+  bad = info;
+  bad.motion = (hush_motion_source)7;
+  CHECK(hush_filter_execute(f, &bad) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, "motion"));
+
+  /* A binding of another size invalidates the commit. */
+  CHECK(hush_filter_set_image(f, "color", &vs) == HUSH_OK);
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_INVALID_OPERATION);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_OPERATION, NULL));
+  CHECK(hush_filter_set_image(f, "color", &vc) == HUSH_OK);
+  CHECK(hush_filter_commit(f) == HUSH_OK);
+
+  /* Unsetting a required image makes execute fail, not crash. */
+  CHECK(hush_filter_unset_image(f, "depth") == HUSH_OK);
+  CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_INVALID_OPERATION);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_OPERATION, "depth"));
+  CHECK(hush_filter_unset_image(f, "bogus") == HUSH_ERROR_NOT_FOUND);
+  CHECK(expect_error(dev, HUSH_ERROR_NOT_FOUND, "bogus"));
+  hush_filter_release(f);
+}
+
+static void test_frames(void) {
+  hush_frame fr = hush_frame_new(dev, 8, 4);
+  REQUIRE(fr != NULL);
+  hush_image_view v;
+  CHECK(hush_frame_add_layer(fr, "color", 3, &v) == HUSH_OK);
+  CHECK(v.width == 8 && v.height == 4 && v.format == HUSH_FORMAT_FLOAT3);
+  CHECK(hush_frame_add_layer(fr, "bad", 5, NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, NULL));
+  CHECK(hush_frame_add_layer(fr, "", 1, NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, NULL));
+  CHECK(hush_frame_get_layer(fr, "normal", &v) == HUSH_ERROR_NOT_FOUND);
+  CHECK(expect_error(dev, HUSH_ERROR_NOT_FOUND, "normal"));
+  CHECK(hush_frame_layer_count(fr) == 1);
+  CHECK(strcmp(hush_frame_layer_name(fr, 0), "color") == 0);
+  CHECK(hush_frame_layer_name(fr, 1) == NULL);
+  CHECK(hush_frame_new(dev, 0, 4) == NULL);
+  CHECK(expect_error(dev, HUSH_ERROR_INVALID_ARGUMENT, NULL));
+  hush_frame_release(fr);
+  hush_frame f2 = NULL;
+  CHECK(hush_frame_read_exr(dev, "/nonexistent/dir/x.exr", &f2) == HUSH_ERROR_IO);
+  CHECK(expect_error(dev, HUSH_ERROR_IO, "/nonexistent/dir/x.exr"));
+  CHECK(f2 == NULL);
+}
+
+int main(void) {
+  dev = hush_device_new("threads=2");
+  REQUIRE(dev != NULL);
+  CHECK(strcmp(hush_version(), "0.1.0") == 0);
+  test_class_tables();
+  test_params();
+  test_images_and_commit();
+  test_frames();
+  hush_device_release(dev);
+  return check_summary();
+}

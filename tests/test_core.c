@@ -1,0 +1,228 @@
+/*
+ * test_core.c — the core module: device configuration and the error model,
+ * half <-> float conversion, image views (formats, strides, offsets) through
+ * import/export, NaN/Inf detection, matrices, and the counter-based RNG.
+ */
+#include "check.h"
+
+#include "core/device.h"
+#include "core/half.h"
+#include "core/hmath.h"
+#include "core/image.h"
+#include "core/rng.h"
+
+#include <stdint.h>
+#include <string.h>
+
+static void test_device_config(void) {
+  hush_device d = hush_device_new(NULL);
+  REQUIRE(d != NULL);
+  CHECK(hush_device_threads(d) >= 1);
+  hush_device_release(d);
+
+  d = hush_device_new("threads=3, verbose=1");
+  REQUIRE(d != NULL);
+  CHECK(hush_device_threads(d) == 3);
+  hush_device_release(d);
+
+  const char *msg = NULL;
+  CHECK(hush_device_new("threads=abc") == NULL);
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(msg && strstr(msg, "threads") != NULL);
+  /* read-and-clear */
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_OK);
+  CHECK(msg && msg[0] == '\0');
+
+  CHECK(hush_device_new("colour=red") == NULL);
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_ERROR_NOT_FOUND);
+  CHECK(msg && strstr(msg, "colour") != NULL);
+  CHECK(hush_device_new("threads") == NULL);
+  CHECK(hush_device_get_error(NULL, NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+}
+
+static int callback_calls;
+static hush_status callback_last;
+static void on_error(void *user, hush_status s, const char *m) {
+  (void)m;
+  *(int *)user += 1;
+  callback_calls++;
+  callback_last = s;
+}
+
+static void test_first_error_kept(void) {
+  hush_device d = hush_device_new(NULL);
+  REQUIRE(d != NULL);
+  int count = 0;
+  hush_device_set_error_callback(d, on_error, &count);
+  hush__fail(d, HUSH_ERROR_NOT_FOUND, "first %d", 1);
+  hush__fail(d, HUSH_ERROR_IO, "second");
+  CHECK(count == 2);
+  CHECK(callback_last == HUSH_ERROR_IO);
+  const char *msg;
+  CHECK(hush_device_get_error(d, &msg) == HUSH_ERROR_NOT_FOUND);
+  CHECK(strcmp(msg, "first 1") == 0);
+  CHECK(hush_device_get_error(d, &msg) == HUSH_OK);
+  CHECK(strcmp(hush_status_name(HUSH_ERROR_NONFINITE), "HUSH_ERROR_NONFINITE") == 0);
+  hush_device_release(d);
+}
+
+static void test_half(void) {
+  /* Every half value survives half -> float -> half exactly (NaN stays NaN). */
+  int exact = 1;
+  for (uint32_t h = 0; h < 65536; h++) {
+    const float f = hush__half_to_float((uint16_t)h);
+    const uint16_t back = hush__float_to_half(f);
+    if (f != f) {
+      if ((back & 0x7c00u) != 0x7c00u || (back & 0x3ffu) == 0) exact = 0;
+    } else if (back != h) {
+      exact = 0;
+    }
+  }
+  CHECK(exact);
+  CHECK(hush__half_to_float(0x3c00) == 1.0f);
+  CHECK(hush__half_to_float(0x7bff) == 65504.0f);
+  CHECK(hush__half_to_float(0x0001) == 5.9604644775390625e-8f);
+  CHECK(hush__float_to_half(65520.0f) == 0x7c00); /* rounds to infinity */
+  CHECK(hush__float_to_half(1.0f + 1.0f / 2048.0f) == 0x3c00); /* tie to even */
+  CHECK(hush__float_to_half(1.0f + 3.0f / 2048.0f) == 0x3c02);
+  CHECK(hush__float_to_half(-0.0f) == 0x8000);
+}
+
+/* Writes a gradient through an arbitrary view (format, strides, offset) and
+ * reads it back through import: the planes must equal the source. */
+static void roundtrip_view(hush_format format, size_t offset, size_t pixel_pad, size_t row_pad) {
+  const uint32_t w = 13, h = 7;
+  const int ch = hush_format_channels(format);
+  hush_planar src, dst;
+  REQUIRE(hush__planar_init(NULL, &src, ch, w, h) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &dst, ch, w, h) == HUSH_OK);
+  for (int c = 0; c < ch; c++)
+    for (size_t i = 0; i < (size_t)w * h; i++) src.plane[c][i] = (float)(i * 0.25 + c); /* exact in half */
+  const size_t ps = hush_format_pixel_size(format) + pixel_pad;
+  const size_t rs = ps * w + row_pad;
+  unsigned char *mem = calloc(1, offset + rs * h + 64);
+  hush_image_view v = {mem, format, w, h, offset, pixel_pad ? ps : 0, row_pad ? rs : 0};
+  CHECK(hush__view_validate(NULL, &v, "test", ch, 1) == HUSH_OK);
+  hush__view_export(&src, &v);
+  CHECK(hush__view_import(NULL, &v, "test", &dst, HUSH_NONFINITE_ERROR, NULL) == HUSH_OK);
+  int same = 1;
+  for (int c = 0; c < ch; c++)
+    if (memcmp(src.plane[c], dst.plane[c], sizeof(float) * w * h)) same = 0;
+  CHECK_MSG(same, "format %d offset %zu pixel pad %zu row pad %zu", format, offset, pixel_pad,
+            row_pad);
+  free(mem);
+  hush__planar_free(&src);
+  hush__planar_free(&dst);
+}
+
+static void test_views(void) {
+  const hush_format formats[] = {HUSH_FORMAT_FLOAT,  HUSH_FORMAT_FLOAT2, HUSH_FORMAT_FLOAT3,
+                                 HUSH_FORMAT_FLOAT4, HUSH_FORMAT_HALF,   HUSH_FORMAT_HALF2,
+                                 HUSH_FORMAT_HALF3,  HUSH_FORMAT_HALF4};
+  for (size_t i = 0; i < sizeof formats / sizeof formats[0]; i++) {
+    roundtrip_view(formats[i], 0, 0, 0);
+    roundtrip_view(formats[i], 8, 4, 12);
+    roundtrip_view(formats[i], 2 * (formats[i] >= HUSH_FORMAT_HALF ? 1 : 2), 8, 0);
+  }
+  CHECK(hush_format_pixel_size(HUSH_FORMAT_HALF3) == 6);
+  CHECK(hush_format_pixel_size(HUSH_FORMAT_FLOAT4) == 16);
+  CHECK(hush_format_channels((hush_format)99) == 0);
+
+  float buf[64] = {0};
+  hush_device d = hush_device_new(NULL);
+  const char *msg;
+  hush_image_view v = {buf, HUSH_FORMAT_FLOAT3, 4, 4, 0, 0, 0};
+  CHECK(hush__view_validate(d, &v, "color", 3, 0) == HUSH_OK);
+  v.pixel_stride = 6; /* not a multiple of 4 */
+  CHECK(hush__view_validate(d, &v, "color", 3, 0) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_device_get_error(d, &msg) && strstr(msg, "color") != NULL);
+  v.pixel_stride = 4; /* smaller than a pixel */
+  CHECK(hush__view_validate(d, &v, "color", 3, 0) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_device_get_error(d, &msg) && strstr(msg, "smaller than a pixel") != NULL);
+  v.pixel_stride = 0;
+  v.row_stride = 16; /* rows overlap */
+  CHECK(hush__view_validate(d, &v, "color", 3, 0) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_device_get_error(d, &msg) && strstr(msg, "overlap") != NULL);
+  v.row_stride = 0;
+  CHECK(hush__view_validate(d, &v, "normal", 4, 0) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(hush_device_get_error(d, &msg) && strstr(msg, "at least 4") != NULL);
+  v.width = 0;
+  CHECK(hush__view_validate(d, &v, "color", 3, 0) == HUSH_ERROR_INVALID_ARGUMENT);
+  v.width = 4;
+  v.data = NULL;
+  CHECK(hush__view_validate(d, &v, "color", 3, 0) == HUSH_ERROR_INVALID_ARGUMENT);
+  hush_device_get_error(d, NULL);
+
+  /* NaN detection names the first pixel; replace policy zeroes and counts. */
+  v.data = buf;
+  buf[3 * (2 * 4 + 1) + 1] = NAN; /* pixel (1, 2), green */
+  buf[3 * (3 * 4 + 3)] = INFINITY;
+  hush_planar p;
+  REQUIRE(hush__planar_init(d, &p, 3, 4, 4) == HUSH_OK);
+  CHECK(hush__view_import(d, &v, "color", &p, HUSH_NONFINITE_ERROR, NULL) == HUSH_ERROR_NONFINITE);
+  CHECK(hush_device_get_error(d, &msg) == HUSH_ERROR_NONFINITE);
+  CHECK_MSG(strstr(msg, "(1, 2)") != NULL, "message: %s", msg);
+  size_t replaced = 0;
+  CHECK(hush__view_import(d, &v, "color", &p, HUSH_NONFINITE_REPLACE, &replaced) == HUSH_OK);
+  CHECK(replaced == 2);
+  CHECK(p.plane[1][2 * 4 + 1] == 0.0f && p.plane[0][3 * 4 + 3] == 0.0f);
+  hush__planar_free(&p);
+  hush_device_release(d);
+}
+
+static void test_math(void) {
+  float v[16], pr[16], m[16], inv[16], id[16];
+  hush_m4_look_at(v, hush_v3(1, 2, 3), hush_v3(0, 0, -4), hush_v3(0, 1, 0));
+  hush_m4_perspective(pr, 60.0f, 16.0f / 9.0f, 0.1f, 100.0f);
+  hush_m4_mul(m, pr, v);
+  CHECK(hush_m4_invert(inv, m));
+  hush_m4_mul(id, m, inv);
+  double err = 0;
+  for (int i = 0; i < 16; i++) err = fmax(err, fabs(id[i] - (i % 5 == 0 ? 1.0 : 0.0)));
+  CHECK(err < 1e-4);
+  /* The eye maps to the view origin; the target lies on -Z. */
+  hush_vec4 e = hush_m4_mul_v4(v, 1, 2, 3, 1);
+  CHECK_NEAR(e.x, 0, 1e-5);
+  CHECK_NEAR(e.y, 0, 1e-5);
+  CHECK_NEAR(e.z, 0, 1e-5);
+  hush_vec4 t = hush_m4_mul_v4(v, 0, 0, -4, 1);
+  CHECK(t.z < 0 && fabsf(t.x) < 1e-5f && fabsf(t.y) < 1e-5f);
+  float zero[16] = {0};
+  CHECK(!hush_m4_invert(inv, zero));
+}
+
+static void test_rng(void) {
+  /* Pure function of its inputs; roughly uniform; streams decorrelated. */
+  CHECK(hush_rng_u32(1, 2, 3) == hush_rng_u32(1, 2, 3));
+  CHECK(hush_rng_u32(1, 2, 3) != hush_rng_u32(1, 2, 4));
+  CHECK(hush_rng_u32(1, 2, 3) != hush_rng_u32(1, 3, 3));
+  const int n = 1 << 16;
+  double sum = 0, sum2 = 0, cross = 0;
+  int buckets[16] = {0};
+  for (int i = 0; i < n; i++) {
+    const float a = hush_rng_float(7, 0, (uint32_t)i), b = hush_rng_float(7, 1, (uint32_t)i);
+    CHECK(a >= 0.0f && a < 1.0f);
+    sum += a;
+    sum2 += a * a;
+    cross += (a - 0.5) * (b - 0.5);
+    buckets[(int)(a * 16)]++;
+  }
+  CHECK_NEAR(sum / n, 0.5, 0.01);
+  CHECK_NEAR(sum2 / n - (sum / n) * (sum / n), 1.0 / 12.0, 0.003);
+  CHECK_NEAR(cross / n, 0.0, 0.003);
+  int flat = 1;
+  for (int k = 0; k < 16; k++)
+    if (abs(buckets[k] - n / 16) > n / 16 / 10) flat = 0;
+  CHECK(flat);
+}
+
+int main(void) {
+  test_device_config();
+  test_first_error_kept();
+  test_half();
+  test_views();
+  test_math();
+  test_rng();
+  CHECK(callback_calls == 2);
+  return check_summary();
+}
