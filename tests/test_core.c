@@ -103,7 +103,7 @@ static void roundtrip_view(hush_format format, size_t offset, size_t pixel_pad, 
   unsigned char *mem = calloc(1, offset + rs * h + 64);
   hush_image_view v = {mem, format, w, h, offset, pixel_pad ? ps : 0, row_pad ? rs : 0};
   CHECK(hush__view_validate(NULL, &v, "test", ch, 1) == HUSH_OK);
-  hush__view_export(&src, &v);
+  hush__view_export(&src, &v, 2);
   CHECK(hush__view_import(NULL, &v, "test", &dst, HUSH_NONFINITE_ERROR, NULL) == HUSH_OK);
   int same = 1;
   for (int c = 0; c < ch; c++)

@@ -8,6 +8,7 @@
 #include "core/device.h"
 #include "core/half.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
@@ -114,72 +115,109 @@ hush_status hush__view_validate(hush_device device, const hush_image_view *v, co
   return HUSH_OK;
 }
 
-static inline const char *pixel_at(const hush_image_view *v, size_t ps, size_t rs, uint32_t x,
-                                   uint32_t y) {
-  return (const char *)v->data + v->byte_offset + (size_t)y * rs + (size_t)x * ps;
+/* One row of a view into planes. The float path reads through a float
+ * pointer when the row is aligned (the common case), so the compiler can
+ * vectorise the strided loads; anything else goes through memcpy. */
+static void import_row(const hush_image_view *v, size_t ps, size_t rs, uint32_t y, int nc,
+                       float *const *out) {
+  const char *row = (const char *)v->data + v->byte_offset + (size_t)y * rs;
+  const uint32_t w = v->width;
+  if (hush__format_element_size(v->format) == 2) {
+    for (uint32_t x = 0; x < w; x++)
+      for (int c = 0; c < nc; c++) {
+        uint16_t h;
+        memcpy(&h, row + (size_t)x * ps + 2 * (size_t)c, 2);
+        out[c][x] = hush__half_to_float(h);
+      }
+    return;
+  }
+  if ((uintptr_t)row % sizeof(float) == 0) {
+    const float *rf = (const float *)(const void *)row;
+    const size_t sf = ps / sizeof(float);
+    for (int c = 0; c < nc; c++) {
+      float *o = out[c];
+      for (uint32_t x = 0; x < w; x++) o[x] = rf[(size_t)x * sf + (size_t)c];
+    }
+    return;
+  }
+  for (uint32_t x = 0; x < w; x++)
+    for (int c = 0; c < nc; c++) memcpy(&out[c][x], row + (size_t)x * ps + 4 * (size_t)c, 4);
+}
+
+/* Non-finite values in one row of planes: a branch-free count (NaN fails
+ * the comparison, so it counts too). */
+static size_t count_nonfinite(float *const *planes, int nc, uint32_t w) {
+  size_t bad = 0;
+  for (int c = 0; c < nc; c++) {
+    const float *p = planes[c];
+    for (uint32_t x = 0; x < w; x++) bad += !(fabsf(p[x]) <= FLT_MAX);
+  }
+  return bad;
 }
 
 hush_status hush__view_import(hush_device device, const hush_image_view *v, const char *what,
                               hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced) {
   const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
-  const int half = hush__format_element_size(v->format) == 2;
   const int nc = dst->channels;
-  const uint32_t w = v->width;
+  const uint32_t w = v->width, h = v->height;
+  const int threads = device ? device->threads : 1;
   size_t bad = 0;
-  long first_bad = -1;
-  for (uint32_t y = 0; y < v->height; y++) {
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad)
+  for (uint32_t y = 0; y < h; y++) {
     float *out[4];
     for (int c = 0; c < nc; c++) out[c] = dst->plane[c] + (size_t)y * w;
-    for (uint32_t x = 0; x < w; x++) {
-      const char *p = pixel_at(v, ps, rs, x, y);
-      for (int c = 0; c < nc; c++) {
-        float f;
-        if (half) {
-          uint16_t h;
-          memcpy(&h, p + 2 * c, 2);
-          f = hush__half_to_float(h);
-        } else {
-          memcpy(&f, p + 4 * c, 4);
-        }
-        out[c][x] = f;
-      }
-    }
-    /* Separate pass: keeps the copy loop free of branches. */
-    for (int c = 0; c < nc; c++)
-      for (uint32_t x = 0; x < w; x++)
-        if (!isfinite(out[c][x])) {
-          if (first_bad < 0) first_bad = (long)((size_t)y * w + x);
-          bad++;
-          out[c][x] = 0.0f;
-        }
+    import_row(v, ps, rs, y, nc, out);
+    bad += count_nonfinite(out, nc, w);
   }
   if (replaced) *replaced = bad;
-  if (bad && policy == HUSH_NONFINITE_ERROR)
+  if (!bad) return HUSH_OK;
+  /* Rare path: find the first bad pixel for the message and zero them all. */
+  size_t first_bad = SIZE_MAX;
+  const size_t n = (size_t)w * h;
+  for (int c = 0; c < nc; c++)
+    for (size_t i = 0; i < n; i++)
+      if (!isfinite(dst->plane[c][i])) {
+        if (i < first_bad) first_bad = i;
+        dst->plane[c][i] = 0.0f;
+      }
+  if (policy == HUSH_NONFINITE_ERROR)
     return hush__fail(device, HUSH_ERROR_NONFINITE,
-                      "%s: %zu NaN/Inf value(s), first at pixel (%ld, %ld); set nonfinite=replace "
+                      "%s: %zu NaN/Inf value(s), first at pixel (%zu, %zu); set nonfinite=replace "
                       "to use 0 instead",
-                      what, bad, first_bad % (long)w, first_bad / (long)w);
+                      what, bad, first_bad % w, first_bad / w);
   return HUSH_OK;
 }
 
-void hush__view_export(const hush_planar *src, const hush_image_view *v) {
-  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
-  const int half = hush__format_element_size(v->format) == 2;
-  const int nc = src->channels;
+static void export_row(const hush_planar *src, const hush_image_view *v, size_t ps, size_t rs,
+                       uint32_t y) {
+  char *row = (char *)v->data + v->byte_offset + (size_t)y * rs;
   const uint32_t w = v->width;
-  for (uint32_t y = 0; y < v->height; y++) {
-    char *row = (char *)v->data + v->byte_offset + (size_t)y * rs;
-    for (uint32_t x = 0; x < w; x++) {
-      char *p = row + (size_t)x * ps;
+  const int nc = src->channels;
+  const size_t base = (size_t)y * w;
+  if (hush__format_element_size(v->format) == 2) {
+    for (uint32_t x = 0; x < w; x++)
       for (int c = 0; c < nc; c++) {
-        const float f = src->plane[c][(size_t)y * w + x];
-        if (half) {
-          const uint16_t h = hush__float_to_half(f);
-          memcpy(p + 2 * c, &h, 2);
-        } else {
-          memcpy(p + 4 * c, &f, 4);
-        }
+        const uint16_t hv = hush__float_to_half(src->plane[c][base + x]);
+        memcpy(row + (size_t)x * ps + 2 * (size_t)c, &hv, 2);
       }
-    }
+    return;
   }
+  if ((uintptr_t)row % sizeof(float) == 0) {
+    float *rf = (float *)(void *)row;
+    const size_t sf = ps / sizeof(float);
+    for (int c = 0; c < nc; c++) {
+      const float *p = src->plane[c] + base;
+      for (uint32_t x = 0; x < w; x++) rf[(size_t)x * sf + (size_t)c] = p[x];
+    }
+    return;
+  }
+  for (uint32_t x = 0; x < w; x++)
+    for (int c = 0; c < nc; c++) memcpy(row + (size_t)x * ps + 4 * (size_t)c, &src->plane[c][base + x], 4);
+}
+
+void hush__view_export(const hush_planar *src, const hush_image_view *v, int threads) {
+  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
+  const uint32_t h = v->height;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (uint32_t y = 0; y < h; y++) export_row(src, v, ps, rs, y);
 }

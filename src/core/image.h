@@ -59,13 +59,14 @@ typedef enum hush_nonfinite_policy {
 
 /*
  * Copies the first dst->channels channels of a validated view into dst's
- * planes (same size). NaN/Inf are handled by policy; *replaced (if not NULL)
+ * planes (same size), rows split over the device's threads. NaN/Inf are handled by policy; *replaced (if not NULL)
  * receives how many values were replaced.
  */
 hush_status hush__view_import(hush_device device, const hush_image_view *view, const char *what,
                               hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced);
 
-/* Copies src's planes into a validated view with src->channels channels. */
-void hush__view_export(const hush_planar *src, const hush_image_view *view);
+/* Copies src's planes into a validated view with src->channels channels,
+ * rows split over `threads` threads. */
+void hush__view_export(const hush_planar *src, const hush_image_view *view, int threads);
 
 #endif

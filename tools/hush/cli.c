@@ -237,3 +237,31 @@ void cli_layer_channels(const char *layer, int channels, char *buf, size_t size)
     snprintf(buf + len, size - len, "%s%s", c ? ", " : "", name);
   }
 }
+
+int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hush_frame frame,
+                    const char *file) {
+  const hush_filter_class_info *cls = hush_filter_get_class(filter);
+  for (uint32_t i = 0; i < cls->image_count; i++) {
+    const hush_image_info *im = &cls->images[i];
+    if (im->role != HUSH_IMAGE_INPUT) continue;
+    hush_image_view view;
+    if (hush_frame_get_layer(frame, im->name, &view) != HUSH_OK) {
+      if (im->required) {
+        char channels[128];
+        cli_layer_channels(im->name, im->channels, channels, sizeof channels);
+        return cli_error(cmd, "%s has no '%s' layer (channels %s), which filter '%s' requires",
+                         file, im->name, channels, cls->name);
+      }
+      /* a view into the previous frame must not outlive it */
+      hush_filter_unset_image(filter, im->name);
+      continue;
+    }
+    const int have = hush_format_channels(view.format);
+    if (have < im->channels)
+      return cli_error(cmd, "%s: layer '%s' has %d channel%s, filter '%s' needs %d", file,
+                       im->name, have, have == 1 ? "" : "s", cls->name, im->channels);
+    const hush_status st = hush_filter_set_image(filter, im->name, &view);
+    if (st != HUSH_OK) return cli_device_error(cmd, device, st, file);
+  }
+  return 0;
+}

@@ -211,34 +211,6 @@ static int bind_outputs(denoise_run *r) {
 
 /* ---- per frame ---------------------------------------------------------- */
 
-/* Binds every input image the class declares to the frame's layer of the
- * same name; a required one that is missing is an error. */
-static int bind_inputs(denoise_run *r, hush_frame frame, const char *file) {
-  for (uint32_t i = 0; i < r->cls->image_count; i++) {
-    const hush_image_info *im = &r->cls->images[i];
-    if (im->role != HUSH_IMAGE_INPUT) continue;
-    hush_image_view view;
-    if (hush_frame_get_layer(frame, im->name, &view) != HUSH_OK) {
-      if (im->required) {
-        char channels[128];
-        cli_layer_channels(im->name, im->channels, channels, sizeof channels);
-        return cli_error(r->cmd, "%s has no '%s' layer (channels %s), which filter '%s' requires",
-                         file, im->name, channels, r->cls->name);
-      }
-      /* a view into the previous frame must not outlive it */
-      hush_filter_unset_image(r->filter, im->name);
-      continue;
-    }
-    const int have = hush_format_channels(view.format);
-    if (have < im->channels)
-      return cli_error(r->cmd, "%s: layer '%s' has %d channel%s, filter '%s' needs %d", file,
-                       im->name, have, have == 1 ? "" : "s", r->cls->name, im->channels);
-    const hush_status st = hush_filter_set_image(r->filter, im->name, &view);
-    if (st != HUSH_OK) return cli_device_error(r->cmd, r->device, st, file);
-  }
-  return 0;
-}
-
 static int write_frame(denoise_run *r, uint32_t index) {
   char path[HUSH_PATH_MAX];
   snprintf(path, sizeof path, "%s/frame_%04u.exr", r->o->out, index);
@@ -294,7 +266,7 @@ static int run_frame(denoise_run *r, uint32_t i, uint32_t n) {
   hush_frame frame = NULL;
   hush_status st = hush__sequence_read_frame(r->device, &r->seq, i, &frame);
   if (st != HUSH_OK) return cli_device_error(r->cmd, r->device, st, file);
-  int rc = bind_inputs(r, frame, file);
+  int rc = cli_bind_inputs(r->cmd, r->device, r->filter, frame, file);
   if (!rc && r->done == 0) {
     st = hush_filter_commit(r->filter);
     if (st != HUSH_OK) rc = cli_device_error(r->cmd, r->device, st, file);

@@ -12,6 +12,7 @@ int cmd_filters(int argc, char **argv);
 int cmd_denoise(int argc, char **argv);
 int cmd_convert(int argc, char **argv);
 int cmd_synth(int argc, char **argv);
+int cmd_bench(int argc, char **argv);
 
 static const struct {
   const char *name;
@@ -22,6 +23,7 @@ static const struct {
     {"denoise", cmd_denoise, "run a filter over a frame sequence"},
     {"convert", cmd_convert, "convert between EXR, PNG and PFM"},
     {"synth", cmd_synth, "write a synthetic noisy sequence with its reference"},
+    {"bench", cmd_bench, "time filters on synthetic frames in memory"},
 };
 
 #define COMMAND_COUNT (sizeof commands / sizeof commands[0])

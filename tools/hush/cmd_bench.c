@@ -1,0 +1,328 @@
+/*
+ * cmd_bench.c — `hush bench`: filter timings only, on synthetic frames held
+ * in memory (no file I/O in the loop). A few distinct frames of the moving
+ * synthetic scene are made once and played forwards and backwards, so
+ * consecutive frames are always neighbours and history behaves as in a real
+ * sequence. Warm-up frames are excluded; per stage and in total it reports
+ * the median and the 5th and 95th percentiles, with the thread count and the
+ * CPU model, as a table on stdout and optionally as CSV.
+ */
+#include "cli.h"
+
+#include "core/timer.h"
+#include "eval/synthetic.h"
+#include "io/atomic_file.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define MAX_FILTERS 16
+#define MAX_STAGES 16
+
+static const char *const help_text =
+    "usage: hush bench [options]\n"
+    "\n"
+    "Times filters on synthetic frames already in memory (the scene of\n"
+    "`hush synth`: orbiting camera, moving object). Frames are made once, then\n"
+    "played forwards and backwards; the first --warmup frames are not timed.\n"
+    "Prints, per filter, the median and 5th/95th percentile of each stage and\n"
+    "of the whole execute, in milliseconds per frame.\n"
+    "\n"
+    "options:\n"
+    "  --filters A,B,...   filters to time (default: every filter)\n"
+    "  --size WxH          frame size (default 1280x720)\n"
+    "  --frames N          timed frames per filter (default 60)\n"
+    "  --warmup N          untimed frames first (default 5)\n"
+    "  --distinct N        distinct frames made and cycled (default 8)\n"
+    "  --threads N         worker threads, 0 = one per core (default 0)\n"
+    "  --set KEY=VALUE     a parameter for every filter that has it; repeatable\n"
+    "  --csv FILE          also write the results as CSV\n"
+    "  -h, --help          show this help\n";
+
+typedef struct bench_options {
+  char filters[512];
+  uint32_t width, height, frames, warmup, distinct, threads;
+  const char *sets[64];
+  int set_count;
+  const char *csv;
+} bench_options;
+
+typedef struct stage_times {
+  const char *name;
+  double *ms; /* one per timed frame */
+} stage_times;
+
+typedef struct bench_result {
+  const char *filter;
+  stage_times stages[MAX_STAGES + 1]; /* the last used one is "total" */
+  uint32_t stage_count;
+} bench_result;
+
+static void parse_options(int argc, char **argv, bench_options *o) {
+  cli_args a;
+  cli_args_init(&a, "bench", argc, argv);
+  memset(o, 0, sizeof *o);
+  o->width = 1280;
+  o->height = 720;
+  o->frames = 60;
+  o->warmup = 5;
+  o->distinct = 8;
+  const char *arg, *v;
+  while (cli_next(&a, &arg)) {
+    if (cli_is_help(arg)) {
+      fputs(help_text, stdout);
+      exit(0);
+    } else if (cli_option(&a, arg, "--filters", &v)) {
+      if (strlen(v) >= sizeof o->filters) cli_usage_error(a.cmd, "--filters: list too long");
+      strcpy(o->filters, v);
+    } else if (cli_option(&a, arg, "--size", &v)) {
+      cli_parse_size(a.cmd, "--size", v, &o->width, &o->height);
+    } else if (cli_option(&a, arg, "--frames", &v)) {
+      o->frames = cli_parse_uint(a.cmd, "--frames", v, 1, 100000);
+    } else if (cli_option(&a, arg, "--warmup", &v)) {
+      o->warmup = cli_parse_uint(a.cmd, "--warmup", v, 0, 10000);
+    } else if (cli_option(&a, arg, "--distinct", &v)) {
+      o->distinct = cli_parse_uint(a.cmd, "--distinct", v, 1, 256);
+    } else if (cli_option(&a, arg, "--threads", &v)) {
+      o->threads = cli_parse_uint(a.cmd, "--threads", v, 0, 1024);
+    } else if (cli_option(&a, arg, "--set", &v)) {
+      if (!strchr(v, '=') || v[0] == '=') cli_usage_error(a.cmd, "--set: expected KEY=VALUE, got '%s'", v);
+      if (o->set_count == 64) cli_usage_error(a.cmd, "--set: too many");
+      o->sets[o->set_count++] = v;
+    } else if (cli_option(&a, arg, "--csv", &v)) {
+      o->csv = v;
+    } else if (cli_is_positional(&a, arg)) {
+      cli_usage_error(a.cmd, "unexpected argument '%s' (see hush bench --help)", arg);
+    } else {
+      cli_unknown_option(&a, arg);
+    }
+  }
+}
+
+/* Frame index played at step k: 0 1 .. d-1 d-2 .. 1 0 1 .. (a triangle wave). */
+static uint32_t played_frame(uint32_t k, uint32_t distinct) {
+  if (distinct < 2) return 0;
+  const uint32_t period = 2 * (distinct - 1);
+  const uint32_t t = k % period;
+  return t < distinct ? t : period - t;
+}
+
+static int compare_double(const void *a, const void *b) {
+  const double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* Nearest-rank percentile of sorted values. */
+static double percentile(const double *sorted, uint32_t n, double q) {
+  if (n == 0) return 0.0;
+  double pos = q * (double)(n - 1);
+  uint32_t i = (uint32_t)pos;
+  const double f = pos - i;
+  return i + 1 < n ? sorted[i] * (1.0 - f) + sorted[i + 1] * f : sorted[i];
+}
+
+static void cpu_model(char *buf, size_t size) {
+  snprintf(buf, size, "unknown CPU");
+  FILE *f = fopen("/proc/cpuinfo", "r");
+  if (!f) return;
+  char line[512];
+  while (fgets(line, sizeof line, f)) {
+    if (strncmp(line, "model name", 10) != 0) continue;
+    const char *colon = strchr(line, ':');
+    if (!colon) continue;
+    colon++;
+    while (*colon == ' ') colon++;
+    snprintf(buf, size, "%s", colon);
+    buf[strcspn(buf, "\n")] = '\0';
+    break;
+  }
+  fclose(f);
+}
+
+static int apply_sets(const bench_options *o, hush_device device, hush_filter f) {
+  const hush_filter_class_info *cls = hush_filter_get_class(f);
+  for (int i = 0; i < o->set_count; i++) {
+    const char *eq = strchr(o->sets[i], '=');
+    char key[128];
+    const size_t len = (size_t)(eq - o->sets[i]);
+    if (len >= sizeof key) return cli_error("bench", "--set %s: name too long", o->sets[i]);
+    memcpy(key, o->sets[i], len);
+    key[len] = '\0';
+    int has = 0;
+    for (uint32_t k = 0; k < cls->param_count; k++) has |= strcmp(cls->params[k].name, key) == 0;
+    if (!has) continue; /* parameters are per filter; skip those this one lacks */
+    const hush_status st = hush_filter_set_string(f, key, eq + 1);
+    if (st != HUSH_OK) return cli_device_error("bench", device, st, o->sets[i]);
+  }
+  return 0;
+}
+
+static stage_times *stage_slot(bench_result *r, const char *name, uint32_t frames) {
+  for (uint32_t i = 0; i < r->stage_count; i++)
+    if (strcmp(r->stages[i].name, name) == 0) return &r->stages[i];
+  if (r->stage_count == MAX_STAGES + 1) return NULL;
+  stage_times *s = &r->stages[r->stage_count++];
+  s->name = name;
+  s->ms = calloc(frames, sizeof *s->ms);
+  return s->ms ? s : NULL;
+}
+
+static int bench_filter(const bench_options *o, hush_device device, hush_frame *frames,
+                        const hush_camera *cams, const char *name, bench_result *res) {
+  hush_filter f = hush_filter_new(device, name);
+  if (!f) return cli_device_error("bench", device, HUSH_ERROR_NOT_FOUND, NULL);
+  res->filter = hush_filter_get_class(f)->name;
+  int rc = apply_sets(o, device, f);
+  hush_frame out = rc ? NULL : hush_frame_new(device, o->width, o->height);
+  const hush_filter_class_info *cls = hush_filter_get_class(f);
+  for (uint32_t i = 0; !rc && out && i < cls->image_count; i++) {
+    if (cls->images[i].role != HUSH_IMAGE_OUTPUT) continue;
+    hush_image_view view;
+    hush_status st = hush_frame_add_layer(out, cls->images[i].name, cls->images[i].channels, &view);
+    if (st == HUSH_OK) st = hush_filter_set_image(f, cls->images[i].name, &view);
+    if (st != HUSH_OK) rc = cli_device_error("bench", device, st, cls->images[i].name);
+  }
+  if (!out && !rc) rc = cli_device_error("bench", device, HUSH_ERROR_OUT_OF_MEMORY, NULL);
+  const uint32_t total = o->warmup + o->frames;
+  uint32_t prev = 0;
+  for (uint32_t k = 0; k < total && !rc; k++) {
+    const uint32_t idx = played_frame(k, o->distinct);
+    rc = cli_bind_inputs("bench", device, f, frames[idx], "synthetic frame");
+    if (!rc && k == 0) {
+      const hush_status st = hush_filter_commit(f);
+      if (st != HUSH_OK) rc = cli_device_error("bench", device, st, NULL);
+    }
+    if (rc) break;
+    hush_frame_info info;
+    hush_frame_info_init(&info);
+    info.frame_index = k;
+    memcpy(info.world_to_view, cams[idx].world_to_view, sizeof info.world_to_view);
+    memcpy(info.view_to_clip, cams[idx].view_to_clip, sizeof info.view_to_clip);
+    memcpy(info.prev_world_to_view, cams[prev].world_to_view, sizeof info.prev_world_to_view);
+    memcpy(info.prev_view_to_clip, cams[prev].view_to_clip, sizeof info.prev_view_to_clip);
+    /* the synthetic motion vectors are relative to frame idx-1, which is the
+     * previous frame only on the way forwards: use the cameras */
+    info.motion = HUSH_MOTION_CAMERA;
+    info.history = k == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE;
+    const double t0 = hush__now_ms();
+    const hush_status st = hush_filter_execute(f, &info);
+    const double ms = hush__now_ms() - t0;
+    if (st != HUSH_OK) {
+      rc = cli_device_error("bench", device, st, name);
+      break;
+    }
+    prev = idx;
+    if (k < o->warmup) continue;
+    const char *const *names;
+    const double *stage_ms;
+    uint32_t count;
+    hush_filter_get_timings(f, &names, &stage_ms, &count);
+    for (uint32_t s = 0; s < count; s++) {
+      stage_times *slot = stage_slot(res, names[s], o->frames);
+      if (slot) slot->ms[k - o->warmup] = stage_ms[s];
+    }
+    stage_times *slot = stage_slot(res, "total", o->frames);
+    if (slot) slot->ms[k - o->warmup] = ms;
+  }
+  hush_frame_release(out);
+  hush_filter_release(f);
+  return rc;
+}
+
+static void print_result(const bench_result *r, uint32_t frames, FILE *csv, const char *cpu,
+                         int threads, const bench_options *o) {
+  printf("%-12s %-14s %9s %9s %9s\n", r->filter, "stage", "median", "p5", "p95");
+  for (uint32_t i = 0; i < r->stage_count; i++) {
+    qsort(r->stages[i].ms, frames, sizeof(double), compare_double);
+    const double med = percentile(r->stages[i].ms, frames, 0.5);
+    const double p5 = percentile(r->stages[i].ms, frames, 0.05);
+    const double p95 = percentile(r->stages[i].ms, frames, 0.95);
+    printf("%-12s %-14s %9.3f %9.3f %9.3f\n", "", r->stages[i].name, med, p5, p95);
+    if (csv)
+      fprintf(csv, "%s,%s,%u,%u,%u,%d,\"%s\",%.4f,%.4f,%.4f\n", r->filter, r->stages[i].name,
+              o->width, o->height, frames, threads, cpu, med, p5, p95);
+  }
+}
+
+static void free_result(bench_result *r) {
+  for (uint32_t i = 0; i < r->stage_count; i++) free(r->stages[i].ms);
+  memset(r, 0, sizeof *r);
+}
+
+static int make_frames(const bench_options *o, hush_device device, hush_frame *frames,
+                       hush_camera *cams) {
+  hush_synth_params p;
+  hush__synth_defaults(&p);
+  p.width = o->width;
+  p.height = o->height;
+  p.frames = o->distinct;
+  hush_status st = hush__synth_validate(device, &p);
+  for (uint32_t i = 0; st == HUSH_OK && i < o->distinct; i++)
+    st = hush__synth_frame(device, &p, i, &frames[i], &cams[i]);
+  return st == HUSH_OK ? 0 : cli_device_error("bench", device, st, "synthetic frames");
+}
+
+/* Fills names[] from the comma list (or every class) and checks each. */
+static int filter_list(const bench_options *o, char *buf, const char **names, uint32_t *count) {
+  *count = 0;
+  if (!o->filters[0]) {
+    for (uint32_t i = 0; i < hush_filter_class_count() && i < MAX_FILTERS; i++)
+      names[(*count)++] = hush_filter_class_at(i)->name;
+    return 0;
+  }
+  strcpy(buf, o->filters);
+  for (char *tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
+    if (!hush_filter_class_find(tok)) return cli_error("bench", "unknown filter '%s'", tok);
+    if (*count == MAX_FILTERS) return cli_error("bench", "more than %d filters", MAX_FILTERS);
+    names[(*count)++] = tok;
+  }
+  return *count ? 0 : cli_error("bench", "--filters is empty");
+}
+
+int cmd_bench(int argc, char **argv) {
+  bench_options o;
+  parse_options(argc, argv, &o);
+  char list_buf[512];
+  const char *names[MAX_FILTERS];
+  uint32_t nf;
+  if (filter_list(&o, list_buf, names, &nf)) return CLI_EXIT_RUNTIME;
+
+  hush_device device = cli_device_new("bench", o.threads);
+  if (!device) return CLI_EXIT_RUNTIME;
+  hush_frame *frames = calloc(o.distinct, sizeof *frames);
+  hush_camera *cams = calloc(o.distinct, sizeof *cams);
+  int rc = frames && cams ? make_frames(&o, device, frames, cams) : cli_error("bench", "out of memory");
+
+  char cpu[256];
+  cpu_model(cpu, sizeof cpu);
+  const int threads = hush_device_threads(device);
+  FILE *csv = NULL;
+  char tmp[HUSH_PATH_MAX];
+  if (!rc && o.csv) {
+    csv = hush__atomic_open(device, o.csv, tmp);
+    if (!csv) rc = cli_device_error("bench", device, HUSH_ERROR_IO, o.csv);
+    else fprintf(csv, "filter,stage,width,height,frames,threads,cpu,median_ms,p5_ms,p95_ms\n");
+  }
+  if (!rc)
+    printf("hush bench: %ux%u, %u timed frames (+%u warm-up), %d thread(s), %s\n", o.width,
+           o.height, o.frames, o.warmup, threads, cpu);
+  for (uint32_t i = 0; i < nf && !rc; i++) {
+    bench_result res;
+    memset(&res, 0, sizeof res);
+    rc = bench_filter(&o, device, frames, cams, names[i], &res);
+    if (!rc) print_result(&res, o.frames, csv, cpu, threads, &o);
+    free_result(&res);
+  }
+  if (csv) {
+    if (rc)
+      hush__atomic_abort(csv, tmp);
+    else if (hush__atomic_commit(device, csv, tmp, o.csv) != HUSH_OK)
+      rc = cli_device_error("bench", device, HUSH_ERROR_IO, o.csv);
+  }
+  for (uint32_t i = 0; frames && i < o.distinct; i++) hush_frame_release(frames[i]);
+  free(frames);
+  free(cams);
+  hush_device_release(device);
+  return rc;
+}
