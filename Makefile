@@ -13,7 +13,7 @@ CMAKE_FLAGS ?=
 
 # Debian packages the build, the tests and the demo need.
 PACKAGES = cmake make gcc g++ pkg-config clang libclang-rt-14-dev libomp-dev \
-           libembree-dev libopenexr-dev libpng-dev libassimp-dev libcjson-dev
+           libembree-dev libopenexr-dev libpng-dev libjpeg-dev libassimp-dev libcjson-dev
 
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 

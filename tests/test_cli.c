@@ -289,6 +289,26 @@ static void test_convert(hush_device dev) {
   CHECK_FAILS(&r, 2, "PNG");
 }
 
+/* hush bench: the table and the CSV name every stage; bad input fails. */
+static void test_bench(void) {
+  result r;
+  hush(&r, "bench --filters accumulate --size 48x32 --frames 4 --warmup 1 --distinct 3 "
+           "--threads 1 --set alpha_min=0.1 --csv '" WORK "/bench.csv'");
+  CHECK_MSG(r.status == 0, "bench: %s", r.err);
+  CHECK(strstr(r.out, "accumulate") && strstr(r.out, "total") && strstr(r.out, "median"));
+  char csv[8192];
+  read_file(WORK "/bench.csv", csv, sizeof csv);
+  CHECK(strncmp(csv, "filter,stage,width,height,frames,threads,cpu,median_ms", 54) == 0);
+  CHECK(strstr(csv, "accumulate,total,48,32,4,1,") != NULL);
+  CHECK(strstr(csv, "accumulate,reproject,") != NULL);
+  hush(&r, "bench --filters nosuch --size 48x32");
+  CHECK_FAILS(&r, 1, "nosuch");
+  hush(&r, "bench --size 0x32");
+  CHECK_FAILS(&r, 2, "--size");
+  hush(&r, "bench --filters accumulate --size 48x32 --frames 2 --set alpha_min=7");
+  CHECK_FAILS(&r, 1, "alpha_min");
+}
+
 /* Runs denoise on dir into a fresh output dir and checks the failure. */
 static void denoise_fails(result *r, const char *in, const char *extra) {
   char args[2048];
@@ -395,6 +415,7 @@ int main(void) {
   test_synth_and_denoise(dev);
   test_convert(dev);
   test_bad_inputs(dev);
+  test_bench();
   hush_device_release(dev);
   return check_summary();
 }

@@ -14,10 +14,8 @@
 #include "io/atomic_file.h"
 #include "io/sequence.h"
 
-#include <errno.h>
 #include <math.h>
 #include <string.h>
-#include <sys/stat.h>
 #include <sys/types.h>
 
 #define SYNTH_SPHERES 4
@@ -406,29 +404,6 @@ hush_status hush__synth_frame(hush_device device, const hush_synth_params *p, ui
 }
 
 /* ---- sequences ---------------------------------------------------------- */
-
-hush_status hush__make_dirs(hush_device device, const char *dir) {
-  char path[HUSH_PATH_MAX];
-  if (!dir || !*dir) return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "directory name is empty");
-  if (strlen(dir) >= sizeof path)
-    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "directory name is too long: %.64s...", dir);
-  strcpy(path, dir);
-  /* Make each prefix that ends at a '/', then the whole path. */
-  for (char *c = path + 1;; c++) {
-    const int end = *c == '\0';
-    if (*c != '/' && !end) continue;
-    *c = '\0';
-    if (mkdir(path, 0777) != 0 && errno != EEXIST)
-      return hush__fail(device, HUSH_ERROR_IO, "cannot create directory '%s': %s", path,
-                        strerror(errno));
-    if (end) break;
-    *c = '/';
-  }
-  struct stat sb;
-  if (stat(dir, &sb) != 0 || !S_ISDIR(sb.st_mode))
-    return hush__fail(device, HUSH_ERROR_IO, "'%s' exists and is not a directory", dir);
-  return HUSH_OK;
-}
 
 hush_status hush__synth_write_sequence(hush_device device, const hush_synth_params *p,
                                        const char *dir) {

@@ -69,7 +69,4 @@ hush_status hush__synth_frame(hush_device device, const hush_synth_params *p, ui
 hush_status hush__synth_write_sequence(hush_device device, const hush_synth_params *p,
                                        const char *dir);
 
-/* Makes dir and its missing parents (mkdir -p); reports on device. */
-hush_status hush__make_dirs(hush_device device, const char *dir);
-
 #endif

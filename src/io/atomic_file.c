@@ -92,3 +92,26 @@ void hush__atomic_abort(FILE *f, const char *tmp) {
   if (f) fclose(f);
   if (tmp && *tmp) unlink(tmp);
 }
+
+hush_status hush__make_dirs(hush_device device, const char *dir) {
+  char path[HUSH_PATH_MAX];
+  if (!dir || !*dir) return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "directory name is empty");
+  if (strlen(dir) >= sizeof path)
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "directory name is too long: %.64s...", dir);
+  strcpy(path, dir);
+  /* Make each prefix that ends at a '/', then the whole path. */
+  for (char *c = path + 1;; c++) {
+    const int end = *c == '\0';
+    if (*c != '/' && !end) continue;
+    *c = '\0';
+    if (mkdir(path, 0777) != 0 && errno != EEXIST)
+      return hush__fail(device, HUSH_ERROR_IO, "cannot create directory '%s': %s", path,
+                        strerror(errno));
+    if (end) break;
+    *c = '/';
+  }
+  struct stat sb;
+  if (stat(dir, &sb) != 0 || !S_ISDIR(sb.st_mode))
+    return hush__fail(device, HUSH_ERROR_IO, "'%s' exists and is not a directory", dir);
+  return HUSH_OK;
+}

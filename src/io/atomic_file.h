@@ -1,6 +1,7 @@
 /*
  * atomic_file.h — write-to-temp-then-rename, so an output file is either the
- * old one or the complete new one, never half written.
+ * old one or the complete new one, never half written; and mkdir -p for
+ * output directories.
  */
 #ifndef HUSH_IO_ATOMIC_FILE_H
 #define HUSH_IO_ATOMIC_FILE_H
@@ -22,5 +23,8 @@ hush_status hush__atomic_reserve(hush_device device, const char *path, char tmp[
 hush_status hush__atomic_commit(hush_device device, FILE *f, const char *tmp, const char *path);
 /* Closes f (if not NULL) and removes tmp. */
 void hush__atomic_abort(FILE *f, const char *tmp);
+
+/* Makes dir and its missing parents (mkdir -p); reports on device. */
+hush_status hush__make_dirs(hush_device device, const char *dir);
 
 #endif
