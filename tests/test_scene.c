@@ -419,7 +419,8 @@ static void test_load_errors(void) {
   expect_error("format", "{\"format\": \"hush-scene/9\"}", NULL, HUSH_ERROR_UNSUPPORTED,
                "format", "hush-scene/9");
   char json[2048];
-  expect_error("light", edited(json, "\"lights\": [{\"type\": \"constant\"", "\"lights\": [{\"type\": \"spot\""),
+  expect_error("light",
+               edited(json, "[{\"type\": \"constant\"", "[{\"type\": \"spot\""),
                NULL, HUSH_ERROR_UNSUPPORTED, "lights[0].type", "'spot'");
   expect_error("mesh", edited(json, "scene.obj", "nomesh.obj"), NULL, HUSH_ERROR_NOT_FOUND,
                "mesh", "nomesh.obj");
@@ -488,7 +489,8 @@ static void test_shared_scenes(void) {
     if (s.triangle_count == 0) continue;
     CHECK(hush__scene_commit(dev, &s) == HUSH_OK);
     const double t2 = hush__now_ms();
-    printf("%s: %u triangles (%u skipped), %u emissive, %u textures: load %.0f ms, commit %.0f ms\n",
+    printf("%s: %u triangles (%u skipped), %u emissive, %u textures: "
+           "load %.0f ms, commit %.0f ms\n",
            names[i], s.triangle_count, s.skipped_triangles, s.emissive_triangles, s.texture_count,
            t1 - t0, t2 - t1);
     CHECK(s.triangle_count + s.skipped_triangles == manifest_number(json, "triangles"));

@@ -340,7 +340,8 @@ static void build_courtyard(builder *b, int variant) {
               hush_v3(0.25f, 1.5f, 0.25f), 0.0f, stone);
     }
   }
-  add_box(b, hush_v3(0, 3.1f, -1.0f), hush_v3(3.3f, 0.1f, 5.3f), 0.0f, stone); /* a roof beam grid */
+  /* a roof over the pillars: light comes in from the sides and bounces */
+  add_box(b, hush_v3(0, 3.1f, -1.0f), hush_v3(3.3f, 0.1f, 5.3f), 0.0f, stone);
   begin_object(b, "props", NULL);
   add_box(b, hush_v3(-1.2f, 0.4f, -2.0f), hush_v3(0.4f, 0.4f, 0.4f), 25.0f, plastic);
   add_box(b, hush_v3(1.5f, 0.6f, -4.0f), hush_v3(0.5f, 0.6f, 0.3f), -10.0f, smooth_plastic);

@@ -232,7 +232,8 @@ static hush_status load_camera_path(const ctx *c, hush_scene *scene, const char 
   st = parse_fov_axis(&pc, root, "fov_axis", &cp->fov_axis_x);
   if (st == HUSH_OK) st = parse_resolution(&pc, root, "resolution", &cp->width, &cp->height);
   const cJSON *frames = cJSON_GetObjectItemCaseSensitive(root, "frames");
-  if (st == HUSH_OK && !cJSON_IsArray(frames)) st = bad_field(&pc, "frames", "missing or not an array");
+  if (st == HUSH_OK && !cJSON_IsArray(frames))
+    st = bad_field(&pc, "frames", "missing or not an array");
   if (st == HUSH_OK) {
     const int n = cJSON_GetArraySize(frames);
     cp->frames = calloc(n > 0 ? (size_t)n : 1, sizeof *cp->frames);

@@ -40,8 +40,9 @@ hush_status hush__texture_init(hush_device device, hush_texture *t, const char *
   snprintf(t->name, sizeof t->name, "%s", name ? name : "");
   if (width == 0 || height == 0 || channels < 1 || channels > 4 ||
       (uint64_t)width * height > TEXTURE_MAX_PIXELS)
-    return hush__fail(device, HUSH_ERROR_UNSUPPORTED, "texture '%s': %ux%u with %d channels is not supported",
-                      t->name, width, height, channels);
+    return hush__fail(device, HUSH_ERROR_UNSUPPORTED,
+                      "texture '%s': %ux%u with %d channels is not supported", t->name, width,
+                      height, channels);
   t->texels = calloc((size_t)width * height * (size_t)channels, sizeof *t->texels);
   if (!t->texels)
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for texture '%s' (%ux%u)",
