@@ -81,13 +81,17 @@ static float cone_solid_angle(float cos_max, float sin2_max) {
 /* ---- environment maps ------------------------------------------------------- */
 
 void hush__envmap_dir_to_uv(hush_vec3 d, float *u, float *v) {
-  /* Mitsuba 0.5: u = (1 + atan2(d.x, -d.z) / pi) / 2, v = acos(d.y) / pi */
-  *u = 0.5f * (1.0f + atan2f(d.x, -d.z) / L_PI);
+  /* Mitsuba 0.5's envmap.cpp: u = atan2(d.x, -d.z) / (2 pi) wrapped into
+   * [0, 1), v = acos(d.y) / pi. (Not (1 + atan2 / pi) / 2, which turns the
+   * map by 180 degrees: checked against living-room/TungstenRender.exr.) */
+  float a = atan2f(d.x, -d.z) / (2.0f * L_PI);
+  if (a < 0.0f) a += 1.0f;
+  *u = a < 1.0f ? a : 0.0f;
   *v = acosf(fminf(1.0f, fmaxf(-1.0f, d.y))) / L_PI;
 }
 
 hush_vec3 hush__envmap_uv_to_dir(float u, float v) {
-  const float theta = v * L_PI, phi = L_PI * (2.0f * u - 1.0f);
+  const float theta = v * L_PI, phi = 2.0f * L_PI * u;
   const float s = sinf(theta);
   return hush_v3(s * sinf(phi), cosf(theta), -s * cosf(phi));
 }
