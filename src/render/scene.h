@@ -163,12 +163,14 @@ typedef struct hush_scene {
   hush_camera_path path;         /* frame_count 0 when the scene has none */
 
   uint32_t skipped_triangles;    /* degenerate or NaN triangles dropped at load */
+  uint32_t emissive_triangles;   /* triangles whose material has non-zero emission */
 
   /* Set by hush__scene_commit / hush__scene_set_frame (scene.c). */
   void *rtc_device;              /* RTCDevice */
   void *rtc_scene;               /* RTCScene: static geometry + one instance per animated object */
   uint32_t frame;                /* the frame the transforms are set for */
   float *object_to_world;        /* 16 per object, column-major, for `frame` */
+  void *rtc_data;                /* scene.c's private Embree state (buffers, filters) */
 } hush_scene;
 
 /* Loads PATH/scene.json (format hush-scene/1). Errors name the file and the
@@ -238,5 +240,21 @@ hush_vec3 hush__scene_point(const hush_scene *scene, uint32_t triangle, float u,
 /* Bilinear lookup with wrap-around; uv (0,0) is the BOTTOM-left of the image
  * (OBJ convention). Writes `channels` values to out (up to 4). */
 void hush__texture_sample(const hush_texture *t, float u, float v, float out[4]);
+
+typedef enum hush_texture_kind {
+  HUSH_TEXTURE_SRGB = 0,   /* colour map: RGB, 8-bit sRGB decoded to linear */
+  HUSH_TEXTURE_ALPHA = 1,  /* opacity: 1 channel, the alpha channel (or grey) as stored */
+  HUSH_TEXTURE_LINEAR = 2  /* RGB as stored (EXR environment maps) */
+} hush_texture_kind;
+
+/* Loads a JPG, PNG or EXR file (by extension). `what` prefixes error
+ * messages ("scene.mtl: Leaves: map_d"). A missing file is
+ * HUSH_ERROR_NOT_FOUND. On failure *t is left empty (safe to free). */
+hush_status hush__texture_load(hush_device device, const char *path, const char *what,
+                               hush_texture_kind kind, hush_texture *t);
+/* A zero-filled texture to fill procedurally. */
+hush_status hush__texture_init(hush_device device, hush_texture *t, const char *name,
+                               uint32_t width, uint32_t height, int channels);
+void hush__texture_free(hush_texture *t);
 
 #endif

@@ -13,6 +13,7 @@ int cmd_denoise(int argc, char **argv);
 int cmd_convert(int argc, char **argv);
 int cmd_synth(int argc, char **argv);
 int cmd_bench(int argc, char **argv);
+int cmd_render(int argc, char **argv);
 
 static const struct {
   const char *name;
@@ -24,6 +25,7 @@ static const struct {
     {"convert", cmd_convert, "convert between EXR, PNG and PFM"},
     {"synth", cmd_synth, "write a synthetic noisy sequence with its reference"},
     {"bench", cmd_bench, "time filters on synthetic frames in memory"},
+    {"render", cmd_render, "path-trace a noisy frame sequence (or references) of a scene"},
 };
 
 #define COMMAND_COUNT (sizeof commands / sizeof commands[0])

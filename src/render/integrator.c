@@ -1,0 +1,335 @@
+/*
+ * integrator.c — the 1 spp path tracer (see integrator.h). Follows
+ * bmfr-koskela-2019.md §3.1: next-event estimation towards one light point,
+ * one importance-sampled secondary ray with its own shadow ray, combined by
+ * multiple importance sampling (Veach and Guibas 1995, power heuristic).
+ */
+#include "render/integrator.h"
+
+#include "core/rng.h"
+#include "render/bsdf.h"
+
+#include <math.h>
+#include <string.h>
+
+#define DIM_PATH 4u
+#define DIMS_PER_VERTEX 8u
+/* offsets inside a vertex's 8 dimensions; 2D pairs start at even numbers */
+#define D_LIGHT_PICK 0u
+#define D_RR 1u
+#define D_LIGHT_UV 2u
+#define D_BSDF_UV 4u
+#define D_BSDF_LOBE 6u
+
+/* ---- random numbers ------------------------------------------------------- */
+
+uint32_t hush__pixel_seed(uint32_t global_seed, uint32_t frame, uint32_t x, uint32_t y) {
+  return hush_rng_u32(global_seed, frame, (y << 16) ^ x);
+}
+
+void hush__rand_init(hush_rand *r, hush_sampler kind, uint32_t global_seed, uint32_t frame,
+                     uint32_t x, uint32_t y, uint32_t sample, uint32_t spp) {
+  r->pixel_seed = hush__pixel_seed(global_seed, frame, x, y);
+  r->sample = sample;
+  r->kind = kind;
+  uint32_t bits = 0;
+  while (bits < 31 && (1u << bits) < spp) bits++;
+  r->log2_spp = bits;
+}
+
+static uint32_t reverse_bits(uint32_t v) {
+  v = ((v >> 1) & 0x55555555u) | ((v & 0x55555555u) << 1);
+  v = ((v >> 2) & 0x33333333u) | ((v & 0x33333333u) << 2);
+  v = ((v >> 4) & 0x0F0F0F0Fu) | ((v & 0x0F0F0F0Fu) << 4);
+  v = ((v >> 8) & 0x00FF00FFu) | ((v & 0x00FF00FFu) << 8);
+  return (v >> 16) | (v << 16);
+}
+
+/* Second dimension of the Sobol sequence (the first is the van der Corput
+ * sequence, reverse_bits). */
+static uint32_t sobol_dim2(uint32_t n) {
+  uint32_t r = 0;
+  for (uint32_t v = 1u << 31; n; n >>= 1, v ^= v >> 1)
+    if (n & 1u) r ^= v;
+  return r;
+}
+
+/* A bijection of [0, 2^bits), keyed: shuffles which sample of the pixel uses
+ * which point of a pair's (0,2)-sequence, so pairs do not correlate. */
+static uint32_t shuffle_index(uint32_t n, uint32_t key, uint32_t bits) {
+  if (bits == 0) return n;
+  const uint32_t mask = bits >= 32 ? 0xffffffffu : (1u << bits) - 1u;
+  uint32_t x = n & mask;
+  for (int round = 0; round < 3; round++) {
+    x ^= (key >> (8 * round)) & mask;
+    x = (x * ((key | 1u) + 2u * (uint32_t)round)) & mask;
+    x ^= x >> ((bits + 1) / 2);
+  }
+  return x | (n & ~mask);
+}
+
+float hush__rand(const hush_rand *r, uint32_t dim) {
+  if (r->kind != HUSH_SAMPLER_LD) return hush_rng_float(r->pixel_seed, dim, r->sample);
+  const uint32_t pair = dim >> 1;
+  const uint32_t key = hush_rng_u32(r->pixel_seed, pair, 0x9e3779b9u);
+  const uint32_t n = shuffle_index(r->sample, key, r->log2_spp);
+  const uint32_t scramble = hush_rng_u32(r->pixel_seed, pair, 0x85ebca6bu + (dim & 1u));
+  const uint32_t bits = ((dim & 1u) ? sobol_dim2(n) : reverse_bits(n)) ^ scramble;
+  return (float)(bits >> 8) * (1.0f / 16777216.0f);
+}
+
+/* ---- helpers ---------------------------------------------------------------- */
+
+void hush__integrator_defaults(hush_integrator *it, const hush_scene *scene,
+                               const hush_lights *lights) {
+  memset(it, 0, sizeof *it);
+  it->scene = scene;
+  it->lights = lights;
+  it->bounces = 1;
+  it->rr_depth = 3;
+}
+
+static float power_heuristic(float a, float b) {
+  const float a2 = a * a, b2 = b * b;
+  return a2 + b2 > 0.0f ? a2 / (a2 + b2) : 0.0f;
+}
+
+static float max3(const float c[3]) {
+  return fmaxf(c[0], fmaxf(c[1], c[2]));
+}
+
+/* A ray origin just off the surface on the side of direction w: the offset
+ * scales with the magnitude of the position so large scenes stay clean. */
+static hush_vec3 offset_origin(hush_vec3 p, hush_vec3 ng, hush_vec3 w) {
+  const float mag = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
+  const float eps = 1e-4f * fmaxf(1.0f, mag);
+  const float side = hush_v3_dot(w, ng) >= 0.0f ? eps : -eps;
+  return hush_v3_add(p, hush_v3_scale(ng, side));
+}
+
+static float ray_eps(hush_vec3 p) {
+  const float mag = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
+  return 1e-4f * fmaxf(1.0f, mag);
+}
+
+/* Adds beta * c * w to the result; contributions beyond the first hit are
+ * clamped when asked. */
+static void add(const hush_integrator *it, hush_path_result *out, float vertex_sum[3],
+                const float beta[3], const float c[3], float w, int depth, int direct) {
+  float v[3];
+  for (int k = 0; k < 3; k++) v[k] = beta[k] * c[k] * w;
+  if (!(isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]))) return;
+  if (it->clamp > 0.0f && depth > 0) {
+    const float m = max3(v);
+    if (m > it->clamp)
+      for (int k = 0; k < 3; k++) v[k] *= it->clamp / m;
+  }
+  for (int k = 0; k < 3; k++) {
+    out->radiance[k] += v[k];
+    vertex_sum[k] += v[k];
+    if (direct) out->direct[k] += v[k];
+  }
+}
+
+/* Next event: one light sample, MIS-weighted unless it is the last vertex. */
+static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t base,
+                       const hush_bsdf *b, hush_vec3 p, hush_vec3 wo, int last, float out[3],
+                       uint32_t *rays) {
+  out[0] = out[1] = out[2] = 0.0f;
+  const float u[3] = {hush__rand(rng, base + D_LIGHT_PICK), hush__rand(rng, base + D_LIGHT_UV),
+                      hush__rand(rng, base + D_LIGHT_UV + 1)};
+  hush_light_sample ls;
+  if (!hush__lights_sample(it->lights, p, u, &ls)) return;
+  if (!(max3(ls.radiance) > 0.0f)) return;
+  float f[3], pdf_b;
+  hush__bsdf_eval(b, wo, ls.wi, f, &pdf_b);
+  if (!(max3(f) > 0.0f)) return;
+  const hush_vec3 o = offset_origin(p, b->ng, ls.wi);
+  const float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - ray_eps(p) : INFINITY;
+  if (!(tfar > 0.0f)) return;
+  (*rays)++;
+  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {ls.wi.x, ls.wi.y, ls.wi.z};
+  if (hush__scene_occluded(it->scene, oo, dd, 0.0f, tfar)) return;
+  const float w = last ? 1.0f : power_heuristic(ls.pdf, pdf_b);
+  for (int k = 0; k < 3; k++) out[k] = f[k] * ls.radiance[k] * w / ls.pdf;
+}
+
+static void call_hook(const hush_integrator *it, uint32_t x, uint32_t y, const hush_rand *rng,
+                      int depth, const hush_surface *s, uint32_t tri, const float beta[3],
+                      const float sum[3]) {
+  if (!it->vertex_fn) return;
+  hush_path_vertex v;
+  v.x = x;
+  v.y = y;
+  v.sample = rng->sample;
+  v.depth = depth;
+  v.p = s->p;
+  v.n = s->ns;
+  v.triangle = tri;
+  v.material = s->material;
+  memcpy(v.throughput, beta, sizeof v.throughput);
+  memcpy(v.contribution, sum, sizeof v.contribution);
+  it->vertex_fn(it->vertex_user, &v);
+}
+
+/* What a ray from o along d hits next: a triangle, a sphere light, or nothing. */
+typedef struct next_hit {
+  hush_first_kind kind;
+  hush_hit hit;
+  uint32_t sphere;
+  float t;
+} next_hit;
+
+static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_hit *h) {
+  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+  h->kind = HUSH_FIRST_SKY;
+  h->t = INFINITY;
+  if (hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &h->hit)) {
+    h->kind = HUSH_FIRST_TRIANGLE;
+    h->t = h->hit.t;
+  }
+  float ts;
+  const uint32_t s = hush__lights_intersect_sphere(it->lights, o, d, 0.0f, h->t, &ts);
+  if (s) {
+    h->kind = HUSH_FIRST_SPHERE;
+    h->sphere = s - 1;
+    h->t = ts;
+  }
+}
+
+/* ---- the path ------------------------------------------------------------------ */
+
+void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
+                            const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
+  memset(out, 0, sizeof *out);
+  const hush_scene *sc = it->scene;
+  const hush_lights *L = it->lights;
+  float beta[3] = {1.0f, 1.0f, 1.0f};
+  hush_vec3 d = first->dir, origin = eye;
+  next_hit h;
+  h.kind = first->kind;
+  h.hit = first->hit;
+  h.sphere = first->sphere;
+  h.t = first->t;
+  float prev_pdf = 0.0f;
+  int prev_delta = 1; /* the camera ray sees emission with full weight */
+  for (int depth = 0;; depth++) {
+    const int direct = depth == 0;
+    float vsum[3] = {0.0f, 0.0f, 0.0f};
+    if (h.kind == HUSH_FIRST_SKY) {
+      float le[3];
+      hush__lights_env_radiance(L, d, le);
+      const float w = prev_delta ? 1.0f : power_heuristic(prev_pdf, hush__lights_env_pdf(L, d));
+      add(it, out, vsum, beta, le, w, depth, direct);
+      return;
+    }
+    if (h.kind == HUSH_FIRST_SPHERE) {
+      const float w =
+          prev_delta ? 1.0f
+                     : power_heuristic(prev_pdf, hush__lights_sphere_pdf(L, h.sphere, origin));
+      add(it, out, vsum, beta, sc->spheres[h.sphere].radiance, w, depth, direct);
+      return;
+    }
+    hush_surface s;
+    if (depth == 0) {
+      s = first->surface;
+    } else {
+      const float dd[3] = {d.x, d.y, d.z};
+      hush__scene_surface(sc, &h.hit, dd, &s);
+    }
+    const hush_material *m = &sc->materials[s.material];
+    if (max3(m->emission) > 0.0f) {
+      float w = 1.0f;
+      if (!prev_delta) {
+        const float cos_l = fabsf(hush_v3_dot(d, s.ng));
+        const float area = hush__lights_triangle_area(sc, h.hit.triangle);
+        w = power_heuristic(prev_pdf, hush__lights_triangle_pdf(L, h.hit.triangle, area, h.t, cos_l));
+      }
+      add(it, out, vsum, beta, m->emission, w, depth, direct);
+    }
+    const hush_vec3 wo = hush_v3_scale(d, -1.0f);
+    hush_bsdf b;
+    hush__bsdf_setup(&b, m, &s, wo);
+    const int last = depth >= it->bounces;
+    const uint32_t base = DIM_PATH + DIMS_PER_VERTEX * (uint32_t)depth;
+    if (hush__bsdf_has_smooth(&b) && hush__lights_any(L)) {
+      float c[3];
+      next_event(it, rng, base, &b, s.p, wo, last, c, &out->rays);
+      const float one[3] = {1.0f, 1.0f, 1.0f};
+      float bc[3];
+      for (int k = 0; k < 3; k++) bc[k] = beta[k] * c[k];
+      add(it, out, vsum, one, bc, 1.0f, depth, direct);
+    }
+    call_hook(it, x, y, rng, depth, &s, h.hit.triangle, beta, vsum);
+    if (last) return;
+
+    const float u[3] = {hush__rand(rng, base + D_BSDF_LOBE), hush__rand(rng, base + D_BSDF_UV),
+                        hush__rand(rng, base + D_BSDF_UV + 1)};
+    hush_bsdf_sample bs;
+    if (!hush__bsdf_sample(&b, wo, u, &bs)) return;
+    for (int k = 0; k < 3; k++) beta[k] *= bs.weight[k];
+    if (!(max3(beta) > 0.0f)) return;
+    if (depth + 1 > it->rr_depth) {
+      const float q = fminf(0.95f, max3(beta));
+      if (hush__rand(rng, base + D_RR) >= q) return;
+      for (int k = 0; k < 3; k++) beta[k] /= q;
+    }
+    prev_pdf = bs.pdf;
+    prev_delta = bs.delta;
+    origin = offset_origin(s.p, b.ng, bs.wi);
+    d = bs.wi;
+    out->rays++;
+    trace_ray(it, origin, d, &h);
+  }
+}
+
+int hush__integrator_first_hit(const hush_integrator *it, hush_vec3 eye, uint32_t triangle, float u,
+                               float v, hush_first_hit *first) {
+  memset(first, 0, sizeof *first);
+  const hush_scene *sc = it->scene;
+  if (triangle >= sc->triangle_count) return 0;
+  const hush_vec3 p = hush__scene_point(sc, triangle, u, v, sc->frame);
+  const hush_vec3 to = hush_v3_sub(p, eye);
+  const float t = hush_v3_length(to);
+  if (!(t > 0.0f)) return 0;
+  first->kind = HUSH_FIRST_TRIANGLE;
+  first->dir = hush_v3_scale(to, 1.0f / t);
+  first->t = t;
+  first->hit.triangle = triangle;
+  first->hit.u = u;
+  first->hit.v = v;
+  first->hit.t = t;
+  const float dd[3] = {first->dir.x, first->dir.y, first->dir.z};
+  hush__scene_surface(sc, &first->hit, dd, &first->surface);
+  first->p = first->surface.p;
+  first->n = first->surface.ns;
+  return 1;
+}
+
+void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                            const hush_rand *rng, uint32_t x, uint32_t y, hush_first_hit *first,
+                            hush_path_result *out) {
+  hush_first_hit local;
+  hush_first_hit *f = first ? first : &local;
+  memset(f, 0, sizeof *f);
+  f->dir = d;
+  next_hit h;
+  trace_ray(it, eye, d, &h);
+  f->kind = h.kind;
+  f->t = h.t;
+  if (h.kind == HUSH_FIRST_TRIANGLE) {
+    f->hit = h.hit;
+    const float dd[3] = {d.x, d.y, d.z};
+    hush__scene_surface(it->scene, &h.hit, dd, &f->surface);
+    f->p = f->surface.p;
+    f->n = f->surface.ns;
+  } else if (h.kind == HUSH_FIRST_SPHERE) {
+    float c[3];
+    f->sphere = h.sphere;
+    hush__scene_sphere_at(it->scene, h.sphere, it->scene->frame, c);
+    f->p = hush_v3_add(eye, hush_v3_scale(d, h.t));
+    f->n = hush_v3_normalize(hush_v3_sub(f->p, hush_v3(c[0], c[1], c[2])));
+  }
+  hush__integrator_shade(it, eye, f, rng, x, y, out);
+  out->rays++;
+}

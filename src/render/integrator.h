@@ -1,0 +1,121 @@
+/*
+ * integrator.h — the path tracer of the documents' 1 spp configuration
+ * (bmfr-koskela-2019.md §3.1; realtime-denoising-comparison-higginson-2023.md
+ * §1.1.3): a primary ray, a next-event-estimation shadow ray at the first
+ * hit, one BSDF-sampled secondary ray with its own shadow ray, and multiple
+ * importance sampling (power heuristic) between the BSDF and light sampling.
+ *
+ * Bounces: `bounces` counts the BSDF-sampled secondary rays of a path.
+ * bounces = 1 is the papers' configuration (primary ray, 2 shadow rays, 1
+ * secondary ray); bounces = 0 is direct lighting only. At the last vertex the
+ * shadow ray takes the whole light-sampling weight, since no BSDF ray
+ * competes with it there. Russian roulette starts after 3 secondary rays.
+ *
+ * Random numbers: every number of a camera sample is a pure function of
+ * (global seed, frame, pixel, sample index, dimension), see hush_rand, so a
+ * pixel can be re-rendered alone, and a visibility-buffer sample can be
+ * re-shaded with another frame's numbers (A-SVGF, schied-2018 §4): see
+ * hush__integrator_shade.
+ *
+ * Path-vertex hook: when vertex_fn is not NULL it is called at every
+ * surface vertex of every path (from the worker threads, concurrently; it
+ * must be thread-safe) with the vertex position and normal, the path
+ * throughput up to it and the radiance the vertex adds to the pixel
+ * (emission and next-event estimation, throughput applied). Path-space
+ * filtering hooks in here.
+ */
+#ifndef HUSH_RENDER_INTEGRATOR_H
+#define HUSH_RENDER_INTEGRATOR_H
+
+#include "core/hmath.h"
+#include "render/lights.h"
+#include "render/scene.h"
+
+#include <stdint.h>
+
+typedef enum hush_sampler {
+  HUSH_SAMPLER_RANDOM = 0, /* independent numbers from the counter-based hash */
+  HUSH_SAMPLER_LD = 1      /* per-pixel scrambled Sobol (0,2) pairs, shuffled per pair */
+} hush_sampler;
+
+/* The random numbers of one camera sample. */
+typedef struct hush_rand {
+  uint32_t pixel_seed;     /* hush__pixel_seed(global, frame, x, y) */
+  uint32_t sample;         /* index of the sample in the pixel */
+  uint32_t log2_spp;       /* LD: the sample indices are shuffled on this many bits */
+  hush_sampler kind;
+} hush_rand;
+
+uint32_t hush__pixel_seed(uint32_t global_seed, uint32_t frame, uint32_t x, uint32_t y);
+void hush__rand_init(hush_rand *r, hush_sampler kind, uint32_t global_seed, uint32_t frame,
+                     uint32_t x, uint32_t y, uint32_t sample, uint32_t spp);
+/* Number `dim` of the sample, in [0, 1). Dimensions 0 and 1 place the
+ * sample in the pixel; the path uses 4 + 8 * depth + i. */
+float hush__rand(const hush_rand *r, uint32_t dim);
+
+typedef struct hush_path_vertex {
+  uint32_t x, y, sample;
+  int depth;               /* 0: the first hit */
+  hush_vec3 p, n;          /* position and shading normal */
+  uint32_t triangle, material;
+  float throughput[3];     /* camera to this vertex */
+  float contribution[3];   /* radiance this vertex adds to the pixel */
+} hush_path_vertex;
+
+typedef void (*hush_path_vertex_fn)(void *user, const hush_path_vertex *vertex);
+
+typedef struct hush_integrator {
+  const hush_scene *scene; /* set to `frame` (hush__scene_set_frame) */
+  const hush_lights *lights;
+  int bounces;             /* secondary rays per path, >= 0 */
+  int rr_depth;            /* Russian roulette before secondary ray rr_depth + 1 (3) */
+  float clamp;             /* > 0: clamp each indirect contribution to this (max channel) */
+  hush_path_vertex_fn vertex_fn;
+  void *vertex_user;
+} hush_integrator;
+
+void hush__integrator_defaults(hush_integrator *it, const hush_scene *scene,
+                               const hush_lights *lights);
+
+/* What a camera sample saw first: a triangle (the visibility buffer), a
+ * sphere light, or nothing. */
+typedef enum hush_first_kind {
+  HUSH_FIRST_SKY = 0,
+  HUSH_FIRST_TRIANGLE = 1,
+  HUSH_FIRST_SPHERE = 2
+} hush_first_kind;
+
+typedef struct hush_first_hit {
+  hush_first_kind kind;
+  hush_vec3 dir;           /* unit camera ray direction */
+  float t;                 /* distance along it */
+  hush_hit hit;            /* TRIANGLE */
+  hush_surface surface;    /* TRIANGLE */
+  uint32_t sphere;         /* SPHERE */
+  hush_vec3 p, n;          /* position and normal of the hit (TRIANGLE, SPHERE) */
+} hush_first_hit;
+
+typedef struct hush_path_result {
+  float radiance[3];
+  float direct[3];         /* emission seen directly + the first hit's shadow ray */
+  uint32_t rays;           /* rays traced, primary and shadow included */
+} hush_path_result;
+
+/* Traces the camera ray from eye along unit direction d and shades it.
+ * first may be NULL. */
+void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                            const hush_rand *rng, uint32_t x, uint32_t y, hush_first_hit *first,
+                            hush_path_result *out);
+
+/* The first hit of visibility sample (triangle, u, v) at the scene's
+ * current frame, seen from eye: what a forward-projected sample needs to be
+ * re-shaded. Returns 0 if the point coincides with the eye. */
+int hush__integrator_first_hit(const hush_integrator *it, hush_vec3 eye, uint32_t triangle, float u,
+                               float v, hush_first_hit *first);
+
+/* Shades a given first hit from eye with the numbers of rng (which may
+ * belong to another frame and pixel). Does not trace the primary ray. */
+void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
+                            const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out);
+
+#endif

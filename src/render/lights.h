@@ -1,0 +1,121 @@
+/*
+ * lights.h — light sampling for next-event estimation and the light-side
+ * densities for multiple importance sampling (bmfr-koskela-2019.md §3.1:
+ * "one shadow ray towards a random point in one random light source",
+ * combined with the BSDF-sampled ray by MIS).
+ *
+ * Light groups, one of which is picked per shadow ray with probability
+ * 0.5 * (its share of the estimated power) + 0.5 / (number of groups):
+ *   - emissive triangles (one group; inside it a triangle by area * luminance(Ke),
+ *     then a uniform point on it, at the current frame's transform);
+ *   - each sphere light (uniform direction in the cone of its visible cap);
+ *   - the environment: CONSTANT (cosine-free uniform sphere), MAP (2D
+ *     piecewise-constant distribution over the lat-long texels, weighted by
+ *     luminance * sin(theta)), or the sky of SUNSKY (a tabulated Preetham
+ *     sky, sampled the same way);
+ *   - the sun disc of SUNSKY (uniform in its cone).
+ * docs/renderer.md documents the sun-and-sky model.
+ */
+#ifndef HUSH_RENDER_LIGHTS_H
+#define HUSH_RENDER_LIGHTS_H
+
+#include "hush.h"
+#include "core/hmath.h"
+#include "render/scene.h"
+
+#include <stdint.h>
+
+/* A lat-long map with its sampling tables (the MAP environment, or the
+ * tabulated sky). Texel (x, y), row 0 at the top (theta = 0: local +Y). */
+typedef struct hush_envmap {
+  uint32_t width, height;
+  float *rgb;              /* width * height * 3, radiance (scale applied) */
+  float *row_cdf;          /* height + 1 */
+  float *col_cdf;          /* height * (width + 1) */
+  float total;             /* sum of the weights (0: a black map) */
+  float to_world[9];       /* local -> world rotation, row-major 3x3 */
+} hush_envmap;
+
+typedef struct hush_lights {
+  /* emissive triangles */
+  uint32_t tri_count;
+  uint32_t *tris;          /* global triangle indices */
+  float *tri_cdf;          /* tri_count + 1 */
+  float *tri_pmf;          /* per GLOBAL triangle: probability within the group (0: not a light) */
+  float tri_power;
+  /* the environment (NONE, CONSTANT, MAP, SUNSKY) */
+  hush_env_type env_type;
+  float env_color[3];      /* CONSTANT */
+  hush_envmap map;         /* MAP, or the sky of SUNSKY */
+  hush_vec3 sun_dir;       /* SUNSKY: towards the sun (world) */
+  float sun_cos_max;       /* cosine of the (scaled) sun's angular radius */
+  float sun_radiance[3];   /* radiance of the disc */
+  float scene_radius;      /* for the power estimate of distant lights */
+  hush_vec3 scene_center;
+  /* group selection, set per frame (spheres switch off) */
+  uint32_t group_count;    /* 0: no light */
+  float p_tris, p_env, p_sun;
+  float *p_sphere;         /* per sphere light */
+  const hush_scene *scene;
+  uint32_t frame;
+} hush_lights;
+
+/* Builds the sampling tables (once per scene, after loading). */
+hush_status hush__lights_init(hush_device device, hush_lights *lights, const hush_scene *scene);
+void hush__lights_free(hush_lights *lights);
+/* Sets the group probabilities for frame f (sphere lights move and switch off). */
+void hush__lights_set_frame(hush_lights *lights, uint32_t frame);
+/* Whether the scene has any light at this frame. */
+int hush__lights_any(const hush_lights *lights);
+
+typedef struct hush_light_sample {
+  hush_vec3 wi;            /* unit, from the shading point towards the light */
+  float dist;              /* distance to the light point; INFINITY for distant lights */
+  float radiance[3];       /* emitted radiance towards the point */
+  float pdf;               /* solid angle, including the group choice */
+  int delta;               /* never set now: every light has area */
+} hush_light_sample;
+
+/* Draws a light and a point on it for the shading point p, from u in [0,1)^3.
+ * Returns 0 if nothing was drawn (no light, or the point faces away). */
+int hush__lights_sample(const hush_lights *lights, hush_vec3 p, const float u[3],
+                        hush_light_sample *s);
+
+/* Radiance of the environment (sky, map or constant, and the sun disc) along d. */
+void hush__lights_env_radiance(const hush_lights *lights, hush_vec3 d, float out[3]);
+/* The solid-angle density with which hush__lights_sample picks direction d
+ * on the environment (sky and sun together). */
+float hush__lights_env_pdf(const hush_lights *lights, hush_vec3 d);
+/* Density for a hit on emissive triangle `tri` at distance dist, with
+ * |cos| between the ray and the light's normal cos_l, of area `area`. */
+float hush__lights_triangle_pdf(const hush_lights *lights, uint32_t tri, float area, float dist,
+                                float cos_l);
+/* Density of sphere light i for a ray from p in direction d (0 if p lies inside). */
+float hush__lights_sphere_pdf(const hush_lights *lights, uint32_t i, hush_vec3 p);
+
+/* Area of triangle tri (object space: rigid motion keeps it). */
+float hush__lights_triangle_area(const hush_scene *scene, uint32_t tri);
+
+/* Closest sphere light (on at this frame) hit by o + t d, t in (tnear, tfar):
+ * returns its index + 1 and sets *t, or 0. */
+uint32_t hush__lights_intersect_sphere(const hush_lights *lights, hush_vec3 o, hush_vec3 d,
+                                       float tnear, float tfar, float *t);
+
+/* Envmap pieces, exposed for tests: direction <-> (u, v) in the map's local
+ * frame (Mitsuba's convention), texel lookup, sampling and density (solid
+ * angle, world directions). */
+void hush__envmap_dir_to_uv(hush_vec3 local, float *u, float *v);
+hush_vec3 hush__envmap_uv_to_dir(float u, float v);
+hush_status hush__envmap_build(hush_device device, hush_envmap *map, const float *rgb,
+                               uint32_t width, uint32_t height, int channels, float scale,
+                               const float to_world_4x4_col_major[16]);
+void hush__envmap_free(hush_envmap *map);
+void hush__envmap_eval(const hush_envmap *map, hush_vec3 d, float out[3]);
+float hush__envmap_pdf(const hush_envmap *map, hush_vec3 d);
+hush_vec3 hush__envmap_sample(const hush_envmap *map, float u1, float u2, float *pdf);
+
+/* Preetham sky radiance (linear sRGB, Mitsuba's spectral units, sky_scale
+ * not applied) for a world direction d with the sun towards sun_dir. */
+void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float turbidity, float out[3]);
+
+#endif

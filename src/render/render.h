@@ -1,0 +1,92 @@
+/*
+ * render.h — renders one frame of a sequence into a hush_frame: the noisy
+ * radiance of the 1 spp configuration (bmfr-koskela-2019.md §3.1) and the
+ * noise-free feature buffers the filters read
+ * (realtime-denoising-comparison-higginson-2023.md §1.2.1-1.2.2), with the
+ * layer names of docs/sequence-format.md:
+ *
+ *   color (3)          mean radiance of the pixel's samples
+ *   albedo (3)         first-hit demodulation albedo (docs/renderer.md)
+ *   normal (3)         world shading normal of the first hit (0 for sky)
+ *   position (3)       world position of the first hit (0 for sky)
+ *   depth (1)          linear view depth, 0 for sky
+ *   depth_gradient (2) d depth / d pixel in x and y, from the first hit's
+ *                      tangent plane (0 for sky)
+ *   motion (2)         pixels, previous minus current, camera and object motion
+ *   id (1)             material index + 1; sphere light i: material_count + 1 + i; sky 0
+ *   vis (3)            visibility buffer: triangle index (exact float),
+ *                      barycentrics u, v; -1 for sky, -2 - i for sphere light i
+ *   spp, variance (1)  when spp > 1: samples, and the sample variance of
+ *                      the luminance of one sample
+ *   direct, indirect (3) with split: first-hit emission + its shadow ray, and the rest
+ *
+ * The G-buffer comes from the first sample's primary ray, which goes through
+ * (x + 0.5 + jitter). Pixels are independent, so the frame is the same for
+ * any thread count; rows are spread over OpenMP threads.
+ */
+#ifndef HUSH_RENDER_RENDER_H
+#define HUSH_RENDER_RENDER_H
+
+#include "hush.h"
+#include "render/camera.h"
+#include "render/integrator.h"
+#include "render/lights.h"
+#include "render/scene.h"
+
+#include <stdint.h>
+
+typedef struct hush_render_params {
+  uint32_t width, height;
+  uint32_t spp;            /* >= 1 */
+  int bounces;             /* BSDF-sampled secondary rays per path (integrator.h) */
+  uint32_t seed;
+  hush_sampler sampler;
+  int jitter;              /* Halton frame jitter; samples 1.. of a pixel spread over it */
+  float clamp;             /* > 0: firefly clamp of indirect contributions */
+  int split;               /* also write "direct" and "indirect" */
+  int threads;             /* 0: the device's */
+  hush_path_vertex_fn vertex_fn;
+  void *vertex_user;
+} hush_render_params;
+
+void hush__render_defaults(hush_render_params *p);
+
+typedef struct hush_render_ctx {
+  const hush_scene *scene; /* set to `frame` */
+  const hush_lights *lights; /* set to `frame` */
+  hush_render_params params;
+  hush_render_camera cam;
+  hush_render_camera prev_cam;
+  int have_prev;           /* 0: motion is 0 */
+  uint32_t frame;
+  hush_integrator it;
+} hush_render_ctx;
+
+/* prev_cam may be NULL (no previous frame). */
+void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const hush_lights *lights,
+                           const hush_render_params *params, const hush_render_camera *cam,
+                           const hush_render_camera *prev_cam, uint32_t frame);
+
+typedef struct hush_pixel_result {
+  float color[3];
+  float direct[3];
+  float variance;          /* of one sample's luminance (spp > 1) */
+  hush_first_hit first;    /* of sample 0 */
+  uint64_t rays;
+} hush_pixel_result;
+
+/* Renders pixel (x, y) of ctx's frame with the random numbers of frame
+ * seed_frame (normally ctx->frame): the same arguments always give the same
+ * result, bit for bit. */
+void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint32_t seed_frame,
+                        hush_pixel_result *out);
+
+typedef void (*hush_render_progress_fn)(void *user, uint32_t rows_done, uint32_t rows);
+
+/* Renders the frame into out (size params.width x params.height; layers
+ * added or replaced). progress, if not NULL, is called from one thread as
+ * rows complete. *rays (may be NULL) receives the number of rays traced. */
+hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, hush_frame out,
+                               hush_render_progress_fn progress, void *user, uint64_t *rays);
+
+#endif

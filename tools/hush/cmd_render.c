@@ -1,0 +1,411 @@
+/*
+ * cmd_render.c — `hush render`: path-traces a frame sequence of a scene
+ * (a scene.json manifest or a built-in scene) in the foundation's sequence
+ * format: frame_NNNN.exr with noisy radiance and the feature buffers, plus
+ * cameras.json and render.json. The 1 spp configuration is that of
+ * bmfr-koskela-2019.md §3.1; `--spp N` renders the matching references
+ * (same frames, cameras and jitter policy), as in §6.
+ */
+#include "cli.h"
+
+#include "core/timer.h"
+#include "io/atomic_file.h"
+#include "io/sequence.h"
+#include "render/camera.h"
+#include "render/lights.h"
+#include "render/render.h"
+#include "render/scene.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <unistd.h>
+
+static const char *const help_text =
+    "usage: hush render --scene SCENE --out DIR [options]\n"
+    "       hush render --list\n"
+    "\n"
+    "Path-traces a frame sequence: DIR/frame_NNNN.exr (layers color, albedo,\n"
+    "normal, position, depth, depth_gradient, motion, id, vis; spp and variance\n"
+    "when --spp > 1), DIR/cameras.json and DIR/render.json. The default is the\n"
+    "documents' 1 spp configuration: a jittered primary ray, a shadow ray, one\n"
+    "BSDF-sampled secondary ray with its own shadow ray, and MIS.\n"
+    "\n"
+    "options:\n"
+    "  --scene SCENE        PATH/scene.json (or its folder) or builtin:NAME (required)\n"
+    "  --out DIR            output directory, created if missing (required)\n"
+    "  --path MOVE          camera: a camera-path.json file, path (the scene's own\n"
+    "                       path), static, orbit or dolly (default: the scene's\n"
+    "                       path if it has one, else orbit)\n"
+    "  --size WxH           frame size (default: the scene's resolution, else 640x360)\n"
+    "  --frames N           frames to render (default: the path's length, else 16)\n"
+    "  --first K            first frame of the animation (default 0)\n"
+    "  --spp N              samples per pixel, 1..1048576 (default 1); N > 1 renders\n"
+    "                       references, with progress and time left on stderr\n"
+    "  --bounces N          BSDF-sampled secondary rays per path, 0..64 (default 1:\n"
+    "                       the papers' configuration; 0: direct light only)\n"
+    "  --seed S             random seed (default 1)\n"
+    "  --sampler KIND       random or ld (scrambled Sobol pairs; default random)\n"
+    "  --no-jitter          no subpixel jitter (default: Halton(2,3) per frame)\n"
+    "  --clamp X            clamp indirect contributions to X (default: off)\n"
+    "  --split              also write the layers direct and indirect\n"
+    "  --png                also write DIR/frame_NNNN.png of the radiance\n"
+    "  --half               write half-float EXRs (depth, position and id stay float)\n"
+    "  --threads N          worker threads, 0 = one per core (default 0)\n"
+    "  --quiet              print only warnings and errors\n"
+    "  --list               list the built-in scenes and camera moves\n"
+    "  -h, --help           show this help\n";
+
+typedef struct render_options {
+  const char *scene, *out, *path;
+  uint32_t width, height, frames, first;
+  int have_size, have_frames;
+  hush_render_params params;
+  int png, quiet;
+  hush_exr_type exr_type;
+  uint32_t threads;
+} render_options;
+
+static void list_builtins(void) {
+  printf("built-in scenes (--scene builtin:NAME):\n");
+  for (int i = 0; hush__scene_builtin_names[i]; i++)
+    printf("  %-14s %s\n", hush__scene_builtin_names[i], hush__scene_builtin_docs[i]);
+  printf("\ncamera moves (--path):\n"
+         "  path           the scene's camera path (camera-path.json of the manifest)\n"
+         "  static         the scene's camera, still\n"
+         "  orbit          around the camera's target, %.2g degrees per frame\n"
+         "  dolly          towards the target to %.0f%% of the distance and back, every %u frames\n"
+         "  FILE.json      a camera path file: {\"fov_axis\", \"resolution\", \"frames\": [...]}\n",
+         (double)HUSH_ORBIT_DEG_PER_FRAME, (double)(HUSH_DOLLY_MIN * 100.0f), HUSH_DOLLY_PERIOD);
+}
+
+static void parse_options(int argc, char **argv, render_options *o) {
+  cli_args a;
+  cli_args_init(&a, "render", argc, argv);
+  memset(o, 0, sizeof *o);
+  hush__render_defaults(&o->params);
+  o->exr_type = HUSH_EXR_FLOAT;
+  const char *arg, *v;
+  while (cli_next(&a, &arg)) {
+    if (cli_is_help(arg)) {
+      fputs(help_text, stdout);
+      exit(0);
+    } else if (cli_switch(&a, arg, "--list")) {
+      list_builtins();
+      exit(0);
+    } else if (cli_option(&a, arg, "--scene", &v)) {
+      o->scene = v;
+    } else if (cli_option(&a, arg, "--out", &v)) {
+      o->out = v;
+    } else if (cli_option(&a, arg, "--path", &v)) {
+      o->path = v;
+    } else if (cli_option(&a, arg, "--size", &v)) {
+      cli_parse_size(a.cmd, "--size", v, &o->width, &o->height);
+      o->have_size = 1;
+    } else if (cli_option(&a, arg, "--frames", &v)) {
+      o->frames = cli_parse_uint(a.cmd, "--frames", v, 1, 100000);
+      o->have_frames = 1;
+    } else if (cli_option(&a, arg, "--first", &v)) {
+      o->first = cli_parse_uint(a.cmd, "--first", v, 0, 1000000);
+    } else if (cli_option(&a, arg, "--spp", &v)) {
+      o->params.spp = cli_parse_uint(a.cmd, "--spp", v, 1, 1u << 20);
+    } else if (cli_option(&a, arg, "--bounces", &v)) {
+      o->params.bounces = (int)cli_parse_uint(a.cmd, "--bounces", v, 0, 64);
+    } else if (cli_option(&a, arg, "--seed", &v)) {
+      o->params.seed = cli_parse_uint(a.cmd, "--seed", v, 0, UINT32_MAX);
+    } else if (cli_option(&a, arg, "--sampler", &v)) {
+      if (strcmp(v, "random") == 0)
+        o->params.sampler = HUSH_SAMPLER_RANDOM;
+      else if (strcmp(v, "ld") == 0)
+        o->params.sampler = HUSH_SAMPLER_LD;
+      else
+        cli_usage_error(a.cmd, "--sampler: unknown sampler '%s' (random or ld)", v);
+    } else if (cli_switch(&a, arg, "--no-jitter")) {
+      o->params.jitter = 0;
+    } else if (cli_option(&a, arg, "--clamp", &v)) {
+      o->params.clamp = cli_parse_float(a.cmd, "--clamp", v, 1e-6f, 1e30f);
+    } else if (cli_switch(&a, arg, "--split")) {
+      o->params.split = 1;
+    } else if (cli_switch(&a, arg, "--png")) {
+      o->png = 1;
+    } else if (cli_switch(&a, arg, "--half")) {
+      o->exr_type = HUSH_EXR_HALF;
+    } else if (cli_option(&a, arg, "--threads", &v)) {
+      o->threads = cli_parse_uint(a.cmd, "--threads", v, 0, 1024);
+    } else if (cli_switch(&a, arg, "--quiet")) {
+      o->quiet = 1;
+    } else if (cli_is_positional(&a, arg)) {
+      cli_usage_error(a.cmd, "unexpected argument '%s' (the scene goes to --scene)", arg);
+    } else {
+      cli_unknown_option(&a, arg);
+    }
+  }
+  if (!o->scene) cli_usage_error(a.cmd, "--scene is required (see hush render --help)");
+  if (!o->out) cli_usage_error(a.cmd, "--out DIR is required (see hush render --help)");
+  if (o->path && strcmp(o->path, "path") && strcmp(o->path, "static") &&
+      strcmp(o->path, "orbit") && strcmp(o->path, "dolly")) {
+    char ext[16];
+    cli_extension(o->path, ext, sizeof ext);
+    if (strcmp(ext, "json") != 0)
+      cli_usage_error(a.cmd,
+                      "--path: '%s' is neither a camera move (path, static, orbit, dolly) nor a "
+                      ".json camera path",
+                      o->path);
+  }
+}
+
+/* ---- one run ------------------------------------------------------------------ */
+
+typedef struct render_run {
+  const render_options *o;
+  hush_device device;
+  hush_scene scene;
+  int have_scene;
+  hush_lights lights;
+  int have_lights;
+  hush_camera_path file_path; /* --path FILE */
+  hush_camera_move move;
+  const hush_camera_path *path;
+  hush_sequence seq;
+  int have_seq;
+  int tty;
+  double frame_start_ms;
+  uint32_t frame_i, frame_n;
+} render_run;
+
+static int fail(render_run *r, hush_status st, const char *context) {
+  return cli_device_error("render", r->device, st, context);
+}
+
+static int load_scene(render_run *r) {
+  const char *s = r->o->scene;
+  hush_status st;
+  if (strncmp(s, "builtin:", 8) == 0)
+    st = hush__scene_builtin(r->device, s + 8, &r->scene);
+  else
+    st = hush__scene_load(r->device, s, &r->scene);
+  if (st != HUSH_OK) return fail(r, st, s);
+  r->have_scene = 1;
+  st = hush__scene_commit(r->device, &r->scene);
+  if (st != HUSH_OK) return fail(r, st, s);
+  if (r->scene.skipped_triangles && !r->o->quiet)
+    fprintf(stderr, "hush render: %u degenerate triangles skipped\n", r->scene.skipped_triangles);
+  st = hush__lights_init(r->device, &r->lights, &r->scene);
+  if (st != HUSH_OK) return fail(r, st, s);
+  r->have_lights = 1;
+  return 0;
+}
+
+static int choose_camera(render_run *r) {
+  const char *p = r->o->path;
+  r->path = r->scene.path.frame_count ? &r->scene.path : NULL;
+  if (!p) {
+    r->move = r->path ? HUSH_MOVE_PATH : HUSH_MOVE_ORBIT;
+    return 0;
+  }
+  if (strcmp(p, "static") == 0) {
+    r->move = HUSH_MOVE_STATIC;
+  } else if (strcmp(p, "orbit") == 0) {
+    r->move = HUSH_MOVE_ORBIT;
+  } else if (strcmp(p, "dolly") == 0) {
+    r->move = HUSH_MOVE_DOLLY;
+  } else if (strcmp(p, "path") == 0) {
+    if (!r->path)
+      return cli_error("render", "--path path: scene '%s' has no camera path", r->scene.name);
+    r->move = HUSH_MOVE_PATH;
+  } else {
+    const hush_status st = hush__camera_path_load(r->device, p, &r->file_path);
+    if (st != HUSH_OK) return fail(r, st, p);
+    r->path = &r->file_path;
+    r->move = HUSH_MOVE_PATH;
+  }
+  return 0;
+}
+
+static int sequence_motion_vectors(const hush_scene *s) {
+  for (uint32_t i = 0; i < s->object_count; i++)
+    if (s->objects[i].motion.animated) return 1;
+  for (uint32_t i = 0; i < s->sphere_count; i++) {
+    const float *v = s->spheres[i].velocity;
+    if (v[0] != 0.0f || v[1] != 0.0f || v[2] != 0.0f) return 1;
+  }
+  return 0;
+}
+
+static void progress(void *user, uint32_t done, uint32_t rows) {
+  const render_run *r = user;
+  if (r->o->quiet || r->o->params.spp <= 1) return;
+  const double el = (hush__now_ms() - r->frame_start_ms) / 1000.0;
+  const double left = done > 0 ? el * (double)(rows - done) / (double)done : 0.0;
+  const int width = 30, fill = (int)((double)width * done / rows);
+  char bar[64];
+  for (int i = 0; i < width; i++) bar[i] = i < fill ? '#' : '.';
+  bar[width] = '\0';
+  fprintf(stderr, "%sframe %u/%u [%s] %3.0f%%  %.0f s elapsed, %.0f s left%s", r->tty ? "\r" : "",
+          r->frame_i + 1, r->frame_n, bar, 100.0 * done / rows, el, left, r->tty ? "" : "\n");
+  if (r->tty && done == rows) fputc('\n', stderr);
+}
+
+/* Writes a JSON string literal (escaped) to f. */
+static void json_string(FILE *f, const char *s) {
+  fputc('"', f);
+  for (; *s; s++) {
+    const unsigned char c = (unsigned char)*s;
+    if (c == '"' || c == '\\')
+      fprintf(f, "\\%c", c);
+    else if (c < 0x20)
+      fprintf(f, "\\u%04x", c);
+    else
+      fputc(c, f);
+  }
+  fputc('"', f);
+}
+
+static int write_render_json(render_run *r, int argc, char **argv, double seconds, uint64_t rays) {
+  char path[HUSH_PATH_MAX], tmp[HUSH_PATH_MAX];
+  if ((size_t)snprintf(path, sizeof path, "%s/render.json", r->o->out) >= sizeof path)
+    return cli_error("render", "--out: path too long");
+  FILE *f = hush__atomic_open(r->device, path, tmp);
+  if (!f) return fail(r, HUSH_ERROR_IO, path);
+  const hush_render_params *p = &r->o->params;
+  static const char *const moves[] = {"path", "static", "orbit", "dolly"};
+  fprintf(f, "{\n  \"format\": \"hush-render/1\",\n  \"scene\": ");
+  json_string(f, r->o->scene);
+  fprintf(f, ",\n  \"scene_name\": ");
+  json_string(f, r->scene.name);
+  fprintf(f, ",\n  \"camera\": ");
+  json_string(f, r->o->path && r->move == HUSH_MOVE_PATH && r->path == &r->file_path
+                     ? r->o->path
+                     : moves[r->move]);
+  fprintf(f,
+          ",\n  \"width\": %u,\n  \"height\": %u,\n  \"first_frame\": %u,\n  \"frame_count\": %u,\n"
+          "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
+          "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n"
+          "  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
+          "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
+          r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
+          p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
+          (double)p->clamp, p->split ? "true" : "false", r->scene.triangle_count,
+          r->scene.skipped_triangles, seconds, (unsigned long long)rays);
+  json_string(f, "hush");
+  for (int i = 0; i < argc; i++) {
+    fputs(", ", f);
+    json_string(f, argv[i]);
+  }
+  fprintf(f, "]\n}\n");
+  const hush_status st = hush__atomic_commit(r->device, f, tmp, path);
+  return st == HUSH_OK ? 0 : fail(r, st, path);
+}
+
+static int render_frames(render_run *r, int argc, char **argv) {
+  const render_options *o = r->o;
+  uint32_t W = o->width, H = o->height;
+  if (!o->have_size) {
+    W = r->scene.width ? r->scene.width : 640;
+    H = r->scene.height ? r->scene.height : 360;
+  }
+  uint32_t n = o->frames;
+  if (!o->have_frames) n = r->move == HUSH_MOVE_PATH && r->path ? r->path->frame_count : 16;
+  if (r->move == HUSH_MOVE_PATH && o->first + n > r->path->frame_count)
+    return cli_error("render",
+                     "--first %u --frames %u: the camera path has %u frames", o->first, n,
+                     r->path->frame_count);
+  hush_status st = hush__make_dirs(r->device, o->out);
+  if (st == HUSH_OK) st = hush__sequence_init(r->device, &r->seq, o->out, W, H, n);
+  if (st != HUSH_OK) return fail(r, st, o->out);
+  r->have_seq = 1;
+  r->seq.motion = sequence_motion_vectors(&r->scene) ? HUSH_MOTION_VECTORS : HUSH_MOTION_CAMERA;
+  if (!hush__lights_any(&r->lights) && !o->quiet)
+    fprintf(stderr, "hush render: warning: scene '%s' has no light: the frames render black\n",
+            r->scene.name);
+
+  hush_render_params params = o->params;
+  params.width = W;
+  params.height = H;
+  params.threads = (int)o->threads;
+  /* one projection for the whole sequence, from the first frame's eye */
+  hush_camera_pose pose;
+  int axis_x;
+  hush__camera_pose(&r->scene, r->move, r->path, o->first, &pose, &axis_x);
+  float z_near, z_far;
+  hush__camera_clip_range(&r->scene, hush_v3(pose.position[0], pose.position[1], pose.position[2]),
+                          &z_near, &z_far);
+  z_far *= 2.0f;
+  z_near *= 2.0f;
+
+  const double t0 = hush__now_ms();
+  uint64_t rays_total = 0;
+  r->frame_n = n;
+  for (uint32_t i = 0; i < n; i++) {
+    const uint32_t f = o->first + i;
+    r->frame_i = i;
+    st = hush__scene_set_frame(r->device, &r->scene, f);
+    if (st != HUSH_OK) return fail(r, st, "set frame");
+    hush__lights_set_frame(&r->lights, f);
+    hush_render_camera cam, prev;
+    hush__camera_pose(&r->scene, r->move, r->path, f, &pose, &axis_x);
+    if (!hush__camera_setup(&cam, &pose, axis_x, W, H, z_near, z_far, f, params.jitter))
+      return cli_error("render", "frame %u: degenerate camera (eye on target, or up along the view)",
+                       f);
+    int have_prev = 0;
+    if (f > 0) {
+      hush__camera_pose(&r->scene, r->move, r->path, f - 1, &pose, &axis_x);
+      have_prev = hush__camera_setup(&prev, &pose, axis_x, W, H, z_near, z_far, f - 1, params.jitter);
+    }
+    hush_render_ctx ctx;
+    hush__render_ctx_init(&ctx, &r->scene, &r->lights, &params, &cam, have_prev ? &prev : NULL, f);
+    hush_frame frame = hush_frame_new(r->device, W, H);
+    if (!frame) return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
+    r->frame_start_ms = hush__now_ms();
+    uint64_t rays = 0;
+    st = hush__render_frame(r->device, &ctx, frame, progress, r, &rays);
+    const double ms = hush__now_ms() - r->frame_start_ms;
+    rays_total += rays;
+    char path[HUSH_PATH_MAX];
+    if (st == HUSH_OK) st = hush__sequence_frame_path(r->device, &r->seq, i, path, sizeof path);
+    if (st == HUSH_OK) st = hush_frame_write_exr(frame, path, o->exr_type);
+    if (st == HUSH_OK && o->png) {
+      const size_t len = strlen(path);
+      memcpy(path + len - 3, "png", 3);
+      hush_image_view view;
+      hush_frame_get_layer(frame, "color", &view);
+      st = hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
+    }
+    hush_frame_release(frame);
+    if (st != HUSH_OK) return fail(r, st, NULL);
+    hush_camera *c = &r->seq.cameras[i];
+    memcpy(c->world_to_view, cam.world_to_view, sizeof c->world_to_view);
+    memcpy(c->view_to_clip, cam.view_to_clip, sizeof c->view_to_clip);
+    memcpy(c->jitter, cam.jitter, sizeof c->jitter);
+    if (!o->quiet)
+      fprintf(stderr, "frame %u/%u  %.3f s  %.2f Mrays/s\n", i + 1, n, ms / 1000.0,
+              (double)rays / (ms * 1000.0));
+  }
+  st = hush__sequence_write_cameras(r->device, &r->seq);
+  if (st != HUSH_OK) return fail(r, st, NULL);
+  const double seconds = (hush__now_ms() - t0) / 1000.0;
+  if (!o->quiet)
+    fprintf(stderr, "wrote %u frames of %ux%u at %u spp to %s: %.3f s/frame, %.2f Mrays/s\n", n, W,
+            H, params.spp, o->out, seconds / n, (double)rays_total / (seconds * 1e6));
+  return write_render_json(r, argc, argv, seconds, rays_total);
+}
+
+int cmd_render(int argc, char **argv) {
+  render_options o;
+  parse_options(argc, argv, &o);
+  render_run r;
+  memset(&r, 0, sizeof r);
+  r.o = &o;
+  r.tty = isatty(fileno(stderr));
+  r.device = cli_device_new("render", o.threads);
+  if (!r.device) return CLI_EXIT_RUNTIME;
+  int rc = load_scene(&r);
+  if (!rc) rc = choose_camera(&r);
+  if (!rc) rc = render_frames(&r, argc, argv);
+  if (r.have_seq) hush__sequence_free(&r.seq);
+  free(r.file_path.frames);
+  if (r.have_lights) hush__lights_free(&r.lights);
+  if (r.have_scene) hush__scene_free(&r.scene);
+  hush_device_release(r.device);
+  return rc;
+}
