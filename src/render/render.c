@@ -154,10 +154,8 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
       L->direct[3 * i + k] = r->direct[k];
       L->indirect[3 * i + k] = r->color[k] - r->direct[k];
     }
-  if (L->spp) {
-    L->spp[i] = (float)ctx->params.spp;
-    L->variance[i] = r->variance;
-  }
+  if (L->spp) L->spp[i] = (float)ctx->params.spp;
+  if (L->variance) L->variance[i] = r->variance;
   motion_of(ctx, f, L->motion + 2 * i);
   float *alb = L->albedo + 3 * i;
   alb[0] = alb[1] = alb[2] = 1.0f;
@@ -184,6 +182,14 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   L->vis[3 * i + 1] = f->hit.u;
   L->vis[3 * i + 2] = f->hit.v;
   depth_gradient(ctx, px, py, f->p, f->surface.ng, z, L->dgrad + 2 * i);
+}
+
+/* A pixel the progressive pattern skips this frame: the layers are zero
+ * from hush_frame_add_layer, spp included; vis says "no triangle", since 0
+ * would name triangle 0. */
+static void write_hole(const hush_render_ctx *ctx, const layers *L, uint32_t x, uint32_t y) {
+  const size_t i = (size_t)y * ctx->params.width + x;
+  L->vis[3 * i] = -1.0f;
 }
 
 static hush_status add_layer(hush_frame out, const char *name, int channels, float **data) {
@@ -217,7 +223,7 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
       {"normal", 3, &L.normal, 1},      {"position", 3, &L.position, 1},
       {"depth", 1, &L.depth, 1},        {"depth_gradient", 2, &L.dgrad, 1},
       {"motion", 2, &L.motion, 1},      {"id", 1, &L.id, 1},
-      {"vis", 3, &L.vis, 1},            {"spp", 1, &L.spp, p->spp > 1},
+      {"vis", 3, &L.vis, 1},            {"spp", 1, &L.spp, p->spp > 1 || p->progressive},
       {"variance", 1, &L.variance, p->spp > 1}, {"direct", 3, &L.direct, p->split},
       {"indirect", 3, &L.indirect, p->split},
   };
@@ -232,6 +238,10 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : total)
   for (uint32_t y = 0; y < H; y++) {
     for (uint32_t x = 0; x < W; x++) {
+      if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) {
+        write_hole(ctx, &L, x, y);
+        continue;
+      }
       hush_pixel_result r;
       hush__render_pixel(ctx, x, y, ctx->frame, &r);
       write_pixel(ctx, &L, x, y, &r);

@@ -16,9 +16,15 @@
  *   id (1)             material index + 1; sphere light i: material_count + 1 + i; sky 0
  *   vis (3)            visibility buffer: triangle index (exact float),
  *                      barycentrics u, v; -1 for sky, -2 - i for sphere light i
- *   spp, variance (1)  when spp > 1: samples, and the sample variance of
- *                      the luminance of one sample
+ *   spp (1)            when spp > 1 or progressive: the samples of the pixel,
+ *                      0 for a hole (a pixel this frame did not trace)
+ *   variance (1)       when spp > 1: the sample variance of the luminance
+ *                      of one sample
  *   direct, indirect (3) with split: first-hit emission + its shadow ray, and the rest
+ *
+ * With params.progressive (fewer than one sample per pixel, progressive.h)
+ * only the pattern's pixels are traced; the others are holes: spp 0, every
+ * other layer 0 except vis, which is -1 (no triangle) as for the sky.
  *
  * The G-buffer comes from the first sample's primary ray, which goes through
  * (x + 0.5 + jitter). Pixels are independent, so the frame is the same for
@@ -31,6 +37,7 @@
 #include "render/camera.h"
 #include "render/integrator.h"
 #include "render/lights.h"
+#include "render/progressive.h"
 #include "render/scene.h"
 
 #include <stdint.h>
@@ -45,6 +52,7 @@ typedef struct hush_render_params {
   float clamp;             /* > 0: firefly clamp of indirect contributions */
   int split;               /* also write "direct" and "indirect" */
   int threads;             /* 0: the device's */
+  const hush_progressive *progressive; /* not NULL: trace only its pixels (progressive.h) */
   hush_path_vertex_fn vertex_fn;
   void *vertex_user;
 } hush_render_params;
