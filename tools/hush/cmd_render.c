@@ -7,12 +7,15 @@
  * (same frames, cameras and jitter policy), as in §6.
  */
 #include "cli.h"
+#include "render_progress.h"
 
 #include "core/timer.h"
 #include "io/atomic_file.h"
+#include "io/export_bmfr.h"
 #include "io/sequence.h"
 #include "render/camera.h"
 #include "render/lights.h"
+#include "render/progressive.h"
 #include "render/render.h"
 #include "render/scene.h"
 
@@ -27,7 +30,8 @@ static const char *const help_text =
     "\n"
     "Path-traces a frame sequence: DIR/frame_NNNN.exr (layers color, albedo,\n"
     "normal, position, depth, depth_gradient, motion, id, vis; spp and variance\n"
-    "when --spp > 1), DIR/cameras.json and DIR/render.json. The default is the\n"
+    "when --spp > 1 or --spp-fraction < 1), DIR/cameras.json and DIR/render.json.\n"
+    "The default is the\n"
     "documents' 1 spp configuration: a jittered primary ray, a shadow ray, one\n"
     "BSDF-sampled secondary ray with its own shadow ray, and MIS.\n"
     "\n"
@@ -41,7 +45,12 @@ static const char *const help_text =
     "  --frames N           frames to render (default: the path's length, else 16)\n"
     "  --first K            first frame of the animation (default 0)\n"
     "  --spp N              samples per pixel, 1..1048576 (default 1); N > 1 renders\n"
-    "                       references, with progress and time left on stderr\n"
+    "                       references, with a progress bar per frame\n"
+    "  --spp-fraction F     trace only a fraction F in (0, 1] of the pixels per frame\n"
+    "                       (F = m/k^2, k <= 16: 0.25, 0.5, 1/9, 0.1 ...): m pixels of\n"
+    "                       every k x k block, rotating so each pixel is traced once\n"
+    "                       every k^2/m frames; the others are holes: spp 0, all\n"
+    "                       other layers 0 (vis -1) (docs/renderer.md)\n"
     "  --bounces N          BSDF-sampled secondary rays per path, 0..64 (default 1:\n"
     "                       the papers' configuration; 0: direct light only)\n"
     "  --seed S             random seed (default 1)\n"
@@ -50,9 +59,13 @@ static const char *const help_text =
     "  --clamp X            clamp indirect contributions to X (default: off)\n"
     "  --split              also write the layers direct and indirect\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
+    "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
+    "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
+    "                       camera_matrices.h, the input of the published BMFR code\n"
     "  --half               write half-float EXRs (depth, position and id stay float)\n"
     "  --threads N          worker threads, 0 = one per core (default 0)\n"
-    "  --quiet              print only warnings and errors\n"
+    "  --quiet              print only warnings and errors (default: progress per\n"
+    "                       frame on stderr: time, Mrays/s, time left)\n"
     "  --list               list the built-in scenes and camera moves\n"
     "  -h, --help           show this help\n";
 
@@ -62,6 +75,9 @@ typedef struct render_options {
   int have_size, have_frames;
   hush_render_params params;
   int png, quiet;
+  int export_bmfr;
+  double spp_fraction;     /* 1: every pixel */
+  hush_progressive progressive;
   hush_exr_type exr_type;
   uint32_t threads;
 } render_options;
@@ -79,12 +95,35 @@ static void list_builtins(void) {
          (double)HUSH_ORBIT_DEG_PER_FRAME, (double)(HUSH_DOLLY_MIN * 100.0f), HUSH_DOLLY_PERIOD);
 }
 
+/* --spp-fraction: a decimal ("0.25") or a ratio ("1/9"). */
+static void parse_fraction(const char *cmd, const char *text, render_options *o) {
+  const char *slash = strchr(text, '/');
+  if (slash) {
+    char num[32];
+    const size_t len = (size_t)(slash - text);
+    if (len == 0 || len >= sizeof num) cli_usage_error(cmd, "--spp-fraction: '%s' is not A/B", text);
+    memcpy(num, text, len);
+    num[len] = '\0';
+    const uint32_t a = cli_parse_uint(cmd, "--spp-fraction", num, 1, 1u << 16);
+    const uint32_t b = cli_parse_uint(cmd, "--spp-fraction", slash + 1, 1, 1u << 16);
+    o->spp_fraction = (double)a / (double)b;
+  } else {
+    o->spp_fraction = cli_parse_float(cmd, "--spp-fraction", text, 1e-6f, 1.0f);
+  }
+  if (!hush__progressive_init(&o->progressive, o->spp_fraction))
+    cli_usage_error(cmd,
+                    "--spp-fraction: %s is not in (0, 1] or not m/k^2 for a block of k x k "
+                    "pixels, k <= %u (try 0.25, 0.5, 1/9, 0.1)",
+                    text, HUSH_PROGRESSIVE_MAX_K);
+}
+
 static void parse_options(int argc, char **argv, render_options *o) {
   cli_args a;
   cli_args_init(&a, "render", argc, argv);
   memset(o, 0, sizeof *o);
   hush__render_defaults(&o->params);
   o->exr_type = HUSH_EXR_FLOAT;
+  o->spp_fraction = 1.0;
   const char *arg, *v;
   while (cli_next(&a, &arg)) {
     if (cli_is_help(arg)) {
@@ -126,6 +165,12 @@ static void parse_options(int argc, char **argv, render_options *o) {
       o->params.clamp = cli_parse_float(a.cmd, "--clamp", v, 1e-6f, 1e30f);
     } else if (cli_switch(&a, arg, "--split")) {
       o->params.split = 1;
+    } else if (cli_option(&a, arg, "--spp-fraction", &v)) {
+      parse_fraction(a.cmd, v, o);
+    } else if (cli_option(&a, arg, "--export", &v)) {
+      if (strcmp(v, "bmfr") != 0)
+        cli_usage_error(a.cmd, "--export: unknown layout '%s' (bmfr)", v);
+      o->export_bmfr = 1;
     } else if (cli_switch(&a, arg, "--png")) {
       o->png = 1;
     } else if (cli_switch(&a, arg, "--half")) {
@@ -169,11 +214,12 @@ typedef struct render_run {
   hush_sequence seq;
   int have_seq;
   int tty;
-  double frame_start_ms;
-  uint32_t frame_i, frame_n;
+  render_progress progress;
+  char bmfr_dir[HUSH_PATH_MAX]; /* --export bmfr */
 } render_run;
 
 static int fail(render_run *r, hush_status st, const char *context) {
+  render_progress_break(&r->progress);
   return cli_device_error("render", r->device, st, context);
 }
 
@@ -233,17 +279,8 @@ static int sequence_motion_vectors(const hush_scene *s) {
 }
 
 static void progress(void *user, uint32_t done, uint32_t rows) {
-  const render_run *r = user;
-  if (r->o->quiet || r->o->params.spp <= 1) return;
-  const double el = (hush__now_ms() - r->frame_start_ms) / 1000.0;
-  const double left = done > 0 ? el * (double)(rows - done) / (double)done : 0.0;
-  const int width = 30, fill = (int)((double)width * done / rows);
-  char bar[64];
-  for (int i = 0; i < width; i++) bar[i] = i < fill ? '#' : '.';
-  bar[width] = '\0';
-  fprintf(stderr, "%sframe %u/%u [%s] %3.0f%%  %.0f s elapsed, %.0f s left%s", r->tty ? "\r" : "",
-          r->frame_i + 1, r->frame_n, bar, 100.0 * done / rows, el, left, r->tty ? "" : "\n");
-  if (r->tty && done == rows) fputc('\n', stderr);
+  render_run *r = user;
+  render_progress_rows(&r->progress, done, rows);
 }
 
 /* Writes a JSON string literal (escaped) to f. */
@@ -281,11 +318,15 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
           ",\n  \"width\": %u,\n  \"height\": %u,\n  \"first_frame\": %u,\n  \"frame_count\": %u,\n"
           "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
           "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n"
+          "  \"spp_fraction\": %.9g,\n  \"progressive_block\": [%u, %u],\n  \"export\": %s,\n"
           "  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
           "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
           r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
           p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
-          (double)p->clamp, p->split ? "true" : "false", r->scene.triangle_count,
+          (double)p->clamp, p->split ? "true" : "false", r->o->spp_fraction,
+          r->o->spp_fraction < 1.0 ? r->o->progressive.k : 1u,
+          r->o->spp_fraction < 1.0 ? r->o->progressive.m : 1u,
+          r->o->export_bmfr ? "\"bmfr\"" : "null", r->scene.triangle_count,
           r->scene.skipped_triangles, seconds, (unsigned long long)rays);
   json_string(f, "hush");
   for (int i = 0; i < argc; i++) {
@@ -319,10 +360,18 @@ static int render_frames(render_run *r, int argc, char **argv) {
     fprintf(stderr, "hush render: warning: scene '%s' has no light: the frames render black\n",
             r->scene.name);
 
+  if (o->export_bmfr) {
+    if ((size_t)snprintf(r->bmfr_dir, sizeof r->bmfr_dir, "%s/bmfr", o->out) >= sizeof r->bmfr_dir)
+      return cli_error("render", "--out: path too long");
+    st = hush__make_dirs(r->device, r->bmfr_dir);
+    if (st != HUSH_OK) return fail(r, st, r->bmfr_dir);
+  }
+
   hush_render_params params = o->params;
   params.width = W;
   params.height = H;
   params.threads = (int)o->threads;
+  if (o->spp_fraction < 1.0) params.progressive = &o->progressive;
   /* one projection for the whole sequence, from the first frame's eye */
   hush_camera_pose pose;
   int axis_x;
@@ -335,18 +384,20 @@ static int render_frames(render_run *r, int argc, char **argv) {
 
   const double t0 = hush__now_ms();
   uint64_t rays_total = 0;
-  r->frame_n = n;
+  render_progress_begin(&r->progress, n, r->tty, o->quiet, params.spp > 1);
   for (uint32_t i = 0; i < n; i++) {
     const uint32_t f = o->first + i;
-    r->frame_i = i;
+    render_progress_frame_start(&r->progress, i);
     st = hush__scene_set_frame(r->device, &r->scene, f);
     if (st != HUSH_OK) return fail(r, st, "set frame");
     hush__lights_set_frame(&r->lights, f);
     hush_render_camera cam, prev;
     hush__camera_pose(&r->scene, r->move, r->path, f, &pose, &axis_x);
-    if (!hush__camera_setup(&cam, &pose, axis_x, W, H, z_near, z_far, f, params.jitter))
+    if (!hush__camera_setup(&cam, &pose, axis_x, W, H, z_near, z_far, f, params.jitter)) {
+      render_progress_break(&r->progress);
       return cli_error("render", "frame %u: degenerate camera (eye on target, or up along the view)",
                        f);
+    }
     int have_prev = 0;
     if (f > 0) {
       hush__camera_pose(&r->scene, r->move, r->path, f - 1, &pose, &axis_x);
@@ -356,10 +407,10 @@ static int render_frames(render_run *r, int argc, char **argv) {
     hush__render_ctx_init(&ctx, &r->scene, &r->lights, &params, &cam, have_prev ? &prev : NULL, f);
     hush_frame frame = hush_frame_new(r->device, W, H);
     if (!frame) return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
-    r->frame_start_ms = hush__now_ms();
+    const double start_ms = hush__now_ms();
     uint64_t rays = 0;
     st = hush__render_frame(r->device, &ctx, frame, progress, r, &rays);
-    const double ms = hush__now_ms() - r->frame_start_ms;
+    const double ms = hush__now_ms() - start_ms;
     rays_total += rays;
     char path[HUSH_PATH_MAX];
     if (st == HUSH_OK) st = hush__sequence_frame_path(r->device, &r->seq, i, path, sizeof path);
@@ -371,17 +422,20 @@ static int render_frames(render_run *r, int argc, char **argv) {
       hush_frame_get_layer(frame, "color", &view);
       st = hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
     }
+    if (st == HUSH_OK && o->export_bmfr) st = hush__bmfr_write_frame(r->device, r->bmfr_dir, i, frame);
     hush_frame_release(frame);
     if (st != HUSH_OK) return fail(r, st, NULL);
     hush_camera *c = &r->seq.cameras[i];
     memcpy(c->world_to_view, cam.world_to_view, sizeof c->world_to_view);
     memcpy(c->view_to_clip, cam.view_to_clip, sizeof c->view_to_clip);
     memcpy(c->jitter, cam.jitter, sizeof c->jitter);
-    if (!o->quiet)
-      fprintf(stderr, "frame %u/%u  %.3f s  %.2f Mrays/s\n", i + 1, n, ms / 1000.0,
-              (double)rays / (ms * 1000.0));
+    render_progress_frame_done(&r->progress, ms / 1000.0, rays);
   }
+  render_progress_break(&r->progress);
   st = hush__sequence_write_cameras(r->device, &r->seq);
+  if (st == HUSH_OK && o->export_bmfr)
+    st = hush__bmfr_write_cameras(r->device, r->bmfr_dir, r->seq.cameras, n,
+                                  HUSH_BMFR_POSITION_LIMIT_SQUARED, HUSH_BMFR_NORMAL_LIMIT_SQUARED);
   if (st != HUSH_OK) return fail(r, st, NULL);
   const double seconds = (hush__now_ms() - t0) / 1000.0;
   if (!o->quiet)
