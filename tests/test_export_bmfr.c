@@ -148,7 +148,8 @@ static void test_render_export(hush_device dev) {
         vp[c * 4 + r] = (float)(r == 1 ? -s : s);
       }
     int bad_m = 0;
-    for (int k = 0; k < 16; k++) bad_m += fabsf(vp[k] - mats[i * 16 + k]) > 1e-5f * (1.0f + fabsf(vp[k]));
+    for (int k = 0; k < 16; k++)
+      bad_m += fabsf(vp[k] - mats[i * 16 + k]) > 1e-5f * (1.0f + fabsf(vp[k]));
     CHECK_MSG(bad_m == 0, "frame %d: %d matrix elements differ from cameras.json", i, bad_m);
     CHECK_NEAR(offs[2 * i], 0.5f + cam->jitter[0], 1e-6);
     CHECK_NEAR(offs[2 * i + 1], 0.5f - cam->jitter[1], 1e-6);
@@ -178,7 +179,7 @@ static void test_render_export(hush_device dev) {
         const float P[4] = {pp[3 * j], pp[3 * j + 1], pp[3 * j + 2], 1.0f};
         float clip[4];
         for (int r = 0; r < 4; r++)
-          clip[r] = m[0 * 4 + r] * P[0] + m[1 * 4 + r] * P[1] + m[2 * 4 + r] * P[2] + m[3 * 4 + r] * P[3];
+          clip[r] = m[r] * P[0] + m[4 + r] * P[1] + m[8 + r] * P[2] + m[12 + r] * P[3];
         const float u = (clip[0] / clip[3] + 1.0f) * 0.5f, v = (clip[1] / clip[3] + 1.0f) * 0.5f;
         const float px = u * W - o[0], py = v * H - (1.0f - o[1]);
         bad_proj += fabsf(px - (float)x) > 2e-3f || fabsf(py - (float)y) > 2e-3f;

@@ -76,7 +76,8 @@ static void check_pattern(uint32_t k, uint32_t m, uint32_t w, uint32_t h, uint32
         bad_share += traced != m;
       }
     for (uint32_t y = 0; y < h; y++)
-      for (uint32_t x = 0; x < w; x++) count[(size_t)y * w + x] += hush__progressive_traced(&p, x, y, f);
+      for (uint32_t x = 0; x < w; x++)
+        count[(size_t)y * w + x] += hush__progressive_traced(&p, x, y, f);
   }
   int bad_total = 0;
   for (size_t i = 0; i < (size_t)w * h; i++) bad_total += count[i] != m;
@@ -85,7 +86,8 @@ static void check_pattern(uint32_t k, uint32_t m, uint32_t w, uint32_t h, uint32
       for (uint32_t y = 0; y < h; y++)
         for (uint32_t x = 0; x < w; x++) {
           uint32_t c = 0;
-          for (uint32_t f = start; f < start + cycle; f++) c += hush__progressive_traced(&p, x, y, f);
+          for (uint32_t f = start; f < start + cycle; f++)
+            c += hush__progressive_traced(&p, x, y, f);
           bad_window += c != 1;
         }
   }
@@ -224,8 +226,10 @@ static void test_render_holes(void) {
   CHECK(hush__frame_find(ref, "variance") != NULL);
   bad_spp = 0;
   for (uint32_t y = 0; y < p.height; y++)
-    for (uint32_t x = 0; x < p.width; x++)
-      bad_spp += spp[(size_t)y * p.width + x] != (hush__progressive_traced(&prog, x, y, f) ? 4.0f : 0.0f);
+    for (uint32_t x = 0; x < p.width; x++) {
+      const float want = hush__progressive_traced(&prog, x, y, f) ? 4.0f : 0.0f;
+      bad_spp += spp[(size_t)y * p.width + x] != want;
+    }
   CHECK_MSG(bad_spp == 0, "%d spp values wrong at 4 spp", bad_spp);
   hush_frame_release(ref);
   hush_frame_release(part);

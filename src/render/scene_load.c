@@ -482,6 +482,36 @@ static int type_is(const mtl_entry *e, const char *type) {
   return strcmp(mitsuba_type(e), type) == 0;
 }
 
+/* The Mitsuba types the mapping below knows: wrappers (mask, twosided,
+ * bumpmap, whose inner type decides) and BSDFs. */
+static const char *const known_types[] = {
+    "mask",          "twosided",        "bumpmap",        "diffuse",        "roughdiffuse",
+    "plastic",       "roughplastic",    "phong",          "conductor",      "roughconductor",
+    "dielectric",    "roughdielectric", "thindielectric", NULL};
+
+/* The first word of the "# mitsuba: a > b > c" chain that is not in
+ * known_types, copied into bad; 0 when every one is known (or there is no
+ * comment). A type this loader does not know must not silently become
+ * Lambert: the scene would render, but wrong. */
+static int unknown_type(const mtl_entry *e, char *bad, size_t size) {
+  const char *s = e->mitsuba;
+  while (*s) {
+    while (*s == ' ' || *s == '>') s++;
+    size_t n = 0;
+    while (s[n] && s[n] != ' ' && s[n] != '>') n++;
+    if (n == 0) break;
+    int known = 0;
+    for (int i = 0; known_types[i] && !known; i++)
+      known = strlen(known_types[i]) == n && strncmp(known_types[i], s, n) == 0;
+    if (!known) {
+      snprintf(bad, size, "%.*s", (int)n, s);
+      return 1;
+    }
+    s += n;
+  }
+  return 0;
+}
+
 /* The mapping of docs/scenes.md ("Materials"). */
 static void map_material(const mtl_entry *e, int two_sided, hush_material *m) {
   memcpy(m->diffuse, e->kd, sizeof m->diffuse);
@@ -547,6 +577,14 @@ static hush_status load_materials(loader *l, const struct aiScene *ai, const mtl
       }
       continue;
     }
+    char bad[64];
+    if (unknown_type(e, bad, sizeof bad))
+      return hush__fail(l->c.device, HUSH_ERROR_UNSUPPORTED,
+                        "%s: material '%s' (line %d): # mitsuba: type '%s' is not supported "
+                        "(diffuse, roughdiffuse, plastic, roughplastic, phong, conductor, "
+                        "roughconductor, dielectric, roughdielectric, thindielectric; wrappers "
+                        "mask, twosided, bumpmap)",
+                        mtl_name, e->name, e->line, bad);
     map_material(e, s->two_sided, m);
     char what[PATH_MAX_LEN + 256];
     if (e->map_kd[0]) {

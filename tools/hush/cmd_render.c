@@ -101,7 +101,8 @@ static void parse_fraction(const char *cmd, const char *text, render_options *o)
   if (slash) {
     char num[32];
     const size_t len = (size_t)(slash - text);
-    if (len == 0 || len >= sizeof num) cli_usage_error(cmd, "--spp-fraction: '%s' is not A/B", text);
+    if (len == 0 || len >= sizeof num)
+      cli_usage_error(cmd, "--spp-fraction: '%s' is not A/B", text);
     memcpy(num, text, len);
     num[len] = '\0';
     const uint32_t a = cli_parse_uint(cmd, "--spp-fraction", num, 1, 1u << 16);
@@ -234,8 +235,11 @@ static int load_scene(render_run *r) {
   r->have_scene = 1;
   st = hush__scene_commit(r->device, &r->scene);
   if (st != HUSH_OK) return fail(r, st, s);
+  /* a log line, not a warning: real scenes have a few (living-room 190) */
   if (r->scene.skipped_triangles && !r->o->quiet)
-    fprintf(stderr, "hush render: %u degenerate triangles skipped\n", r->scene.skipped_triangles);
+    fprintf(stderr,
+            "hush render: %s: skipped %u triangles (zero area, or NaN or infinite vertices)\n", s,
+            r->scene.skipped_triangles);
   st = hush__lights_init(r->device, &r->lights, &r->scene);
   if (st != HUSH_OK) return fail(r, st, s);
   r->have_lights = 1;
@@ -356,7 +360,7 @@ static int render_frames(render_run *r, int argc, char **argv) {
   if (st != HUSH_OK) return fail(r, st, o->out);
   r->have_seq = 1;
   r->seq.motion = sequence_motion_vectors(&r->scene) ? HUSH_MOTION_VECTORS : HUSH_MOTION_CAMERA;
-  if (!hush__lights_any(&r->lights) && !o->quiet)
+  if (!hush__lights_any(&r->lights))
     fprintf(stderr, "hush render: warning: scene '%s' has no light: the frames render black\n",
             r->scene.name);
 
@@ -422,7 +426,8 @@ static int render_frames(render_run *r, int argc, char **argv) {
       hush_frame_get_layer(frame, "color", &view);
       st = hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
     }
-    if (st == HUSH_OK && o->export_bmfr) st = hush__bmfr_write_frame(r->device, r->bmfr_dir, i, frame);
+    if (st == HUSH_OK && o->export_bmfr)
+      st = hush__bmfr_write_frame(r->device, r->bmfr_dir, i, frame);
     hush_frame_release(frame);
     if (st != HUSH_OK) return fail(r, st, NULL);
     hush_camera *c = &r->seq.cameras[i];
