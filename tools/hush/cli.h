@@ -23,15 +23,6 @@
 #else
 #  define CLI_PRINTF(a, b)
 #  define CLI_NORETURN
-/*
- * Binds every input image of the filter's class to the frame's layer of the
- * same name, and unbinds optional ones the frame lacks; a missing required
- * layer or one with too few channels is an error naming `file`. Returns 0 or
- * CLI_EXIT_RUNTIME (message printed).
- */
-int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hush_frame frame,
-                    const char *file);
-
 #endif
 
 /* A subcommand: argv[0] is the subcommand name, options follow. */

@@ -253,7 +253,7 @@ static int measure(denoise_run *r, hush_frame frame, hush_frame test, const char
     return cli_error(r->cmd, "%s: --ref layer '%s' has %d channels, 'color' has %d", file,
                      r->o->ref, rc, ic);
   const hush_error_stats s =
-      hush__error_stats(ref.data, img.data, (size_t)ref.width * ref.height, rc);
+      hush__error_stats(img.data, ref.data, (size_t)ref.width * ref.height, rc);
   sum->rmse += s.rmse;
   sum->psnr += s.psnr;
   sum->mse += s.mse;
