@@ -302,8 +302,12 @@ static hush_status csv_split(hush_device device, csv_file *csv) {
         p++;
         continue;
       }
-      if (sep == '\r') p++;
-      if (*p == '\n') {
+      /* the terminator may have replaced sep: step over it by what it was */
+      if (sep == '\r') {
+        p++;
+        if (*p == '\n') p++;
+        line++;
+      } else if (sep == '\n') {
         p++;
         line++;
       }
