@@ -6,7 +6,7 @@
  * numbers, bad input (missing references, another frame count or size, an
  * unknown filter or parameter), a filter that fails on one frame (marked
  * failed, the others complete; --strict makes it an error), the render form
- * on builtin:cornell (deterministic), and `hush bench --scene`.
+ * on builtin:cornell (deterministic), report.html, and `hush bench --scene`.
  */
 #include "check.h"
 
@@ -108,6 +108,7 @@ static void test_files(void) {
   CHECK(file_exists(WORK "/r/frames/noisy/frame_0000.exr"));
   CHECK(file_exists(WORK "/r/frames/accumulate/frame_0003.exr"));
   CHECK(file_exists(WORK "/r/frames/reference/frame_0003.exr"));
+  CHECK(file_exists(WORK "/r/report.html"));
 
   /* the summary table goes to stdout without --quiet */
   result r;
@@ -144,6 +145,8 @@ static void test_bad_input(void) {
   expect("--seq " WORK "/s --set other.alpha=1 --out " WORK "/x", 1, "not one of the filters");
   expect("--seq " WORK "/s --set alpha=1 --out " WORK "/x", 2, "FILTER.KEY=VALUE");
   expect("--seq " WORK "/s --frames 9: --out " WORK "/x", 1, "has 4 frames");
+  expect("--seq " WORK "/s --frames 1:3 --show 0 --no-video --out " WORK "/x", 1,
+         "--show 0: frames 1 to 2");
   expect("--out " WORK "/x", 2, "--seq");
   expect("--seq " WORK "/s", 2, "--out");
   expect("--seq " WORK "/s --scene builtin:cornell --out " WORK "/x", 2, "either");

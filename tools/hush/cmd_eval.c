@@ -24,6 +24,7 @@
 
 #include "core/timer.h"
 #include "eval/metrics.h"
+#include "eval/report.h"
 #include "eval/ssim.h"
 #include "io/atomic_file.h"
 #include "io/sequence.h"
@@ -38,6 +39,7 @@
 #define MAX_STAGES 16
 #define MAX_SETS 64
 #define MESSAGE_MAX 1024
+#define MAX_SHOW 16
 
 static const char *const help_text =
     "usage: hush eval --seq NOISY_DIR [--ref REF_DIR] --out REPORT_DIR [options]\n"
@@ -54,7 +56,9 @@ static const char *const help_text =
     "filter and stage: median, 5th, 95th percentile), status.csv (ok or failed,\n"
     "with the error), summary.md (the table of means), eval.json (what was run)\n"
     "and frames/<filter>/frame_NNNN.exr (each output's colour, half float; also\n"
-    "frames/noisy and frames/reference). The summary table goes to stdout.\n"
+    "frames/noisy and frames/reference), then report.html from them: pictures side\n"
+    "by side with insets and error maps, metric plots, the tables, and a video when\n"
+    "ffmpeg is installed. The summary table goes to stdout.\n"
     "\n"
     "A filter that fails on a frame is marked failed in status.csv and the\n"
     "others complete: the exit status is 0 with a warning (1 with --strict).\n"
@@ -73,6 +77,11 @@ static const char *const help_text =
     "                       the camera path's length, else 16)\n"
     "  --threads N          worker threads, 0 = one per core (default 0)\n"
     "  --strict             exit 1 when a filter fails\n"
+    "  --show F1,F2,...     report: the frames shown side by side (default: the\n"
+    "                       first, middle and last)\n"
+    "  --exposure E         report pictures: scale radiance by 2^E (default 0)\n"
+    "  --tonemap T          report pictures: clamp, reinhard or aces (default aces)\n"
+    "  --no-video           report: no side-by-side video (default: with ffmpeg)\n"
     "  --quiet              no progress and no table, only warnings and errors\n"
     "  -h, --help           show this help\n"
     "\n"
@@ -95,6 +104,11 @@ typedef struct eval_options {
   uint32_t ref_spp;
   uint32_t threads;
   int strict, quiet;
+  uint32_t show[MAX_SHOW]; /* report frames */
+  uint32_t show_count;
+  float exposure;
+  hush_tonemap tonemap;
+  int no_video;
 } eval_options;
 
 typedef struct stage_times {
@@ -146,11 +160,25 @@ typedef struct eval_run {
 
 /* ---- options ---------------------------------------------------------------- */
 
+/* --show F1,F2,...: sequence frame numbers. */
+static void parse_show(const char *cmd, const char *text, eval_options *o) {
+  char buf[256];
+  if (strlen(text) >= sizeof buf) cli_usage_error(cmd, "--show: list too long");
+  strcpy(buf, text);
+  o->show_count = 0;
+  for (char *tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
+    if (o->show_count == MAX_SHOW) cli_usage_error(cmd, "--show: more than %d frames", MAX_SHOW);
+    o->show[o->show_count++] = cli_parse_uint(cmd, "--show", tok, 0, 10000000);
+  }
+  if (!o->show_count) cli_usage_error(cmd, "--show: no frames");
+}
+
 static void parse_options(int argc, char **argv, eval_options *o) {
   cli_args a;
   cli_args_init(&a, "eval", argc, argv);
   memset(o, 0, sizeof *o);
   o->ref_spp = 64;
+  o->tonemap = HUSH_TONEMAP_ACES;
   const char *arg, *v;
   while (cli_next(&a, &arg)) {
     if (cli_is_help(arg)) {
@@ -177,6 +205,14 @@ static void parse_options(int argc, char **argv, eval_options *o) {
       o->threads = cli_parse_uint(a.cmd, "--threads", v, 0, 1024);
     } else if (cli_switch(&a, arg, "--strict")) {
       o->strict = 1;
+    } else if (cli_option(&a, arg, "--show", &v)) {
+      parse_show(a.cmd, v, o);
+    } else if (cli_option(&a, arg, "--exposure", &v)) {
+      o->exposure = cli_parse_float(a.cmd, "--exposure", v, -64.0f, 64.0f);
+    } else if (cli_option(&a, arg, "--tonemap", &v)) {
+      o->tonemap = cli_parse_tonemap(a.cmd, "--tonemap", v);
+    } else if (cli_switch(&a, arg, "--no-video")) {
+      o->no_video = 1;
     } else if (cli_switch(&a, arg, "--quiet")) {
       o->quiet = 1;
     } else if (cli_option(&a, arg, "--scene", &v)) {
@@ -741,11 +777,14 @@ static void json_string(FILE *f, const char *s) {
 static void write_json(const eval_run *r, FILE *f) {
   fputs("{\n  \"format\": \"hush-eval/1\",\n  \"seq\": ", f);
   json_string(f, r->seq_dir);
-  fputs(",\n  \"ref\": ", f);
+  /* always a string, for people to read: ref_layer says where it came from */
+  char ref[HUSH_PATH_MAX + 32];
   if (r->have_ref)
-    json_string(f, r->ref_dir);
+    snprintf(ref, sizeof ref, "%s", r->ref_dir);
   else
-    fputs("null", f);
+    snprintf(ref, sizeof ref, "%s (layer ref)", r->seq_dir);
+  fputs(",\n  \"ref\": ", f);
+  json_string(f, ref);
   fprintf(f, ",\n  \"ref_layer\": \"%s\"", r->have_ref ? "color" : "ref");
   fputs(",\n  \"scene\": ", f);
   if (r->o->scene)
@@ -866,10 +905,25 @@ static int write_results(eval_run *r) {
   if (!rc) rc = write_file(r, "status.csv", write_status);
   if (!rc) rc = write_file(r, "summary.md", write_summary);
   if (!rc) rc = write_file(r, "eval.json", write_json);
-  /* The HTML report (src/eval/report.h: hush__report_write(device, out,
-   * &options)) is made from these files, here, once it is part of the
-   * library; docs/eval.md describes the interface. */
   return rc;
+}
+
+/* report.html, made from the files just written (docs/eval.md). */
+static int write_report(eval_run *r) {
+  const eval_options *o = r->o;
+  for (uint32_t k = 0; k < o->show_count; k++)
+    if (o->show[k] < r->first || o->show[k] >= r->last)
+      return cli_error(r->cmd, "--show %u: frames %u to %u were evaluated", o->show[k], r->first,
+                       r->last - 1);
+  hush_report_options opt;
+  memset(&opt, 0, sizeof opt);
+  opt.frames = o->show_count ? o->show : NULL;
+  opt.frame_count = o->show_count;
+  opt.exposure = o->exposure;
+  opt.tonemap = o->tonemap;
+  opt.video = !o->no_video;
+  const hush_status st = hush__report_write(r->device, o->out, &opt);
+  return st == HUSH_OK ? 0 : cli_device_error(r->cmd, r->device, st, "report");
 }
 
 static int run(eval_run *r) {
@@ -889,10 +943,12 @@ static int run(eval_run *r) {
   if (rc) return rc;
   if (r->tty && !r->o->quiet) fputc('\n', stderr);
   rc = write_results(r);
+  if (!rc) rc = write_report(r);
   if (rc) return rc;
   if (!r->o->quiet) {
     print_summary(r);
-    fprintf(stderr, "hush eval: results in %s (summary.md, metrics.csv, timings.csv)\n", r->o->out);
+    fprintf(stderr, "hush eval: report in %s/report.html (and summary.md, metrics.csv, timings.csv)\n",
+            r->o->out);
   }
   int failed = 0;
   for (uint32_t k = 0; k < r->filter_count; k++) {
