@@ -959,6 +959,28 @@ static void html_failed(report *r) {
                          "frames it finished.</div>\n");
 }
 
+/* Text with Markdown `code` spans as <code>, the rest escaped. */
+static void markdown_inline(hush_strbuf *h, const char *text) {
+  int in_code = 0;
+  for (const char *p = text; *p;) {
+    const char *tick = strchr(p, '`');
+    const size_t n = tick ? (size_t)(tick - p) : strlen(p);
+    char part[1024];
+    snprintf(part, sizeof part, "%.*s", (int)(n < sizeof part ? n : sizeof part - 1), p);
+    hush__strbuf_escape(h, part);
+    if (!tick) break;
+    /* an unpaired backtick stays a backtick */
+    if (!in_code && !strchr(tick + 1, '`')) {
+      hush__strbuf_append(h, "`");
+    } else {
+      hush__strbuf_append(h, in_code ? "</code>" : "<code>");
+      in_code = !in_code;
+    }
+    p = tick + 1;
+  }
+  if (in_code) hush__strbuf_append(h, "</code>");
+}
+
 /* A Markdown pipe-table line ("| a | b |") split into cells. */
 static void markdown_row(hush_strbuf *h, const char *line, size_t len, const char *tag) {
   hush__strbuf_append(h, "<tr>");
@@ -974,7 +996,7 @@ static void markdown_row(hush_strbuf *h, const char *line, size_t len, const cha
     char cell[512];
     snprintf(cell, sizeof cell, "%.*s", (int)(b - a), line + a);
     hush__strbuf_printf(h, "<%s>", tag);
-    hush__strbuf_escape(h, cell);
+    markdown_inline(h, cell);
     hush__strbuf_printf(h, "</%s>", tag);
     i = j + 1;
   }
@@ -985,7 +1007,7 @@ static void markdown_row(hush_strbuf *h, const char *line, size_t len, const cha
  * lines paragraphs. That is all summary.md uses. */
 static void html_summary(report *r) {
   hush_strbuf *h = &r->html;
-  hush__strbuf_append(h, "<h2>Summary</h2>\n");
+  hush__strbuf_append(h, "<h2 id=\"summary\">Summary</h2>\n");
   if (!r->summary) {
     hush__strbuf_append(h, "<p class=\"note\">summary.md is missing.</p>\n");
     return;
@@ -1017,7 +1039,7 @@ static void html_summary(report *r) {
       const size_t skip = heading ? hashes + 1 : 0;
       snprintf(text, sizeof text, "%.*s", (int)(l - skip), line + skip);
       hush__strbuf_append(h, heading ? "<h3>" : "<p>");
-      hush__strbuf_escape(h, text);
+      markdown_inline(h, text);
       hush__strbuf_append(h, heading ? "</h3>\n" : "</p>\n");
       header_done = 0;
     }
@@ -1213,7 +1235,7 @@ static hush_status html_plot(report *r, int metric, const char *title, const cha
 }
 
 static hush_status html_plots(report *r) {
-  hush__strbuf_append(&r->html, "<h2>Per frame</h2>\n<div class=\"plots\">\n");
+  hush__strbuf_append(&r->html, "<h2 id=\"plots\">Per frame</h2>\n<div class=\"plots\">\n");
   hush_status status = html_plot(r, M_RMSE, "RMSE against the reference", "RMSE", 1);
   if (status == HUSH_OK) status = html_plot(r, M_SSIM, "SSIM against the reference", "SSIM", 0);
   if (status == HUSH_OK)
@@ -1226,12 +1248,12 @@ static hush_status html_plots(report *r) {
 
 static void html_timings(report *r) {
   hush_strbuf *h = &r->html;
-  hush__strbuf_append(h, "<h2>Timings</h2>\n");
+  hush__strbuf_append(h, "<h2 id=\"timings\">Timings</h2>\n");
   if (!r->have_timings) {
     hush__strbuf_append(h, "<p class=\"note\">timings.csv is missing.</p>\n");
     return;
   }
-  hush__strbuf_append(h, "<table>\n<tr><th>filter</th><th>stage</th><th>median ms</th>"
+  hush__strbuf_append(h, "<table>\n<tr><th>filter</th><th style=\"text-align:left\">stage</th><th>median ms</th>"
                          "<th>5th percentile ms</th><th>95th percentile ms</th></tr>\n");
   for (uint32_t i = 1; i < r->timings.row_count; i++) {
     char *const *f = r->timings.rows[i].field;
@@ -1374,7 +1396,7 @@ static int encode_video(report *r, const char *ffmpeg, const char *video_dir, ch
 
 static hush_status html_video(report *r) {
   hush_strbuf *h = &r->html;
-  hush__strbuf_append(h, "<h2>Video</h2>\n");
+  hush__strbuf_append(h, "<h2 id=\"video\">Video</h2>\n");
   char ffmpeg[HUSH_PATH_MAX];
   if (!r->opt.video) {
     hush__strbuf_append(h, "<p class=\"note\">video: not requested.</p>\n");
