@@ -1,7 +1,8 @@
 /*
  * test_metrics.c — error metrics: identical images give RMSE 0 and infinite
  * PSNR; a known constant offset gives its exact RMSE; Gaussian noise of
- * standard deviation sigma gives RMSE ~ sigma and PSNR ~ -20 log10(sigma).
+ * standard deviation sigma gives RMSE ~ sigma and PSNR ~ -20 log10(sigma);
+ * relative MSE divides by the reference; PSNR compares clamped values.
  */
 #include "check.h"
 
@@ -34,5 +35,19 @@ int main(void) {
   CHECK_NEAR(s.rmse, sigma, sigma * 0.01);
   CHECK_NEAR(s.psnr, -20.0 * log10(sigma), 0.1);
   CHECK(hush__error_stats(a, b, 0, 3).rmse == 0.0);
+
+  /* relative MSE divides by the REFERENCE (the second argument): x = 0.75,
+   * r = 0.5 gives 0.0625 / (0.25 + 0.01); swapped, 0.0625 / (0.5625 + 0.01). */
+  for (int i = 0; i < N * 3; i++) {
+    a[i] = 0.75f;
+    b[i] = 0.5f;
+  }
+  CHECK_NEAR(hush__error_stats(a, b, N, 3).rel_mse, 0.0625 / 0.26, 1e-9);
+  CHECK_NEAR(hush__error_stats(b, a, N, 3).rel_mse, 0.0625 / 0.5725, 1e-9);
+  /* PSNR clamps to [0, 1]: values above 1 compare as 1 */
+  for (int i = 0; i < N * 3; i++) a[i] = 3.0f + (float)(i % 2);
+  for (int i = 0; i < N * 3; i++) b[i] = 1.0f;
+  CHECK(isinf(hush__error_stats(a, b, N, 3).psnr));
+  CHECK(hush__error_stats(a, b, N, 3).rmse > 2.0);
   return check_summary();
 }

@@ -13,6 +13,7 @@
 #include "core/image.h"
 #include "io/atomic_file.h"
 #include "io/frame.h"
+#include "io/png.h"
 #include "io/tonemap.h"
 #include "io/view_rows.h"
 
@@ -113,6 +114,17 @@ static hush_status write_png_file(hush_device device, const char *path, const pn
     return hush__fail(device, HUSH_ERROR_IO, "cannot write '%s': %s", path, message.text);
   }
   return hush__atomic_commit(device, f, tmp, path);
+}
+
+hush_status hush__png_write8(hush_device device, const char *path, const uint8_t *pixels,
+                             uint32_t width, uint32_t height, int channels) {
+  if (width == 0 || height == 0 || width > PNG_MAX_SIZE || height > PNG_MAX_SIZE ||
+      (channels != 1 && channels != 3))
+    return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "cannot write '%s': a %ux%u picture of %d channels", path, width, height,
+                      channels);
+  const png_job job = {NULL, pixels, width, height, channels};
+  return write_png_file(device, path, &job);
 }
 
 hush_status hush_image_write_png(hush_device device, const hush_image_view *view, const char *path,

@@ -1,13 +1,15 @@
 /*
- * cmd_bench.c — `hush bench`: filter timings only, on synthetic frames held
- * in memory (no file I/O in the loop). A few distinct frames of the moving
- * synthetic scene are made once and played forwards and backwards, so
+ * cmd_bench.c — `hush bench`: filter timings only, on synthetic frames (or,
+ * with --scene, frames of the path tracer) held in memory (no file I/O in
+ * the loop). A few distinct frames of the moving synthetic scene (or of the
+ * scene's camera move) are made once and played forwards and backwards, so
  * consecutive frames are always neighbours and history behaves as in a real
  * sequence. Warm-up frames are excluded; per stage and in total it reports
  * the median and the 5th and 95th percentiles, with the thread count and the
  * CPU model, as a table on stdout and optionally as CSV.
  */
 #include "cli.h"
+#include "scene_frames.h"
 
 #include "core/timer.h"
 #include "eval/synthetic.h"
@@ -24,8 +26,10 @@ static const char *const help_text =
     "usage: hush bench [options]\n"
     "\n"
     "Times filters on synthetic frames already in memory (the scene of\n"
-    "`hush synth`: orbiting camera, moving object). Frames are made once, then\n"
-    "played forwards and backwards; the first --warmup frames are not timed.\n"
+    "`hush synth`: orbiting camera, moving object), or with --scene on frames\n"
+    "of a scene rendered at 1 spp by the path tracer (as `hush render`). Frames\n"
+    "are made once, then played forwards and backwards; the first --warmup\n"
+    "frames are not timed.\n"
     "Prints, per filter, the median and 5th/95th percentile of each stage and\n"
     "of the whole execute, in milliseconds per frame.\n"
     "\n"
@@ -37,6 +41,9 @@ static const char *const help_text =
     "  --distinct N        distinct frames made and cycled (default 8)\n"
     "  --threads N         worker threads, 0 = one per core (default 0)\n"
     "  --set KEY=VALUE     a parameter for every filter that has it; repeatable\n"
+    "  --scene SCENE       render the frames: PATH/scene.json or builtin:NAME\n"
+    "                      (default: synthetic frames)\n"
+    "  --path MOVE         with --scene: the camera move, as `hush render --path`\n"
     "  --csv FILE          also write the results as CSV\n"
     "  -h, --help          show this help\n";
 
@@ -46,6 +53,7 @@ typedef struct bench_options {
   const char *sets[64];
   int set_count;
   const char *csv;
+  const char *scene, *path; /* --scene: rendered frames */
 } bench_options;
 
 typedef struct stage_times {
@@ -92,12 +100,17 @@ static void parse_options(int argc, char **argv, bench_options *o) {
       o->sets[o->set_count++] = v;
     } else if (cli_option(&a, arg, "--csv", &v)) {
       o->csv = v;
+    } else if (cli_option(&a, arg, "--scene", &v)) {
+      o->scene = v;
+    } else if (cli_option(&a, arg, "--path", &v)) {
+      o->path = v;
     } else if (cli_is_positional(&a, arg)) {
       cli_usage_error(a.cmd, "unexpected argument '%s' (see hush bench --help)", arg);
     } else {
       cli_unknown_option(&a, arg);
     }
   }
+  if (o->path && !o->scene) cli_usage_error(a.cmd, "--path goes with --scene");
 }
 
 /* Frame index played at step k: 0 1 .. d-1 d-2 .. 1 0 1 .. (a triangle wave). */
@@ -250,8 +263,24 @@ static void free_result(bench_result *r) {
   memset(r, 0, sizeof *r);
 }
 
+/* The distinct frames rendered by the path tracer at 1 spp, frames 0 ..
+ * distinct-1 of the camera move. */
+static int render_frames(const bench_options *o, hush_device device, hush_frame *frames,
+                         hush_camera *cams) {
+  scene_frames sf;
+  int rc = scene_frames_open(&sf, "bench", device, o->scene, o->path, o->width, o->height,
+                             o->distinct);
+  hush_render_params params;
+  hush__render_defaults(&params);
+  for (uint32_t i = 0; !rc && i < o->distinct; i++)
+    rc = scene_frames_render(&sf, i, &params, (int)o->threads, NULL, &frames[i], &cams[i]);
+  scene_frames_close(&sf);
+  return rc;
+}
+
 static int make_frames(const bench_options *o, hush_device device, hush_frame *frames,
                        hush_camera *cams) {
+  if (o->scene) return render_frames(o, device, frames, cams);
   hush_synth_params p;
   hush__synth_defaults(&p);
   p.width = o->width;

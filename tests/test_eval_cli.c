@@ -1,0 +1,246 @@
+/*
+ * test_eval_cli.c — `hush eval` end to end on tiny sequences: the files of
+ * docs/eval.md (headers, one row per filter and frame, the baselines, a
+ * summary table in which accumulation beats the noisy input), --frames,
+ * references from a directory or from the "ref" layer giving the same
+ * numbers, bad input (missing references, another frame count or size, an
+ * unknown filter or parameter), a filter that fails on one frame (marked
+ * failed, the others complete; --strict makes it an error), the render form
+ * on builtin:cornell (deterministic), report.html, and `hush bench --scene`.
+ */
+#include "check.h"
+
+#include "hush.h"
+
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/wait.h>
+
+#define WORK HUSH_BINARY_DIR "/test_eval_cli"
+
+typedef struct result {
+  int status;
+  char out[16384];
+  char err[16384];
+} result;
+
+static char text[1 << 16];
+
+static const char *read_file(const char *path) {
+  text[0] = '\0';
+  FILE *f = fopen(path, "rb");
+  if (!f) return text;
+  const size_t n = fread(text, 1, sizeof text - 1, f);
+  text[n] = '\0';
+  fclose(f);
+  return text;
+}
+
+static void run(result *r, const char *cmd, const char *args) {
+  char line[4096];
+  snprintf(line, sizeof line, "'%s' %s %s > '%s/stdout.txt' 2> '%s/stderr.txt'", HUSH_CLI, cmd,
+           args, WORK, WORK);
+  const int s = system(line);
+  r->status = (s != -1 && WIFEXITED(s)) ? WEXITSTATUS(s) : -1;
+  snprintf(r->out, sizeof r->out, "%s", read_file(WORK "/stdout.txt"));
+  snprintf(r->err, sizeof r->err, "%s", read_file(WORK "/stderr.txt"));
+}
+
+static void expect(const char *args, int status, const char *needle) {
+  result r;
+  run(&r, "eval", args);
+  CHECK_MSG(r.status == status, "hush eval %s: exit %d, expected %d (%s)", args, r.status, status,
+            r.err);
+  if (needle)
+    CHECK_MSG(strstr(r.err, needle) != NULL, "hush eval %s: no '%s' in '%s'", args, needle, r.err);
+}
+
+static int file_exists(const char *path) {
+  FILE *f = fopen(path, "rb");
+  if (f) fclose(f);
+  return f != NULL;
+}
+
+/* Rows of metrics.csv for one filter: count and mean RMSE (column 3). */
+static int metric_rows(const char *dir, const char *filter, double *mean_rmse) {
+  char path[512], prefix[64];
+  snprintf(path, sizeof path, "%s/metrics.csv", dir);
+  snprintf(prefix, sizeof prefix, "%s,", filter);
+  const char *p = read_file(path);
+  int n = 0;
+  double sum = 0.0;
+  for (const char *line = p; line && *line; line = strchr(line, '\n'), line = line ? line + 1 : NULL) {
+    if (strncmp(line, prefix, strlen(prefix)) != 0) continue;
+    const char *c = strchr(line + strlen(prefix), ',');
+    sum += c ? atof(c + 1) : 0.0;
+    n++;
+  }
+  *mean_rmse = n ? sum / n : 0.0;
+  return n;
+}
+
+static int starts_with(const char *s, const char *prefix) {
+  return strncmp(s, prefix, strlen(prefix)) == 0;
+}
+
+static void test_files(void) {
+  expect("--seq " WORK "/s --filters accumulate --out " WORK "/r --quiet", 0, NULL);
+  CHECK(starts_with(read_file(WORK "/r/metrics.csv"),
+                    "filter,frame,rmse,rel_mse,psnr,ssim,temporal_error,ref_temporal_error,ms\n"));
+  CHECK(strstr(text, "\nnoisy,0,") && strstr(text, "\naccumulate,3,"));
+  /* frame 0 has no previous frame: empty temporal errors; noisy has no time */
+  CHECK(strstr(text, "\nnoisy,1,") && !strstr(text, "\nnoisy,4,"));
+  double noisy, acc;
+  CHECK(metric_rows(WORK "/r", "noisy", &noisy) == 4);
+  CHECK(metric_rows(WORK "/r", "accumulate", &acc) == 4);
+  CHECK_MSG(acc < noisy, "mean RMSE: accumulate %g, noisy %g", acc, noisy);
+  CHECK(starts_with(read_file(WORK "/r/timings.csv"), "filter,stage,median_ms,p5_ms,p95_ms\n"));
+  CHECK(strstr(text, "\naccumulate,total,") != NULL);
+  CHECK(strcmp(read_file(WORK "/r/status.csv"),
+               "filter,status,message\nnoisy,ok,\"\"\naccumulate,ok,\"\"\n") == 0);
+  read_file(WORK "/r/summary.md");
+  CHECK(strstr(text, "| filter | RMSE |") && strstr(text, "| noisy |") &&
+        strstr(text, "| accumulate |") && strstr(text, "| reference |"));
+  read_file(WORK "/r/eval.json");
+  CHECK(strstr(text, "\"frames\": [0, 4]") && strstr(text, "\"filters\": [\"noisy\", \"accumulate\"]"));
+  CHECK(strstr(text, "\"width\": 32") && strstr(text, "\"command\": [\"hush\", \"eval\""));
+  CHECK(file_exists(WORK "/r/frames/noisy/frame_0000.exr"));
+  CHECK(file_exists(WORK "/r/frames/accumulate/frame_0003.exr"));
+  CHECK(file_exists(WORK "/r/frames/reference/frame_0003.exr"));
+  CHECK(file_exists(WORK "/r/report.html"));
+
+  /* the summary table goes to stdout without --quiet */
+  result r;
+  run(&r, "eval", "--seq " WORK "/s --filters accumulate --frames 1:3 --out " WORK "/r2");
+  CHECK(r.status == 0 && strstr(r.out, "| accumulate |") && strstr(r.err, "frame 2/2"));
+  CHECK(metric_rows(WORK "/r2", "accumulate", &acc) == 2);
+  read_file(WORK "/r2/metrics.csv");
+  CHECK(strstr(text, "\naccumulate,1,") && strstr(text, "\naccumulate,2,"));
+  CHECK(strstr(read_file(WORK "/r2/eval.json"), "\"frames\": [1, 3]") != NULL);
+}
+
+/* A reference directory gives the same numbers as the "ref" layer. */
+static void test_ref_dir(void) {
+  expect("--seq " WORK "/s --ref " WORK "/clean --filters accumulate --out " WORK "/rd --quiet", 0,
+         NULL);
+  char a[8192];
+  snprintf(a, sizeof a, "%s", read_file(WORK "/r/metrics.csv"));
+  read_file(WORK "/rd/metrics.csv");
+  /* compare the noisy rows: no timings in them */
+  const char *na = strstr(a, "\nnoisy,"), *nb = strstr(text, "\nnoisy,");
+  const char *ea = strstr(a, "\naccumulate,"), *eb = strstr(text, "\naccumulate,");
+  CHECK(na && nb && ea && eb && ea - na == eb - nb && memcmp(na, nb, (size_t)(ea - na)) == 0);
+  CHECK(strstr(read_file(WORK "/rd/eval.json"), "\"ref_layer\": \"color\"") != NULL);
+}
+
+static void test_bad_input(void) {
+  expect("--seq " WORK "/s --ref " WORK "/nope --out " WORK "/x", 1, "does not exist");
+  expect("--seq " WORK "/nope --out " WORK "/x", 1, "does not exist");
+  expect("--seq " WORK "/s --ref " WORK "/short --out " WORK "/x", 1, "has 3 frames");
+  expect("--seq " WORK "/s --ref " WORK "/small --out " WORK "/x", 1, "is 16x12");
+  expect("--seq " WORK "/s --filters accumulate,nosuch --out " WORK "/x", 1,
+         "unknown filter 'nosuch'");
+  expect("--seq " WORK "/s --set accumulate.nosuch=1 --out " WORK "/x", 1, "nosuch");
+  expect("--seq " WORK "/s --set other.alpha=1 --out " WORK "/x", 1, "not one of the filters");
+  expect("--seq " WORK "/s --set alpha=1 --out " WORK "/x", 2, "FILTER.KEY=VALUE");
+  expect("--seq " WORK "/s --frames 9: --out " WORK "/x", 1, "has 4 frames");
+  expect("--seq " WORK "/s --frames 1:3 --show 0 --no-video --out " WORK "/x", 1,
+         "--show 0: frames 1 to 2");
+  expect("--out " WORK "/x", 2, "--seq");
+  expect("--seq " WORK "/s", 2, "--out");
+  expect("--seq " WORK "/s --scene builtin:cornell --out " WORK "/x", 2, "either");
+  /* rendered frames have no "ref" layer: the references must be named */
+  expect("--seq " WORK "/rr/seq --out " WORK "/x", 1, "no 'ref' layer");
+}
+
+/* Frame 2 of a copy of the sequence loses the layers accumulate needs. */
+static void make_broken(hush_device dev) {
+  REQUIRE(system("rm -rf '" WORK "/broken' && cp -r '" WORK "/s' '" WORK "/broken'") == 0);
+  hush_frame in = NULL;
+  REQUIRE(hush_frame_read_exr(dev, WORK "/broken/frame_0002.exr", &in) == HUSH_OK);
+  hush_frame out = hush_frame_new(dev, hush_frame_width(in), hush_frame_height(in));
+  REQUIRE(out);
+  const char *keep[] = {"color", "ref"};
+  for (int i = 0; i < 2; i++) {
+    hush_image_view src, dst;
+    REQUIRE(hush_frame_get_layer(in, keep[i], &src) == HUSH_OK);
+    REQUIRE(hush_frame_add_layer(out, keep[i], 3, &dst) == HUSH_OK);
+    memcpy(dst.data, src.data, (size_t)src.width * src.height * 3 * sizeof(float));
+  }
+  REQUIRE(hush_frame_write_exr(out, WORK "/broken/frame_0002.exr", HUSH_EXR_FLOAT) == HUSH_OK);
+  hush_frame_release(out);
+  hush_frame_release(in);
+}
+
+static void test_failing_filter(hush_device dev) {
+  make_broken(dev);
+  result r;
+  run(&r, "eval", "--seq " WORK "/broken --filters accumulate --out " WORK "/rb --quiet");
+  CHECK_MSG(r.status == 0, "exit %d: %s", r.status, r.err);
+  CHECK(strstr(r.err, "warning: filter 'accumulate' failed at frame 2") != NULL);
+  read_file(WORK "/rb/status.csv");
+  CHECK(strstr(text, "noisy,ok,") && strstr(text, "accumulate,failed,\"frame_0002.exr has no"));
+  double m;
+  CHECK(metric_rows(WORK "/rb", "noisy", &m) == 4);
+  CHECK(metric_rows(WORK "/rb", "accumulate", &m) == 2);
+  CHECK(strstr(read_file(WORK "/rb/summary.md"), "accumulate (failed)") != NULL);
+  expect("--seq " WORK "/broken --filters accumulate --strict --out " WORK "/rb --quiet", 1,
+         "failed at frame 2");
+}
+
+static void test_render_form(void) {
+  const char *args = "--scene builtin:cornell --size 48x32 --frames 3 --ref-spp 8 "
+                     "--filters accumulate --quiet --out ";
+  char line[1024];
+  snprintf(line, sizeof line, "%s%s", args, WORK "/rr");
+  expect(line, 0, NULL);
+  double noisy, acc;
+  CHECK(metric_rows(WORK "/rr", "noisy", &noisy) == 3);
+  CHECK(metric_rows(WORK "/rr", "accumulate", &acc) == 3);
+  CHECK(file_exists(WORK "/rr/seq/cameras.json") && file_exists(WORK "/rr/ref/frame_0002.exr"));
+  CHECK(strstr(read_file(WORK "/rr/eval.json"), "\"scene\": \"builtin:cornell\"") != NULL);
+  /* deterministic: a second run gives the same metrics (times aside) */
+  snprintf(line, sizeof line, "%s%s --threads 1", args, WORK "/rr2");
+  expect(line, 0, NULL);
+  char a[8192];
+  snprintf(a, sizeof a, "%s", read_file(WORK "/rr/metrics.csv"));
+  read_file(WORK "/rr2/metrics.csv");
+  const char *ea = strstr(a, "\naccumulate,"), *eb = strstr(text, "\naccumulate,");
+  CHECK(ea && eb && ea - a == eb - text && memcmp(a, text, (size_t)(ea - a)) == 0);
+}
+
+static void test_bench_scene(void) {
+  result r;
+  run(&r, "bench", "--scene builtin:cornell --size 32x24 --frames 2 --warmup 1 --distinct 2 "
+                   "--filters accumulate --threads 1");
+  CHECK_MSG(r.status == 0, "exit %d: %s", r.status, r.err);
+  CHECK(strstr(r.out, "total") != NULL);
+  run(&r, "bench", "--path orbit");
+  CHECK(r.status == 2 && strstr(r.err, "--scene"));
+}
+
+int main(void) {
+  REQUIRE(system("rm -rf '" WORK "' && mkdir -p '" WORK "'") == 0);
+  const char *synth[] = {
+      "--out " WORK "/s --size 32x24 --frames 4 --quiet",
+      "--out " WORK "/clean --size 32x24 --frames 4 --noise 0 --quiet",
+      "--out " WORK "/short --size 32x24 --frames 3 --quiet",
+      "--out " WORK "/small --size 16x12 --frames 4 --quiet",
+  };
+  for (int i = 0; i < 4; i++) {
+    result r;
+    run(&r, "synth", synth[i]);
+    REQUIRE(r.status == 0);
+  }
+  hush_device dev = hush_device_new(NULL);
+  REQUIRE(dev);
+  test_files();
+  test_ref_dir();
+  test_render_form();
+  test_bad_input();
+  test_failing_filter(dev);
+  test_bench_scene();
+  hush_device_release(dev);
+  return check_summary();
+}
