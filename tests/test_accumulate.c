@@ -1365,6 +1365,205 @@ static void test_module_accum(hush_device dev) {
   gpair_free(&g);
 }
 
+/* A uniform float in [0, 1) from a running counter. */
+static float urand(uint32_t *counter) { return hush_rng_float(11, 0, (*counter)++); }
+
+/* Bits of a float, to compare results exactly (and -0 with 0 apart). */
+static uint32_t fbits(float f) {
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  return u;
+}
+
+/* hush__floorf_vec (the vectorisable floorf of the temporal module) gives
+ * floorf's bits, specials included. */
+static void test_module_floor(void) {
+  const float special[] = {0.0f, -0.0f, 0.5f, -0.5f, 1.0f, -1.0f, 0.999999f, -0.999999f,
+                           8388607.5f, -8388607.5f, 8388608.0f, -8388609.0f, 1e30f, -1e30f,
+                           HUGE_VALF, -HUGE_VALF, NAN, 1e-40f, -1e-40f, 4194304.5f};
+  int ok = 1;
+  for (size_t k = 0; k < sizeof special / sizeof special[0]; k++)
+    ok &= fbits(hush__floorf_vec(special[k])) == fbits(floorf(special[k]));
+  uint32_t rng = 0;
+  for (int k = 0; k < 100000; k++) {
+    const float x = (urand(&rng) - 0.5f) * (k % 2 ? 100.0f : 70000.0f);
+    ok &= fbits(hush__floorf_vec(x)) == fbits(floorf(x));
+  }
+  CHECK(ok);
+}
+
+/* The row-wise (vectorised, gathered block by block) paths of the module
+ * against per-pixel references through hush__reproject_taps, bit for bit,
+ * on a plan with every footprint kind, border footprints and no-history
+ * pixels; and the plan itself against thread counts and its stored
+ * weights. Also for images 1 pixel wide or high (plans without blocks). */
+static void test_module_fast_paths(hush_device dev, int W, int H) {
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 0.0f, 0.0f);
+  uint32_t rng = 0;
+  for (size_t i = 0; i < n; i++) {
+    const float r = urand(&rng);
+    g.cz[i] = 5.0f + 0.02f * (float)(i % (size_t)W);
+    g.pz[i] = g.cz[i] * (r < 0.1f ? 1.3f : r < 0.2f ? 1.12f : 1.0f);
+    if (urand(&rng) < 0.03f) g.cz[i] = g.pz[i] = 0.0f; /* background */
+    if (urand(&rng) < 0.04f) g.pid[i] = 2.0f;
+    float mx = 3.0f * (urand(&rng) - 0.5f), my = 3.0f * (urand(&rng) - 0.5f);
+    const float q = urand(&rng);
+    if (q < 0.05f) mx = floorf(mx); /* on a tap centre: tiny weights */
+    else if (q < 0.07f) mx = -80.0f; /* off-screen */
+    else if (q < 0.5f) mx = my = 0.3f; /* runs of consecutive footprints */
+    g.mot[0][i] = mx;
+    g.mot[1][i] = my;
+  }
+  hush_reproject_plan plan, plan1;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__reproject_plan_init(dev, &plan1, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  {
+    /* the same plan from one thread (gpair_build uses two) */
+    hush_reproject_input in;
+    memset(&in, 0, sizeof in);
+    in.cur.depth = g.cz;
+    in.cur.id = g.cid;
+    hush_gbuffer prev;
+    memset(&prev, 0, sizeof prev);
+    prev.depth = g.pz;
+    prev.id = g.pid;
+    for (int k = 0; k < 3; k++) {
+      in.cur.normal[k] = g.cn[k];
+      prev.normal[k] = g.pn[k];
+    }
+    in.motion[0] = g.mot[0];
+    in.motion[1] = g.mot[1];
+    hush_frame_info info;
+    hush_frame_info_init(&info);
+    info.motion = HUSH_MOTION_VECTORS;
+    REQUIRE(hush__reproject_build(dev, &plan1, &in, &prev, &info, &p, 1) == HUSH_OK);
+  }
+  int same = memcmp(plan.origin, plan1.origin, n * sizeof *plan.origin) == 0 &&
+             memcmp(plan.mask, plan1.mask, n * sizeof *plan.mask) == 0 &&
+             memcmp(plan.kind, plan1.kind, n) == 0 &&
+             memcmp(plan.fx, plan1.fx, n * sizeof(float)) == 0 &&
+             memcmp(plan.fy, plan1.fy, n * sizeof(float)) == 0;
+  for (int t = 0; t < 4; t++) same &= memcmp(plan.w[t], plan1.w[t], n * sizeof(float)) == 0;
+  CHECK(same);
+  size_t count[3] = {0, 0, 0};
+  int weights_ok = 1;
+  for (size_t i = 0; i < n; i++) {
+    count[plan.kind[i]]++;
+    float w[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+    if (plan.kind[i] == HUSH_FOOTPRINT_BILINEAR)
+      hush__reproject_renormalised(plan.mask[i], plan.fx[i], plan.fy[i], w);
+    for (int t = 0; t < 4; t++) weights_ok &= fbits(plan.w[t][i]) == fbits(w[t]);
+  }
+  CHECK(weights_ok);
+  if (W > 20 && H > 20)
+    CHECK(count[HUSH_FOOTPRINT_NONE] > 0 && count[HUSH_FOOTPRINT_BILINEAR] > 0 &&
+          count[HUSH_FOOTPRINT_3X3] > 0);
+
+  float *v[4], *o[4], *smp[3], *age = malloc(n * sizeof(float));
+  REQUIRE(age);
+  for (int k = 0; k < 4; k++) {
+    REQUIRE((v[k] = malloc(n * sizeof(float))) && (o[k] = malloc(n * sizeof(float))));
+    for (size_t i = 0; i < n; i++) v[k][i] = 10.0f * urand(&rng) - 3.0f;
+  }
+  for (int k = 0; k < 3; k++) REQUIRE((smp[k] = malloc(n * sizeof(float))));
+  for (size_t i = 0; i < n; i++) age[i] = (float)(i % 7) * 1.5f;
+
+  /* gather */
+  hush__reproject_gather(&plan, (const float *const *)v, 2, o, -5.0f, 2);
+  int gather_ok = 1;
+  for (size_t i = 0; i < n; i++) {
+    int32_t idx[9];
+    float w[9];
+    const int nt = hush__reproject_taps(&plan, i, idx, w);
+    for (int c = 0; c < 2; c++) {
+      const float want = nt ? hush__reproject_apply(v[c], idx, w, nt) : -5.0f;
+      gather_ok &= fbits(o[c][i]) == fbits(want);
+    }
+  }
+  CHECK(gather_ok);
+
+  /* temporal_blend */
+  for (size_t i = 0; i < n; i++) smp[0][i] = urand(&rng);
+  hush__temporal_blend(&plan, (const float *const *)v, (const float *const *)smp, 1, age, 0.1f,
+                       o, 2);
+  int tblend_ok = 1;
+  for (size_t i = 0; i < n; i++) {
+    const float inv_age = age[i] > 1.0f ? 1.0f / age[i] : 1.0f;
+    const float a = 0.1f > inv_age ? 0.1f : inv_age;
+    int32_t idx[9];
+    float w[9];
+    const int nt = hush__reproject_taps(&plan, i, idx, w);
+    const float want =
+        nt ? (1.0f - a) * hush__reproject_apply(v[0], idx, w, nt) + a * smp[0][i] : smp[0][i];
+    tblend_ok &= fbits(o[0][i]) == fbits(want);
+  }
+  CHECK(tblend_ok);
+
+  /* accumulation: three frames against the rule of accumulation.h, per
+   * pixel, from the history of the previous frame */
+  hush_accum acc;
+  REQUIRE(hush__accum_init(dev, &acc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  const hush_accum_params ap = {0.05f, 0.2f, 6};
+  float *var = malloc(n * sizeof(float));
+  REQUIRE(var);
+  int accum_ok = 1;
+  for (int f = 0; f < 4; f++) {
+    for (int c = 0; c < 3; c++)
+      for (size_t i = 0; i < n; i++) smp[c][i] = (float)(c + 1) * urand(&rng);
+    const int had = acc.has_history;
+    const int src = acc.latest;
+    hush__accum_blend(&acc, &plan, (const float *const *)smp, &ap, var, f % 2 ? 1 : 2);
+    const hush_planar *col = hush__accum_color(&acc);
+    const hush_planar *mom = hush__accum_moments(&acc);
+    const float *ages = hush__accum_age(&acc)->plane[0];
+    for (size_t i = 0; i < n; i++) {
+      int32_t idx[9];
+      float w[9];
+      const int nt = had ? hush__reproject_taps(&plan, i, idx, w) : 0;
+      const float l = hush_luminance(smp[0][i], smp[1][i], smp[2][i]);
+      float c_want[3], m1 = l, m2 = l * l, age_want = 1.0f;
+      for (int c = 0; c < 3; c++) c_want[c] = smp[c][i];
+      if (nt) {
+        float a_ = floorf(hush__reproject_apply(acc.age[src].plane[0], idx, w, nt) + 0.5f) + 1.0f;
+        if (a_ > 6.0f) a_ = 6.0f;
+        const float inv_age = 1.0f / a_;
+        const float a = 0.05f > inv_age ? 0.05f : inv_age;
+        const float am = 0.2f > inv_age ? 0.2f : inv_age;
+        for (int c = 0; c < 3; c++)
+          c_want[c] = (1.0f - a) * hush__reproject_apply(acc.color[src].plane[c], idx, w, nt) +
+                      a * smp[c][i];
+        m1 = (1.0f - am) * hush__reproject_apply(acc.moments[src].plane[0], idx, w, nt) + am * l;
+        m2 = (1.0f - am) * hush__reproject_apply(acc.moments[src].plane[1], idx, w, nt) +
+             am * (l * l);
+        age_want = a_;
+      }
+      const float m1sq = m1 * m1;
+      const float vv = m2 - m1sq;
+      for (int c = 0; c < 3; c++) accum_ok &= fbits(col->plane[c][i]) == fbits(c_want[c]);
+      accum_ok &= fbits(mom->plane[0][i]) == fbits(m1) && fbits(mom->plane[1][i]) == fbits(m2);
+      accum_ok &= fbits(ages[i]) == fbits(age_want);
+      accum_ok &= fbits(var[i]) == fbits(vv > 0.0f ? vv : 0.0f);
+    }
+  }
+  CHECK(accum_ok);
+  hush__accum_free(&acc);
+  free(var);
+  free(age);
+  for (int k = 0; k < 4; k++) {
+    free(v[k]);
+    free(o[k]);
+  }
+  for (int k = 0; k < 3; k++) free(smp[k]);
+  hush__reproject_plan_free(&plan);
+  hush__reproject_plan_free(&plan1);
+  gpair_free(&g);
+}
+
 /* ======================================================================== */
 /* Timing note (HUSH_BENCH=1)                                               */
 /* ======================================================================== */
@@ -1423,6 +1622,11 @@ int main(void) {
   REQUIRE(dev != NULL);
   test_module_plan(dev);
   test_module_accum(dev);
+  test_module_floor();
+  test_module_fast_paths(dev, 53, 31);
+  test_module_fast_paths(dev, 9, 1);
+  test_module_fast_paths(dev, 1, 7);
+  test_module_fast_paths(dev, 2, 2);
   test_convergence(dev);
   test_static_jitter(dev);
   test_camera_move(dev);

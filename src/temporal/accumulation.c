@@ -40,82 +40,227 @@ void hush__accum_free(hush_accum *acc) {
 
 void hush__accum_reset(hush_accum *acc) { acc->has_history = 0; }
 
+/* Everything a blend reads and writes, resolved once per call. */
+typedef struct blend_ctx {
+  const hush_reproject_plan *plan; /* NULL: no history anywhere */
+  size_t W;
+  const float *sample[4];
+  const float *pc[4], *pm1, *pm2, *pa; /* history: the previous set */
+  float *oc[4], *om1, *om2, *oa;       /* this frame's set */
+  float *variance;                     /* may be NULL */
+  float alpha_min, alpha_mom_min, max_age;
+} blend_ctx;
+
+/* The blend's per-call constants. */
+typedef struct blend_params {
+  float alpha_min, alpha_mom_min, max_age;
+} blend_params;
+
+/* One pixel: its samples and gathered history (colour, moments, age) in,
+ * its results out. Scalars, not arrays: the row loop vectorises. */
+typedef struct blend_px {
+  float s0, s1, s2, s3; /* samples (channels >= nc unused) */
+  float h0, h1, h2, h3; /* history colour */
+  float hm1, hm2, ha;   /* history moments and age */
+  float c0, c1, c2, c3; /* out: colour */
+  float m1, m2, age, var;
+} blend_px;
+
+/*
+ * The blend of one pixel (has: there is history, else the history values
+ * are ignored), as accumulation.h gives it. Branch-free and inlined into
+ * the row loop (nc a constant there) and into the per-pixel path, so both
+ * give the same bits.
+ */
+static HUSH_ALWAYS_INLINE void blend_compute(const blend_params *p, blend_px *q, int has,
+                                             const int nc) {
+  const float l = nc >= 3 ? hush_luminance(q->s0, q->s1, q->s2) : q->s0;
+  float age = hush__floorf_vec(q->ha + 0.5f) + 1.0f;
+  age = age > p->max_age ? p->max_age : age;
+  age = has ? age : 1.0f; /* also keeps the divide below away from garbage */
+  const float inv_age = 1.0f / age;
+  const float a = p->alpha_min > inv_age ? p->alpha_min : inv_age;
+  const float am = p->alpha_mom_min > inv_age ? p->alpha_mom_min : inv_age;
+  q->c0 = has ? (1.0f - a) * q->h0 + a * q->s0 : q->s0;
+  q->c1 = has ? (1.0f - a) * q->h1 + a * q->s1 : q->s1;
+  q->c2 = has ? (1.0f - a) * q->h2 + a * q->s2 : q->s2;
+  q->c3 = has ? (1.0f - a) * q->h3 + a * q->s3 : q->s3;
+  const float l2 = l * l;
+  q->m1 = has ? (1.0f - am) * q->hm1 + am * l : l;
+  q->m2 = has ? (1.0f - am) * q->hm2 + am * l2 : l2;
+  q->age = age;
+  /* separate statements: no fused multiply-add, so one sample gives
+   * exactly 0 with every compiler */
+  const float m1sq = q->m1 * q->m1;
+  const float v = q->m2 - m1sq;
+  q->var = v > 0.0f ? v : 0.0f;
+}
+
+/* Pixel i through hush__reproject_taps: any footprint, any plan. */
+static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
+  const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
+  int32_t idx[9];
+  float w[9];
+  const int n = b->plan ? hush__reproject_taps(b->plan, i, idx, w) : 0;
+  float s[4] = {0.0f, 0.0f, 0.0f, 0.0f}, h[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+  for (int c = 0; c < nc; c++) {
+    s[c] = b->sample[c][i];
+    if (n) h[c] = hush__reproject_apply(b->pc[c], idx, w, n);
+  }
+  blend_px q = {s[0], s[1], s[2], s[3], h[0], h[1], h[2], h[3], 0.0f, 0.0f, 0.0f,
+                0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+  if (n) {
+    q.hm1 = hush__reproject_apply(b->pm1, idx, w, n);
+    q.hm2 = hush__reproject_apply(b->pm2, idx, w, n);
+    q.ha = hush__reproject_apply(b->pa, idx, w, n);
+  }
+  blend_compute(&p, &q, n > 0, nc);
+  const float out[4] = {q.c0, q.c1, q.c2, q.c3};
+  for (int c = 0; c < nc; c++) b->oc[c][i] = out[c];
+  b->om1[i] = q.m1;
+  b->om2[i] = q.m2;
+  b->oa[i] = q.age;
+  if (b->variance) b->variance[i] = q.var;
+}
+
+/*
+ * Pixels row + x_begin .. row + x_begin + len - 1 of a plan with blocks, each
+ * gathered as a block (origin and the plan's four weights; all 0 for a
+ * pixel without a BILINEAR footprint, whose origin is then 0), in a loop
+ * the compiler vectorises. With contiguous the block of pixel row + x
+ * starts at base + x (plain vector loads), else at its origin (gathers).
+ * Every pointer is a plain local, so the vectoriser sees loop invariants
+ * (and the omp simd: no dependence between pixels; the history read is
+ * never written here).
+ */
+static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int x_begin,
+                                            int len, int32_t base, const int contiguous,
+                                            const int nc) {
+  const int x_end = x_begin + len;
+  const hush_reproject_plan *plan = b->plan;
+  const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
+  const int W = (int)b->W;
+  const int32_t *origin = plan->origin + row;
+  const uint16_t *mask = plan->mask + row;
+  const uint8_t *kind = plan->kind + row;
+  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row;
+  const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
+  const float *pm1 = b->pm1, *pm2 = b->pm2, *pa = b->pa;
+  float *om1 = b->om1 + row, *om2 = b->om2 + row, *oa = b->oa + row;
+  float *var = b->variance ? b->variance + row : NULL;
+  /* channels as scalars (channel 0 stands in for the missing ones, never
+   * read or written): arrays of pointers indexed in the loop would not
+   * vectorise */
+  const float *p0 = b->pc[0], *p1 = b->pc[nc > 1], *p2 = b->pc[nc > 2 ? 2 : 0];
+  const float *p3 = b->pc[nc > 3 ? 3 : 0];
+  const float *s0 = b->sample[0] + row, *s1 = b->sample[nc > 1] + row;
+  const float *s2 = b->sample[nc > 2 ? 2 : 0] + row, *s3 = b->sample[nc > 3 ? 3 : 0] + row;
+  float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
+  float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
+#pragma omp simd
+  for (int x = x_begin; x < x_end; x++) {
+    const int32_t o = contiguous ? base + x
+                                 : origin[x] & -(int32_t)(kind[x] == HUSH_FOOTPRINT_BILINEAR);
+    const float a0 = w0[x], a1 = w1[x], a2 = w2[x], a3 = w3[x];
+#define HUSH_APPLY4(t) (a0 * (t)[o] + a1 * (t)[o + 1] + a2 * (t)[o + W] + a3 * (t)[o + W + 1])
+    blend_px q;
+    q.s0 = s0[x];
+    q.s1 = nc > 1 ? s1[x] : 0.0f;
+    q.s2 = nc > 2 ? s2[x] : 0.0f;
+    q.s3 = nc > 3 ? s3[x] : 0.0f;
+    q.h0 = HUSH_APPLY4(p0);
+    q.h1 = nc > 1 ? HUSH_APPLY4(p1) : 0.0f;
+    q.h2 = nc > 2 ? HUSH_APPLY4(p2) : 0.0f;
+    q.h3 = nc > 3 ? HUSH_APPLY4(p3) : 0.0f;
+    q.hm1 = HUSH_APPLY4(pm1);
+    q.hm2 = HUSH_APPLY4(pm2);
+    q.ha = HUSH_APPLY4(pa);
+#undef HUSH_APPLY4
+    blend_compute(&p, &q, mask[x] != 0, nc);
+    o0[x] = q.c0;
+    if (nc > 1) o1[x] = q.c1;
+    if (nc > 2) o2[x] = q.c2;
+    if (nc > 3) o3[x] = q.c3;
+    om1[x] = q.m1;
+    om2[x] = q.m2;
+    oa[x] = q.age;
+    if (var) var[x] = q.var;
+  }
+}
+
+/* Pixels per chunk of a blended row: a chunk of BILINEAR pixels whose
+ * blocks follow each other (origin + 1 per pixel, as under smooth motion)
+ * loads its taps as vectors; any other chunk gathers them. */
+#define CHUNK 16
+
+/* One row of a plan with blocks, chunk by chunk, then the rare 3X3 pixels
+ * redone through their taps. */
+static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const int nc) {
+  const int W = (int)b->W;
+  const int32_t *origin = b->plan->origin + row;
+  const uint8_t *kind = b->plan->kind + row;
+  for (int x0 = 0; x0 < W; x0 += CHUNK) {
+    const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
+    int contiguous = 1;
+    for (int x = x0; x < x1; x++)
+      contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
+    /* a constant length for full chunks: one vector iteration, no
+     * alignment peeling or scalar epilogue */
+    if (x1 - x0 < CHUNK)
+      blend_pixels(b, row, x0, x1 - x0, 0, 0, nc);
+    else if (contiguous)
+      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, 1, nc);
+    else
+      blend_pixels(b, row, x0, CHUNK, 0, 0, nc);
+  }
+  for (size_t i = row; i < row + (size_t)W; i++)
+    if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) blend_pixel(b, i, nc);
+}
+
+/* Rows y of the image, with nc a constant. */
+static HUSH_ALWAYS_INLINE void blend_rows(const blend_ctx *b, int y, const int nc) {
+  const size_t row = (size_t)y * b->W;
+  if (b->plan && b->plan->blocks) {
+    blend_row(b, row, nc);
+  } else {
+    for (size_t i = row; i < row + b->W; i++) blend_pixel(b, i, nc);
+  }
+}
+
 void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
                        const float *const *sample, const hush_accum_params *params,
                        float *variance, int threads) {
-  if (!acc->has_history) plan = NULL;
   if (threads < 1) threads = 1;
   const int src = acc->latest, dst = 1 - acc->latest;
   const int nc = acc->channels;
   const int H = (int)acc->height;
-  const size_t W = acc->width;
-  const float alpha_min = params->alpha_min;
-  const float alpha_mom_min = params->alpha_moments_min;
-  const float max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
-
-  const float *pc[4] = {NULL, NULL, NULL, NULL};
-  float *oc[4] = {NULL, NULL, NULL, NULL};
+  blend_ctx b;
+  memset(&b, 0, sizeof b);
+  b.plan = acc->has_history ? plan : NULL;
+  b.W = acc->width;
   for (int c = 0; c < nc; c++) {
-    pc[c] = acc->color[src].plane[c];
-    oc[c] = acc->color[dst].plane[c];
+    b.sample[c] = sample[c];
+    b.pc[c] = acc->color[src].plane[c];
+    b.oc[c] = acc->color[dst].plane[c];
   }
-  const float *pm1 = acc->moments[src].plane[0], *pm2 = acc->moments[src].plane[1];
-  const float *pa = acc->age[src].plane[0];
-  float *om1 = acc->moments[dst].plane[0], *om2 = acc->moments[dst].plane[1];
-  float *oa = acc->age[dst].plane[0];
+  b.pm1 = acc->moments[src].plane[0];
+  b.pm2 = acc->moments[src].plane[1];
+  b.pa = acc->age[src].plane[0];
+  b.om1 = acc->moments[dst].plane[0];
+  b.om2 = acc->moments[dst].plane[1];
+  b.oa = acc->age[dst].plane[0];
+  b.variance = variance;
+  b.alpha_min = params->alpha_min;
+  b.alpha_mom_min = params->alpha_moments_min;
+  b.max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
 
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
-    for (size_t x = 0; x < W; x++) {
-      const size_t i = (size_t)y * W + x;
-      const float l = hush__accum_luminance(sample, nc, i);
-      /* gathered history: colour (nc), m1, m2, age */
-      float h[4], h1, h2, ha;
-      int has = 1;
-      if (plan && hush__reproject_is_block(plan, i)) {
-        float w4[4];
-        hush__reproject_weights4(plan, i, w4);
-        const size_t o = (size_t)plan->origin[i];
-        ha = hush__reproject_apply4(pa, o, W, w4);
-        h1 = hush__reproject_apply4(pm1, o, W, w4);
-        h2 = hush__reproject_apply4(pm2, o, W, w4);
-        for (int c = 0; c < nc; c++) h[c] = hush__reproject_apply4(pc[c], o, W, w4);
-      } else {
-        int32_t idx[9];
-        float w[9];
-        const int n = plan ? hush__reproject_taps(plan, i, idx, w) : 0;
-        has = n > 0;
-        ha = has ? hush__reproject_apply(pa, idx, w, n) : 0.0f;
-        h1 = has ? hush__reproject_apply(pm1, idx, w, n) : 0.0f;
-        h2 = has ? hush__reproject_apply(pm2, idx, w, n) : 0.0f;
-        for (int c = 0; c < nc; c++) h[c] = has ? hush__reproject_apply(pc[c], idx, w, n) : 0.0f;
-      }
-      float m1, m2;
-      if (!has) {
-        for (int c = 0; c < nc; c++) oc[c][i] = sample[c][i];
-        m1 = l;
-        m2 = l * l;
-        oa[i] = 1.0f;
-      } else {
-        float age = floorf(ha + 0.5f) + 1.0f;
-        if (age > max_age) age = max_age;
-        const float inv_age = 1.0f / age;
-        const float a = alpha_min > inv_age ? alpha_min : inv_age;
-        const float am = alpha_mom_min > inv_age ? alpha_mom_min : inv_age;
-        for (int c = 0; c < nc; c++) oc[c][i] = (1.0f - a) * h[c] + a * sample[c][i];
-        m1 = (1.0f - am) * h1 + am * l;
-        m2 = (1.0f - am) * h2 + am * (l * l);
-        oa[i] = age;
-      }
-      om1[i] = m1;
-      om2[i] = m2;
-      if (variance) {
-        /* separate statements: no fused multiply-add, so one sample gives
-         * exactly 0 with every compiler */
-        const float m1sq = m1 * m1;
-        const float v = m2 - m1sq;
-        variance[i] = v > 0.0f ? v : 0.0f;
-      }
+    switch (nc) {
+    case 1: blend_rows(&b, y, 1); break;
+    case 2: blend_rows(&b, y, 2); break;
+    case 3: blend_rows(&b, y, 3); break;
+    default: blend_rows(&b, y, 4); break;
     }
   }
   acc->latest = dst;
@@ -124,6 +269,13 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
 
 #define BLEND_MAX 8
 
+/* hush__temporal_blend's weight of the new sample for an age. */
+static inline float blend_alpha(float age, float alpha_min) {
+  const float inv = 1.0f / age; /* computed for every age: no branch */
+  const float inv_age = age > 1.0f ? inv : 1.0f;
+  return alpha_min > inv_age ? alpha_min : inv_age;
+}
+
 void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *prev,
                           const float *const *sample, int channels, const float *age,
                           float alpha_min, float *const *out, int threads) {
@@ -131,27 +283,48 @@ void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *p
   if (channels > BLEND_MAX) channels = BLEND_MAX;
   const int H = (int)plan->height;
   const size_t W = plan->width;
+  const int32_t Wi = (int32_t)W;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
-    for (size_t x = 0; x < W; x++) {
-      const size_t i = (size_t)y * W + x;
-      const float inv_age = age[i] > 1.0f ? 1.0f / age[i] : 1.0f;
-      const float a = alpha_min > inv_age ? alpha_min : inv_age;
-      if (prev && hush__reproject_is_block(plan, i)) {
-        float w4[4];
-        hush__reproject_weights4(plan, i, w4);
-        const size_t o = (size_t)plan->origin[i];
+    const size_t row = (size_t)y * W;
+    if (!prev) {
+      for (int c = 0; c < channels; c++)
+        for (size_t i = row; i < row + W; i++) out[c][i] = sample[c][i];
+      continue;
+    }
+    if (!plan->blocks) {
+      /* per pixel through the taps */
+      for (size_t i = row; i < row + W; i++) {
+        const float a = blend_alpha(age[i], alpha_min);
+        int32_t idx[9];
+        float w[9];
+        const int n = hush__reproject_taps(plan, i, idx, w);
         for (int c = 0; c < channels; c++)
-          out[c][i] = (1.0f - a) * hush__reproject_apply4(prev[c], o, W, w4) + a * sample[c][i];
-        continue;
+          out[c][i] = n ? (1.0f - a) * hush__reproject_apply(prev[c], idx, w, n) + a * sample[c][i]
+                        : sample[c][i];
       }
+      continue;
+    }
+    /* blocks (NONE pixels: weights 0, and the sample), then the 3X3 pixels */
+    for (int c = 0; c < channels; c++) {
+      const float *p = prev[c], *s = sample[c];
+      float *o = out[c];
+#pragma omp simd
+      for (size_t i = row; i < row + W; i++) {
+        const int32_t j = hush__reproject_block_origin(plan, i);
+        const float h = plan->w[0][i] * p[j] + plan->w[1][i] * p[j + 1] +
+                        plan->w[2][i] * p[j + Wi] + plan->w[3][i] * p[j + Wi + 1];
+        const float a = blend_alpha(age[i], alpha_min);
+        const float blended = (1.0f - a) * h + a * s[i];
+        o[i] = plan->kind[i] == HUSH_FOOTPRINT_BILINEAR ? blended : s[i];
+      }
+    }
+    for (size_t i = row; i < row + W; i++) {
+      if (plan->kind[i] != HUSH_FOOTPRINT_3X3) continue;
+      const float a = blend_alpha(age[i], alpha_min);
       int32_t idx[9];
       float w[9];
-      const int n = prev ? hush__reproject_taps(plan, i, idx, w) : 0;
-      if (n == 0) {
-        for (int c = 0; c < channels; c++) out[c][i] = sample[c][i];
-        continue;
-      }
+      const int n = hush__reproject_taps(plan, i, idx, w);
       for (int c = 0; c < channels; c++)
         out[c][i] = (1.0f - a) * hush__reproject_apply(prev[c], idx, w, n) + a * sample[c][i];
     }

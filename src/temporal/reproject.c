@@ -43,7 +43,12 @@ hush_status hush__reproject_plan_init(hush_device device, hush_reproject_plan *p
   plan->kind = calloc(n, sizeof *plan->kind);
   plan->fx = hush__alloc_floats(n);
   plan->fy = hush__alloc_floats(n);
-  if (!plan->origin || !plan->mask || !plan->kind || !plan->fx || !plan->fy) {
+  int ok = plan->origin && plan->mask && plan->kind && plan->fx && plan->fy;
+  for (int t = 0; t < 4; t++) {
+    plan->w[t] = hush__alloc_floats(n);
+    ok = ok && plan->w[t];
+  }
+  if (!ok) {
     hush__reproject_plan_free(plan);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY,
                       "out of memory for a %ux%u reprojection plan", width, height);
@@ -60,6 +65,7 @@ void hush__reproject_plan_free(hush_reproject_plan *plan) {
   free(plan->kind);
   hush__free_floats(plan->fx);
   hush__free_floats(plan->fy);
+  for (int t = 0; t < 4; t++) hush__free_floats(plan->w[t]);
   memset(plan, 0, sizeof *plan);
 }
 
@@ -75,6 +81,7 @@ void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads) {
     memset(plan->kind + row, 0, W * sizeof *plan->kind);
     memset(plan->fx + row, 0, W * sizeof *plan->fx);
     memset(plan->fy + row, 0, W * sizeof *plan->fy);
+    for (int t = 0; t < 4; t++) memset(plan->w[t] + row, 0, W * sizeof *plan->w[t]);
   }
 }
 
@@ -138,11 +145,6 @@ static inline float prev_depth(const build_ctx *c, hush_vec4 p) {
 /* Marks a pixel with no previous location in the span buffers. */
 #define NO_LOCATION (-1e30f)
 
-#if defined(__GNUC__)
-#  define HUSH_ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#  define HUSH_ALWAYS_INLINE inline
-#endif
 
 /* The span arrays of back_project_span. */
 typedef struct span_out {
@@ -204,11 +206,17 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
   const float ny = 1.0f - 2.0f * ((float)y + 0.5f) / Hf;
   const float sxf = 2.0f / Wf;
   const float p10 = c->p10, p11 = c->p11, p14 = c->p14, p15 = c->p15;
-  float M[16], R[4], P[16], V[4];
+  float M[16], R[4];
   memcpy(M, c->cur_to_prev, sizeof M);
   memcpy(R, c->cur_to_prev_view_z, sizeof R);
-  memcpy(P, c->prev_vp, sizeof P);
-  for (int k = 0; k < 4; k++) V[k] = c->prev_w2v[k * 4 + 2];
+  /* the rows of prev_vp and prev_w2v use_pos needs, as scalars (gcc does
+   * not vectorise the loop with them in a local array) */
+  const float *P = c->prev_vp;
+  const float P0 = P[0], P4 = P[4], P8 = P[8], P12 = P[12];
+  const float P1 = P[1], P5 = P[5], P9 = P[9], P13 = P[13];
+  const float P3 = P[3], P7 = P[7], P11 = P[11], P15 = P[15];
+  const float V0 = c->prev_w2v[2], V1 = c->prev_w2v[6], V2 = c->prev_w2v[10];
+  const float V3 = c->prev_w2v[14];
   const float jx = c->jx, jy = c->jy;
   float *restrict pxo = o.px, *restrict pyo = o.py, *restrict zeo = o.ze;
   for (int k = 0; k < n; k++) {
@@ -229,10 +237,10 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
        * centre's (first order) */
       const int sp = !bg;
       const float x3 = X[k], y3 = Y[k], z3 = Z[k];
-      qx = sp ? P[0] * x3 + P[4] * y3 + P[8] * z3 + P[12] : qx;
-      qy = sp ? P[1] * x3 + P[5] * y3 + P[9] * z3 + P[13] : qy;
-      qw = sp ? P[3] * x3 + P[7] * y3 + P[11] * z3 + P[15] : qw;
-      ze = sp ? -(V[0] * x3 + V[1] * y3 + V[2] * z3 + V[3]) : ze;
+      qx = sp ? P0 * x3 + P4 * y3 + P8 * z3 + P12 : qx;
+      qy = sp ? P1 * x3 + P5 * y3 + P9 * z3 + P13 : qy;
+      qw = sp ? P3 * x3 + P7 * y3 + P11 * z3 + P15 : qw;
+      ze = sp ? -(V0 * x3 + V1 * y3 + V2 * z3 + V3) : ze;
       ok = sp | ok;
       sjx = sp ? jx : 0.0f;
       sjy = sp ? jy : 0.0f;
@@ -334,16 +342,31 @@ typedef struct pixel_ref {
   float id;
 } pixel_ref;
 
-/* Whether neighbour j of this frame is on the same surface as pixel i
- * (surface, normal within the threshold, same id): only those give the
- * depth slope, so a crease or an edge does not distort it. */
+/* Whether a neighbour (depth zj, normal nj, id idj) of a pixel (normal ni,
+ * id idi) of this frame is on the same surface (a surface, normal within
+ * the threshold, same id): only those give the depth slope, so a crease or
+ * an edge does not distort it. Branch-free, for the span loops too. */
+static inline int same_surface_v(float zj, float ni0, float ni1, float ni2, float nj0, float nj1,
+                                 float nj2, float idi, float idj, float cos_min, int use_id) {
+  const float d = ni0 * nj0 + ni1 * nj1 + ni2 * nj2;
+  return (zj > 0.0f) & ((d < cos_min) == 0) & ((use_id == 0) | (idi == idj));
+}
+
 static inline int same_surface(const build_ctx *c, size_t i, size_t j) {
   const hush_gbuffer *g = &c->in->cur;
-  if (!(g->depth[j] > 0.0f)) return 0;
-  const float d = g->normal[0][i] * g->normal[0][j] + g->normal[1][i] * g->normal[1][j] +
-                  g->normal[2][i] * g->normal[2][j];
-  if (d < c->cos_min) return 0;
-  return !c->use_id || g->id[i] == g->id[j];
+  const float idi = c->use_id ? g->id[i] : 0.0f, idj = c->use_id ? g->id[j] : 0.0f;
+  return same_surface_v(g->depth[j], g->normal[0][i], g->normal[1][i], g->normal[2][i],
+                        g->normal[0][j], g->normal[1][j], g->normal[2][j], idi, idj, c->cos_min,
+                        c->use_id);
+}
+
+/* The smaller one-sided |dz| of a pixel at depth z from its neighbours at
+ * za (counted when a_ok) and zb (when b_ok); 0 with neither. */
+static inline float min_slope(float z, float za, float zb, int a_ok, int b_ok) {
+  const float da = fabsf(z - za), db = fabsf(zb - z);
+  float d = hush__select_bits(a_ok, da, HUGE_VALF);
+  d = hush__select_bits(b_ok & (db < d), db, d);
+  return hush__select_bits(d < HUGE_VALF, d, 0.0f);
 }
 
 /* |dz| per pixel of pixel i along one axis, from its neighbours i - step
@@ -351,13 +374,9 @@ static inline int same_surface(const build_ctx *c, size_t i, size_t j) {
  * one-sided difference; 0 without such a neighbour. */
 static float depth_slope(const build_ctx *c, size_t i, size_t step, int has_a, int has_b) {
   const float *z = c->in->cur.depth;
-  float d = HUGE_VALF;
-  if (has_a && same_surface(c, i, i - step)) d = fabsf(z[i] - z[i - step]);
-  if (has_b && same_surface(c, i, i + step)) {
-    const float db = fabsf(z[i + step] - z[i]);
-    if (db < d) d = db;
-  }
-  return d < HUGE_VALF ? d : 0.0f;
+  const int a_ok = has_a && same_surface(c, i, i - step);
+  const int b_ok = has_b && same_surface(c, i, i + step);
+  return min_slope(z[i], a_ok ? z[i - step] : 0.0f, b_ok ? z[i + step] : 0.0f, a_ok, b_ok);
 }
 
 /* Tap j of the previous frame, at offset (ox, oy) pixels from the
@@ -387,125 +406,380 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
   return 1;
 }
 
-#define SPAN 256
-
-static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
+/*
+ * The full per-pixel rule, for any pixel: the bilinear footprint of the
+ * back-projected point (px, py) with each tap tested by tap_ok (the depth
+ * gradient computed lazily), moved inside the image when it overhangs the
+ * border; else the 3x3 fallback; else NONE. Writes the pixel's origin, mask,
+ * kind, fx and fy (not w). build_row sends here only the pixels its span
+ * test could not settle: footprints not wholly inside the image, and those
+ * with no consistent tap (3x3 fallback). have_slopes: gx, gy are tap_ok's
+ * depth slopes, already computed.
+ */
+static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int y, float px,
+                       float py, float ze, int have_slopes, float gx, float gy) {
   const hush_gbuffer *cur = &c->in->cur;
   const int W = c->W, H = c->H;
-  float span_px[SPAN], span_py[SPAN], span_ze[SPAN];
-  for (int x = 0; x < W; x++) {
-    const int k = x % SPAN;
-    if (k == 0) {
-      const span_out so = {span_px, span_py, span_ze};
-      back_project_span(c, y, x, W - x < SPAN ? W - x : SPAN, so);
+  const size_t i = (size_t)y * (size_t)W + (size_t)x;
+  unsigned mask = 0;
+  uint8_t kind = HUSH_FOOTPRINT_NONE;
+  int32_t origin = 0;
+  float fx = 0.0f, fy = 0.0f;
+  pixel_ref r;
+  r.z = cur->depth[i];
+  r.bg = !(r.z > 0.0f);
+  r.ze = ze;
+  if (px > -2.0f && px < (float)W + 2.0f && py > -2.0f && py < (float)H + 2.0f) {
+    r.x = x;
+    r.y = y;
+    r.i = i;
+    r.tolz = c->tol * r.ze;
+    r.slopes = have_slopes; /* given: the same values tap_ok would compute */
+    r.gx = gx;
+    r.gy = gy;
+    r.n[0] = cur->normal[0][i];
+    r.n[1] = cur->normal[1][i];
+    r.n[2] = cur->normal[2][i];
+    r.id = c->use_id ? cur->id[i] : 0.0f;
+    /* 2x2 bilinear footprint around the tap-grid coordinate p - 0.5. */
+    const float sx = px - 0.5f, sy = py - 0.5f;
+    const float flx = floorf(sx), fly = floorf(sy);
+    const int x0 = (int)flx, y0 = (int)fly;
+    fx = sx - flx;
+    fy = sy - fly;
+    float bw[4];
+    hush__reproject_bilinear(fx, fy, bw);
+    for (int t = 0; t < 4; t++) {
+      const int xt = x0 + (t & 1), yt = y0 + (t >> 1);
+      if (xt < 0 || xt >= W || yt < 0 || yt >= H || !(bw[t] >= HUSH_REPROJECT_MIN_WEIGHT))
+        continue;
+      if (tap_ok(c, &r, (int32_t)yt * W + xt, (float)(t & 1) - fx, (float)(t >> 1) - fy))
+        mask |= 1u << t;
     }
-    const size_t i = (size_t)y * (size_t)W + (size_t)x;
-    unsigned mask = 0;
-    uint8_t kind = HUSH_FOOTPRINT_NONE;
-    int32_t origin = 0;
-    float fx = 0.0f, fy = 0.0f;
-    pixel_ref r;
-    r.z = cur->depth[i];
-    r.bg = !(r.z > 0.0f);
-    const float px = span_px[k], py = span_py[k];
-    r.ze = span_ze[k];
-    if (px > -2.0f && px < (float)W + 2.0f && py > -2.0f && py < (float)H + 2.0f) {
-      r.x = x;
-      r.y = y;
-      r.i = i;
-      r.tolz = c->tol * r.ze;
-      r.slopes = 0;
-      r.gx = r.gy = 0.0f;
-      r.n[0] = cur->normal[0][i];
-      r.n[1] = cur->normal[1][i];
-      r.n[2] = cur->normal[2][i];
-      r.id = c->use_id ? cur->id[i] : 0.0f;
-      /* 2x2 bilinear footprint around the tap-grid coordinate p - 0.5. */
-      const float sx = px - 0.5f, sy = py - 0.5f;
-      const float flx = floorf(sx), fly = floorf(sy);
-      const int x0 = (int)flx, y0 = (int)fly;
-      fx = sx - flx;
-      fy = sy - fly;
-      float bw[4];
-      hush__reproject_bilinear(fx, fy, bw);
-      if (!r.bg && x0 >= 0 && y0 >= 0 && x0 + 1 < W && y0 + 1 < H) {
-        /* The common case, without branches: the plain tests on all four
-         * taps, then the full test (depth gradient) on those that failed;
-         * the same result as tap_ok on each. */
-        const hush_gbuffer *pg = c->prev;
-        const int32_t j0 = (int32_t)y0 * W + x0;
-        const int32_t jj[4] = {j0, j0 + 1, j0 + W, j0 + W + 1};
-        for (int t = 0; t < 4; t++) {
-          const int32_t j = jj[t];
-          const float zt = pg->depth[j];
-          const float d = r.n[0] * pg->normal[0][j] + r.n[1] * pg->normal[1][j] +
-                          r.n[2] * pg->normal[2][j];
-          int ok = (zt > 0.0f) & (fabsf(zt - r.ze) <= r.tolz) & (d >= c->cos_min) &
-                   (bw[t] >= HUSH_REPROJECT_MIN_WEIGHT);
-          if (c->use_id) ok &= pg->id[j] == r.id;
-          mask |= (unsigned)ok << t;
+    if (mask) {
+      kind = HUSH_FOOTPRINT_BILINEAR;
+      int bx = x0, by = y0;
+      if (plan->blocks) {
+        /* move an overhanging footprint inside: same taps, same weights */
+        if (bx < 0) {
+          bx = 0;
+          mask = (mask & 0xau) >> 1;
+          fx = 0.0f;
+        } else if (bx > W - 2) {
+          bx = W - 2;
+          mask = (mask & 0x5u) << 1;
+          fx = 1.0f;
         }
-        if (mask != 0xfu && c->grad > 0.0f)
-          for (int t = 0; t < 4; t++)
-            if (!(mask & (1u << t)) && bw[t] >= HUSH_REPROJECT_MIN_WEIGHT &&
-                tap_ok(c, &r, jj[t], (float)(t & 1) - fx, (float)(t >> 1) - fy))
-              mask |= 1u << t;
-      } else {
-        for (int t = 0; t < 4; t++) {
-          const int xt = x0 + (t & 1), yt = y0 + (t >> 1);
-          if (xt < 0 || xt >= W || yt < 0 || yt >= H || !(bw[t] >= HUSH_REPROJECT_MIN_WEIGHT))
-            continue;
-          if (tap_ok(c, &r, (int32_t)yt * W + xt, (float)(t & 1) - fx, (float)(t >> 1) - fy))
-            mask |= 1u << t;
+        if (by < 0) {
+          by = 0;
+          mask = (mask & 0xcu) >> 2;
+          fy = 0.0f;
+        } else if (by > H - 2) {
+          by = H - 2;
+          mask = (mask & 0x3u) << 2;
+          fy = 1.0f;
         }
+      }
+      origin = (int32_t)by * W + bx;
+    } else if (c->fallback) {
+      /* 3x3 around the pixel that contains p. */
+      const int cx = (int)floorf(px), cy = (int)floorf(py);
+      for (int t = 0; t < 9; t++) {
+        const int xt = cx - 1 + t % 3, yt = cy - 1 + t / 3;
+        if (xt < 0 || xt >= W || yt < 0 || yt >= H) continue;
+        if (tap_ok(c, &r, (int32_t)yt * W + xt, (float)xt - sx, (float)yt - sy))
+          mask |= 1u << t;
       }
       if (mask) {
-        kind = HUSH_FOOTPRINT_BILINEAR;
-        int bx = x0, by = y0;
-        if (plan->blocks) {
-          /* move an overhanging footprint inside: same taps, same weights */
-          if (bx < 0) {
-            bx = 0;
-            mask = (mask & 0xau) >> 1;
-            fx = 0.0f;
-          } else if (bx > W - 2) {
-            bx = W - 2;
-            mask = (mask & 0x5u) << 1;
-            fx = 1.0f;
-          }
-          if (by < 0) {
-            by = 0;
-            mask = (mask & 0xcu) >> 2;
-            fy = 0.0f;
-          } else if (by > H - 2) {
-            by = H - 2;
-            mask = (mask & 0x3u) << 2;
-            fy = 1.0f;
-          }
-        }
-        origin = (int32_t)by * W + bx;
-      } else if (c->fallback) {
-        /* 3x3 around the pixel that contains p. */
-        const int cx = (int)floorf(px), cy = (int)floorf(py);
-        for (int t = 0; t < 9; t++) {
-          const int xt = cx - 1 + t % 3, yt = cy - 1 + t / 3;
-          if (xt < 0 || xt >= W || yt < 0 || yt >= H) continue;
-          if (tap_ok(c, &r, (int32_t)yt * W + xt, (float)xt - sx, (float)yt - sy))
-            mask |= 1u << t;
-        }
-        if (mask) {
-          kind = HUSH_FOOTPRINT_3X3;
-          origin = (int32_t)(cy - 1) * W + (cx - 1);
-        }
+        kind = HUSH_FOOTPRINT_3X3;
+        origin = (int32_t)(cy - 1) * W + (cx - 1);
       }
     }
-    if (kind != HUSH_FOOTPRINT_BILINEAR) fx = fy = 0.0f;
-    plan->origin[i] = origin;
-    plan->mask[i] = (uint16_t)mask;
-    plan->kind[i] = kind;
-    plan->fx[i] = fx;
-    plan->fy[i] = fy;
   }
+  if (kind != HUSH_FOOTPRINT_BILINEAR) fx = fy = 0.0f;
+  plan->origin[i] = origin;
+  plan->mask[i] = (uint16_t)mask;
+  plan->kind[i] = kind;
+  plan->fx[i] = fx;
+  plan->fy[i] = fy;
+}
+
+/* Pixels per span: the back-projection and the tap tests run over spans of
+ * a row held in small stack arrays (L1-resident). */
+#define SPAN 256
+
+/* The previous frame's planes, for span_tap. */
+typedef struct prev_view {
+  const float *depth, *normal[3], *id;
+  float cos_min;
+} prev_view;
+
+/* What span_tap compares a tap with: one pixel of this frame. */
+typedef struct tap_ref {
+  int bg;
+  float n0, n1, n2, id;
+  float ze, tolz; /* expected depth, depth_tolerance * ze */
+  float gx, gy;   /* depth slopes (grad_test) */
+} tap_ref;
+
+/*
+ * The test of tap j with bilinear weight wt at offset (ox, oy) pixels from
+ * the back-projected point, for a footprint inside the image: 1 if it is in
+ * plan_pixel's mask. With grad_test (depth_gradient > 0) that is exactly
+ * tap_ok, comparisons included (NaN fails or passes as there); without,
+ * the plain test (tap_ok's result when the gradient retry is off). Every
+ * value is loaded and computed unconditionally and combined with & and |,
+ * so the span loop has no control flow (which would stop vectorisation).
+ */
+static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, int32_t j, float wt, float ox,
+                                            float oy, const tap_ref *r, const int use_id,
+                                            const int grad_test) {
+  const float zt = p->depth[j];
+  const float d = r->n0 * p->normal[0][j] + r->n1 * p->normal[1][j] + r->n2 * p->normal[2][j];
+  const float idt = p->id[j];
+  const float dz = fabsf(zt - r->ze);
+  const int surface = zt > 0.0f;
+  int surface_ok;
+  if (grad_test) {
+    const float tol_grad = r->tolz + r->gx * fabsf(ox) + r->gy * fabsf(oy);
+    surface_ok = surface & (((dz > r->tolz) == 0) | ((dz > tol_grad) == 0)) &
+                 ((d < p->cos_min) == 0);
+  } else {
+    surface_ok = surface & (dz <= r->tolz) & (d >= p->cos_min);
+  }
+  const int id_ok = (use_id == 0) | (idt == r->id);
+  const int kind_ok = (r->bg & (surface == 0)) | ((r->bg == 0) & surface_ok); /* bg: bg taps */
+  return (unsigned)(kind_ok & (wt >= HUSH_REPROJECT_MIN_WEIGHT) & id_ok);
+}
+
+/*
+ * tap_ok's depth slopes gx, gy (depth_gradient * ze / z times depth_slope
+ * along x and y) of pixels x_begin .. x_begin + n - 1 of row y, for every
+ * pixel (background ones are not used). Branch-free over contiguous loads:
+ * the neighbours are the pixels beside and the rows above and below; the
+ * first and last pixel of the image row, whose neighbour along x would lie
+ * outside it, go through depth_slope.
+ */
+static HUSH_ALWAYS_INLINE void span_slopes(const build_ctx *c, int y, int x_begin, int n,
+                                           const float *restrict sze, float *restrict gx,
+                                           float *restrict gy, const int use_id) {
+  const hush_gbuffer *g = &c->in->cur;
+  const int W = c->W, H = c->H;
+  const size_t row = (size_t)y * (size_t)W + (size_t)x_begin;
+  const int has_up = y > 0, has_down = y + 1 < H;
+  /* a missing row is replaced by this one (and not counted) */
+  const size_t up = has_up ? row - (size_t)W : row, down = has_down ? row + (size_t)W : row;
+  const float *z = g->depth + row, *zu = g->depth + up, *zd = g->depth + down;
+  const float *a = g->normal[0] + row, *au = g->normal[0] + up, *ad = g->normal[0] + down;
+  const float *b = g->normal[1] + row, *bu = g->normal[1] + up, *bd = g->normal[1] + down;
+  const float *e = g->normal[2] + row, *eu = g->normal[2] + up, *ed = g->normal[2] + down;
+  /* unread without use_id: any valid pointers */
+  const float *id = use_id ? g->id + row : z, *idu = use_id ? g->id + up : zu;
+  const float *idd = use_id ? g->id + down : zd;
+  const float grad = c->grad, cos_min = c->cos_min;
+  for (int k = 0; k < n; k++) {
+    const float s = grad * sze[k] / z[k];
+    const int u_ok = has_up & same_surface_v(zu[k], a[k], b[k], e[k], au[k], bu[k], eu[k], id[k],
+                                             idu[k], cos_min, use_id);
+    const int d_ok = has_down & same_surface_v(zd[k], a[k], b[k], e[k], ad[k], bd[k], ed[k],
+                                               id[k], idd[k], cos_min, use_id);
+    gy[k] = s * min_slope(z[k], zu[k], zd[k], u_ok, d_ok);
+  }
+  /* along x: pixels 1 .. W - 2 of the image row have both neighbours */
+  const int k0 = x_begin == 0 ? 1 : 0;
+  const int k1 = x_begin + n == W ? n - 1 : n;
+  for (int k = k0; k < k1; k++) {
+    const float s = grad * sze[k] / z[k];
+    const int l_ok = same_surface_v(z[k - 1], a[k], b[k], e[k], a[k - 1], b[k - 1], e[k - 1],
+                                    id[k], id[k - 1], cos_min, use_id);
+    const int r_ok = same_surface_v(z[k + 1], a[k], b[k], e[k], a[k + 1], b[k + 1], e[k + 1],
+                                    id[k], id[k + 1], cos_min, use_id);
+    gx[k] = s * min_slope(z[k], z[k - 1], z[k + 1], l_ok, r_ok);
+  }
+  const int first = x_begin == 0, last = x_begin + n == W;
+  if (first) gx[0] = grad * sze[0] / z[0] * depth_slope(c, row, 1, 0, W > 1);
+  if (last && !(first && n == 1))
+    gx[n - 1] = grad * sze[n - 1] / z[n - 1] * depth_slope(c, row + (size_t)n - 1, 1, 1, 0);
+}
+
+/* What the span test settles per pixel. */
+typedef struct span_taps {
+  int32_t origin[SPAN]; /* the footprint's top-left tap (0 when not inside) */
+  float fx[SPAN], fy[SPAN];
+  float gx[SPAN], gy[SPAN]; /* tap_ok's depth slopes (grad_test) */
+  uint8_t inside[SPAN];     /* the footprint lies wholly inside the image */
+  uint8_t mask[SPAN];       /* consistent taps */
+  uint8_t done[SPAN];       /* 1: origin, mask, fx, fy are the pixel's final plan */
+} span_taps;
+
+/* Pixels per chunk of the tap tests: a chunk whose footprints follow each
+ * other (origin + 1 per pixel, as under smooth motion) loads its taps as
+ * vectors; any other chunk gathers them one by one. */
+#define CHUNK 16
+
+/* The footprint of each pixel of a span: fractions, origin (0 when not
+ * wholly inside the image, so its taps are read at a safe index) and
+ * whether it is inside (x0 >= 0 && x0 + 1 < W, likewise y; false for NaN
+ * and NO_LOCATION). Branch-free, vectorised. */
+static void span_footprints(int W, int H, const float *restrict spx, const float *restrict spy,
+                            span_taps *restrict o, int n) {
+  const float Wm2 = (float)(W - 2), Hm2 = (float)(H - 2);
+  for (int k = 0; k < n; k++) {
+    const float sx = spx[k] - 0.5f, sy = spy[k] - 0.5f;
+    const float flx = hush__floorf_vec(sx), fly = hush__floorf_vec(sy);
+    const int inside = (flx >= 0.0f) & (flx <= Wm2) & (fly >= 0.0f) & (fly <= Hm2);
+    o->fx[k] = sx - flx;
+    o->fy[k] = sy - fly;
+    /* no out-of-range float is converted */
+    o->origin[k] = (int32_t)hush__select_bits(inside, fly, 0.0f) * W +
+                   (int32_t)hush__select_bits(inside, flx, 0.0f);
+    o->inside[k] = (uint8_t)inside;
+  }
+}
+
+/*
+ * plan_pixel's common case for pixels k_begin .. k_begin + len - 1 of a span,
+ * without branches (vectorised): a footprint lying wholly inside the image
+ * with at least one consistent tap. Then the result is final (done); else
+ * plan_pixel decides (the border, the 3x3 fallback). With contiguous the
+ * footprint of pixel k starts at base + k (plain vector loads), else at
+ * o->origin[k] (gathers). contiguous, use_id and grad_test are constants at
+ * each call, so the loop has no branch on them (and reads no id plane
+ * without use_id).
+ */
+static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k_begin, int len,
+                                           const float *restrict sze, span_taps *restrict o,
+                                           int32_t base, const int contiguous, const int use_id,
+                                           const int grad_test) {
+  const int k_end = k_begin + len;
+  const hush_gbuffer *cur = &c->in->cur, *pg = c->prev;
+  const int W = c->W;
+  const float *zr = cur->depth + row;
+  const float *n0 = cur->normal[0] + row, *n1 = cur->normal[1] + row, *n2 = cur->normal[2] + row;
+  /* unread without use_id: any valid pointer */
+  const float *idr = use_id ? cur->id + row : zr;
+  const prev_view pv = {pg->depth, {pg->normal[0], pg->normal[1], pg->normal[2]},
+                        use_id ? pg->id : pg->depth, c->cos_min};
+  const float tol = c->tol;
+  for (int k = k_begin; k < k_end; k++) {
+    tap_ref r;
+    r.bg = !(zr[k] > 0.0f);
+    r.n0 = n0[k];
+    r.n1 = n1[k];
+    r.n2 = n2[k];
+    r.id = idr[k];
+    r.ze = sze[k];
+    r.tolz = tol * r.ze;
+    r.gx = grad_test ? o->gx[k] : 0.0f;
+    r.gy = grad_test ? o->gy[k] : 0.0f;
+    const float fx = o->fx[k], fy = o->fy[k];
+    float bw[4];
+    hush__reproject_bilinear(fx, fy, bw);
+    const int32_t j0 = contiguous ? base + k : o->origin[k];
+    const unsigned m =
+        span_tap(&pv, j0, bw[0], 0.0f - fx, 0.0f - fy, &r, use_id, grad_test) |
+        span_tap(&pv, j0 + 1, bw[1], 1.0f - fx, 0.0f - fy, &r, use_id, grad_test) << 1 |
+        span_tap(&pv, j0 + W, bw[2], 0.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 2 |
+        span_tap(&pv, j0 + W + 1, bw[3], 1.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 3;
+    o->mask[k] = (uint8_t)m;
+    o->done[k] = (uint8_t)(o->inside[k] & (m != 0u));
+  }
+}
+
+/* The span test: footprints, slopes, then the tap tests chunk by chunk. */
+static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin, int n,
+                                         const float *restrict spx, const float *restrict spy,
+                                         const float *restrict sze, span_taps *restrict o,
+                                         const int use_id, const int grad_test) {
+  const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
+  span_footprints(c->W, c->H, spx, spy, o, n);
+  if (grad_test) span_slopes(c, y, x_begin, n, sze, o->gx, o->gy, use_id);
+  for (int k0 = 0; k0 < n; k0 += CHUNK) {
+    const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
+    int contiguous = 1;
+    for (int k = k0; k < k1; k++)
+      contiguous &= o->inside[k] & (o->origin[k] == o->origin[k0] + (k - k0));
+    /* a constant length for full chunks: one vector iteration, no
+     * alignment peeling or scalar epilogue */
+    if (k1 - k0 < CHUNK)
+      test_pixels(c, row, k0, k1 - k0, sze, o, 0, 0, use_id, grad_test);
+    else if (contiguous)
+      test_pixels(c, row, k0, CHUNK, sze, o, o->origin[k0] - k0, 1, use_id, grad_test);
+    else
+      test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, use_id, grad_test);
+  }
+}
+
+/* The span test's results into the plan (a vectorised copy): the settled
+ * pixels, and whatever for the others, which plan_pixel overwrites. */
+static void store_span(const span_taps *restrict st, int32_t *restrict origin,
+                       uint16_t *restrict mask, uint8_t *restrict kind, float *restrict fx,
+                       float *restrict fy, int n) {
+  for (int k = 0; k < n; k++) {
+    origin[k] = st->origin[k];
+    mask[k] = st->mask[k];
+    kind[k] = st->done[k] ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
+    fx[k] = st->fx[k];
+    fy[k] = st->fy[k];
+  }
+}
+
+/* The renormalised weights of n pixels into w0..w3 (0 unless BILINEAR):
+ * hush__reproject_renormalised, vectorised over a row of the plan. */
+static void row_weights(const uint16_t *restrict mask, const uint8_t *restrict kind,
+                        const float *restrict fx, const float *restrict fy, float *restrict w0,
+                        float *restrict w1, float *restrict w2, float *restrict w3, size_t n) {
+  for (size_t k = 0; k < n; k++) {
+    float w[4];
+    hush__reproject_renormalised(mask[k], fx[k], fy[k], w);
+    const int bil = kind[k] == HUSH_FOOTPRINT_BILINEAR;
+    w0[k] = bil ? w[0] : 0.0f;
+    w1[k] = bil ? w[1] : 0.0f;
+    w2[k] = bil ? w[2] : 0.0f;
+    w3[k] = bil ? w[3] : 0.0f;
+  }
+}
+
+/* One row of the plan: per span, the back-projection, the span test, then
+ * plan_pixel for the pixels the test left open; then the weights. Plans
+ * without blocks (an image 1 pixel wide or high) go through plan_pixel. */
+static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
+  const int W = c->W;
+  const size_t row = (size_t)y * (size_t)W;
+  float span_px[SPAN], span_py[SPAN], span_ze[SPAN];
+  span_taps st;
+  for (int x0 = 0; x0 < W; x0 += SPAN) {
+    const int n = W - x0 < SPAN ? W - x0 : SPAN;
+    const span_out so = {span_px, span_py, span_ze};
+    back_project_span(c, y, x0, n, so);
+    if (!plan->blocks) {
+      /* a 1-pixel-wide or -high image: no footprint lies inside it (and
+       * the span test's taps at index 0 would not exist) */
+      for (int k = 0; k < n; k++)
+        plan_pixel(c, plan, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f);
+      continue;
+    }
+    const int grad_test = c->grad > 0.0f;
+    if (c->use_id) {
+      if (grad_test)
+        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 1);
+      else
+        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 0);
+    } else {
+      if (grad_test)
+        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 1);
+      else
+        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 0);
+    }
+    store_span(&st, plan->origin + row + x0, plan->mask + row + x0, plan->kind + row + x0,
+               plan->fx + row + x0, plan->fy + row + x0, n);
+    for (int k = 0; k < n; k++)
+      if (!st.done[k])
+        plan_pixel(c, plan, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
+                   grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f);
+  }
+  row_weights(plan->mask + row, plan->kind + row, plan->fx + row, plan->fy + row,
+              plan->w[0] + row, plan->w[1] + row, plan->w[2] + row, plan->w[3] + row, (size_t)W);
 }
 
 hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
@@ -576,19 +850,29 @@ void hush__reproject_gather(const hush_reproject_plan *plan, const float *const 
                             int channels, float *const *out, float fill_value, int threads) {
   const int H = (int)plan->height;
   const size_t W = plan->width;
+  const int32_t Wi = (int32_t)W;
   if (threads < 1) threads = 1;
   if (channels > GATHER_MAX) channels = GATHER_MAX;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
-    for (size_t x = 0; x < W; x++) {
-      const size_t i = (size_t)y * W + x;
-      if (hush__reproject_is_block(plan, i)) {
-        float w4[4];
-        hush__reproject_weights4(plan, i, w4);
-        const size_t o = (size_t)plan->origin[i];
-        for (int ch = 0; ch < channels; ch++) out[ch][i] = hush__reproject_apply4(prev[ch], o, W, w4);
-        continue;
+    const size_t row = (size_t)y * W;
+    if (plan->blocks) {
+      /* every pixel as a block (vectorised; NONE pixels: fill_value), then
+       * the 3X3 pixels through their taps */
+      for (int ch = 0; ch < channels; ch++) {
+        const float *p = prev[ch];
+        float *o = out[ch];
+#pragma omp simd
+        for (size_t i = row; i < row + W; i++) {
+          const int32_t j = hush__reproject_block_origin(plan, i);
+          const float h = plan->w[0][i] * p[j] + plan->w[1][i] * p[j + 1] +
+                          plan->w[2][i] * p[j + Wi] + plan->w[3][i] * p[j + Wi + 1];
+          o[i] = plan->kind[i] == HUSH_FOOTPRINT_BILINEAR ? h : fill_value;
+        }
       }
+    }
+    for (size_t i = row; i < row + W; i++) {
+      if (plan->blocks && plan->kind[i] != HUSH_FOOTPRINT_3X3) continue;
       int32_t idx[9];
       float w[9];
       const int n = hush__reproject_taps(plan, i, idx, w);

@@ -48,8 +48,10 @@
 #include "hush.h"
 #include "core/image.h"
 
+#include <math.h>
 #include <stddef.h>
 #include <stdint.h>
+#include <string.h>
 
 /* One frame's geometry as planes (width * height floats each, not owned).
  * NULL members are absent. */
@@ -121,10 +123,21 @@ extern const float hush__reproject_k3x3[9];
  *             (1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx fy; a tap is in the mask
  *             only if it is on-screen, consistent and its weight is at least
  *             HUSH_REPROJECT_MIN_WEIGHT.
+ *   w[t][i]   BILINEAR: the renormalised weight of tap t = 0..3 (the
+ *             bilinear weight if t is in the mask, else 0, divided by the
+ *             sum of the four), exactly hush__reproject_weights4's; 0 for
+ *             every other kind. Computed once at build time, so a block
+ *             gather is origin + four weights, with no branch or divide,
+ *             and a NONE pixel gathers 0.
  *   blocks    width >= 2 && height >= 2: BILINEAR pixels may be gathered as
  *             blocks (hush__reproject_weights4).
  * Built by hush__reproject_build; read with hush__reproject_taps /
  * hush__reproject_weights4 or gathered with hush__reproject_gather.
+ *
+ * A fast gather over a row (see hush__reproject_gather) handles every pixel
+ * as a block, with origin hush__reproject_block_origin (a safe index for
+ * non-BILINEAR pixels, whose weights are 0), then redoes the rare 3X3
+ * pixels with hush__reproject_taps.
  */
 typedef struct hush_reproject_plan {
   uint32_t width, height;
@@ -133,6 +146,7 @@ typedef struct hush_reproject_plan {
   uint16_t *mask;
   uint8_t *kind;
   float *fx, *fy;
+  float *w[4];
 } hush_reproject_plan;
 
 hush_status hush__reproject_plan_init(hush_device device, hush_reproject_plan *plan,
@@ -154,6 +168,43 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
                                   const hush_frame_info *info, const hush_reproject_params *params,
                                   int threads);
 
+/* ---- helpers for loops the compiler must vectorise ------------------------
+ * The build is -O3 without -ffast-math (results must not depend on the
+ * vector width). Under the default -ftrapping-math gcc vectorises floorf
+ * only with -fno-trapping-math, and through a select with a constant arm
+ * (c ? x : 0.0f) it may move a later comparison, conversion or load (which
+ * may trap) under a branch, which stops the vectorisation of the loop.
+ * These do the same work without either. */
+
+#if defined(__GNUC__)
+#  define HUSH_ALWAYS_INLINE inline __attribute__((always_inline))
+#else
+#  define HUSH_ALWAYS_INLINE inline
+#endif
+
+/* cond ? x : y for cond 0 or 1, by masking the bits. */
+static inline float hush__select_bits(int cond, float x, float y) {
+  uint32_t bx, by;
+  memcpy(&bx, &x, sizeof bx);
+  memcpy(&by, &y, sizeof by);
+  const uint32_t m = (uint32_t)-cond;
+  bx = (bx & m) | (by & ~m);
+  memcpy(&x, &bx, sizeof x);
+  return x;
+}
+
+/* floorf(s), bit for bit (also -0, infinities and NaN): a truncating
+ * conversion of s where |s| < 2^23 (else s is an integer, inf or NaN), one
+ * less when that rounded up, and the sign of s kept on a zero. */
+static inline float hush__floorf_vec(float s) {
+  const int small = fabsf(s) < 8388608.0f; /* 2^23 */
+  const float c = hush__select_bits(small, s, 0.0f);
+  const float t = (float)(int32_t)c;
+  float f = t > c ? t - 1.0f : t;
+  f = f == 0.0f ? s * 0.0f : f; /* floorf(-0) = -0 */
+  return hush__select_bits(small, f, s);
+}
+
 /* The four bilinear weights (1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx fy. */
 static inline void hush__reproject_bilinear(float fx, float fy, float w[4]) {
   w[0] = (1.0f - fx) * (1.0f - fy);
@@ -169,12 +220,12 @@ static inline int hush__reproject_is_block(const hush_reproject_plan *plan, size
   return plan->kind[i] == HUSH_FOOTPRINT_BILINEAR && plan->blocks;
 }
 
-/* The renormalised weights of a block pixel's four taps (0 for the taps not
- * in the mask), summing to 1 up to rounding. Branch-free. */
-static inline void hush__reproject_weights4(const hush_reproject_plan *plan, size_t i,
-                                            float w[4]) {
-  const unsigned m = plan->mask[i];
-  hush__reproject_bilinear(plan->fx[i], plan->fy[i], w);
+/* The renormalised weights of the four taps of a BILINEAR pixel with mask m
+ * and fractions fx, fy: the bilinear weights of the taps in the mask (0 for
+ * the others) divided by their sum. Branch-free; the build stores them in
+ * plan->w. */
+static inline void hush__reproject_renormalised(unsigned m, float fx, float fy, float w[4]) {
+  hush__reproject_bilinear(fx, fy, w);
   w[0] = (m & 1u) ? w[0] : 0.0f;
   w[1] = (m & 2u) ? w[1] : 0.0f;
   w[2] = (m & 4u) ? w[2] : 0.0f;
@@ -184,6 +235,25 @@ static inline void hush__reproject_weights4(const hush_reproject_plan *plan, siz
   w[1] *= inv;
   w[2] *= inv;
   w[3] *= inv;
+}
+
+/* The renormalised weights of a block pixel's four taps (0 for the taps not
+ * in the mask), summing to 1 up to rounding: plan->w, computed by the build
+ * with hush__reproject_renormalised. */
+static inline void hush__reproject_weights4(const hush_reproject_plan *plan, size_t i,
+                                            float w[4]) {
+  w[0] = plan->w[0][i];
+  w[1] = plan->w[1][i];
+  w[2] = plan->w[2][i];
+  w[3] = plan->w[3][i];
+}
+
+/* The origin a row-wide block gather uses for pixel i: plan->origin for
+ * BILINEAR pixels (in a plan with blocks), 0 for the others, whose weights
+ * are all 0 (so the gather reads inside the image and yields 0). */
+static inline int32_t hush__reproject_block_origin(const hush_reproject_plan *plan, size_t i) {
+  const int32_t o = plan->origin[i]; /* loaded unconditionally: no masked load */
+  return o & -(int32_t)(plan->kind[i] == HUSH_FOOTPRINT_BILINEAR);
 }
 
 /*

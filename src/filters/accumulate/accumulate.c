@@ -246,10 +246,10 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
     remodulate(&st->albedo, result, threads);
     result = &st->albedo;
   }
-  hush__view_export(result, hush__filter_view(f, I_OUTPUT), f->device->threads);
-  if (var_view) hush__view_export(&st->variance, var_view, f->device->threads);
+  hush__view_export(result, hush__filter_view(f, I_OUTPUT), threads);
+  if (var_view) hush__view_export(&st->variance, var_view, threads);
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
-  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, f->device->threads);
+  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
 }
