@@ -14,6 +14,7 @@ int cmd_convert(int argc, char **argv);
 int cmd_synth(int argc, char **argv);
 int cmd_bench(int argc, char **argv);
 int cmd_render(int argc, char **argv);
+int cmd_compare(int argc, char **argv);
 
 static const struct {
   const char *name;
@@ -26,6 +27,7 @@ static const struct {
     {"synth", cmd_synth, "write a synthetic noisy sequence with its reference"},
     {"bench", cmd_bench, "time filters on synthetic frames in memory"},
     {"render", cmd_render, "path-trace a noisy frame sequence (or references) of a scene"},
+    {"compare", cmd_compare, "mean luminance ratio and RMSE of a render against a reference"},
 };
 
 #define COMMAND_COUNT (sizeof commands / sizeof commands[0])
