@@ -50,7 +50,7 @@ static const char *const help_text =
     "  --clamp X            clamp indirect contributions to X (default: off)\n"
     "  --split              also write the layers direct and indirect\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
-    "  --half               write half-float EXRs (depth, position and id stay float)\n"
+    "  --half               write half-float EXRs (depth, position, id, vis stay float)\n"
     "  --threads N          worker threads, 0 = one per core (default 0)\n"
     "  --quiet              print only warnings and errors\n"
     "  --list               list the built-in scenes and camera moves\n"
