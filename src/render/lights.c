@@ -25,8 +25,23 @@ static float lum3(const float c[3]) {
   return hush_luminance(c[0], c[1], c[2]);
 }
 
-/* Index i with cdf[i] <= u < cdf[i + 1], for a cdf of n + 1 entries from 0 to 1. */
-static uint32_t cdf_find(const float *cdf, uint32_t n, float u) {
+/* Index i with cdf[i] <= u < cdf[i + 1], for a cdf of n + 1 entries from 0
+ * to 1. guide[k] (see build_guide) is an index at or near the answer for
+ * u in [k/n, (k+1)/n): one or two cache lines are read instead of the
+ * dependent loads of a binary search, and the answer is the same. */
+static uint32_t cdf_find(const float *cdf, const uint32_t *guide, uint32_t n, float u) {
+  uint32_t k = (uint32_t)(u * (float)n);
+  if (k >= n) k = n - 1;
+  uint32_t lo = guide[k];
+  while (lo > 0 && cdf[lo] > u) lo--; /* in case u * n rounded up */
+  while (lo + 1 < n && cdf[lo + 1] <= u) lo++;
+  /* skip empty bins at the start of a run of equal values */
+  while (lo > 0 && cdf[lo + 1] == cdf[lo]) lo--;
+  return lo;
+}
+
+/* The same by binary search, for tables without a guide (triangle lights). */
+static uint32_t cdf_search(const float *cdf, uint32_t n, float u) {
   uint32_t lo = 0, hi = n;
   while (hi - lo > 1) {
     const uint32_t mid = (lo + hi) / 2;
@@ -35,10 +50,19 @@ static uint32_t cdf_find(const float *cdf, uint32_t n, float u) {
     else
       hi = mid;
   }
-  /* skip empty bins at the start of a run of equal values */
   while (lo + 1 < n && cdf[lo + 1] <= u) lo++;
   while (lo > 0 && cdf[lo + 1] == cdf[lo]) lo--;
   return lo;
+}
+
+/* guide[k] = the last i with cdf[i] <= k / n. */
+static void build_guide(const float *cdf, uint32_t n, uint32_t *guide) {
+  uint32_t i = 0;
+  for (uint32_t k = 0; k < n; k++) {
+    const float t = (float)k / (float)n;
+    while (i + 1 < n && cdf[i + 1] <= t) i++;
+    guide[k] = i;
+  }
 }
 
 /* Fills cdf[0..n] from weights; returns the total (0: cdf is uniform). */
@@ -120,6 +144,8 @@ void hush__envmap_free(hush_envmap *m) {
   free(m->rgb);
   free(m->row_cdf);
   free(m->col_cdf);
+  free(m->row_guide);
+  free(m->col_guide);
   memset(m, 0, sizeof *m);
 }
 
@@ -128,14 +154,20 @@ static hush_status envmap_tables(hush_device device, hush_envmap *m, const doubl
   const uint32_t W = m->width, H = m->height;
   m->row_cdf = malloc((H + 1) * sizeof(float));
   m->col_cdf = malloc((size_t)H * (W + 1) * sizeof(float));
+  m->row_guide = malloc(H * sizeof(uint32_t));
+  m->col_guide = malloc((size_t)H * W * sizeof(uint32_t));
   double *rows = malloc(H * sizeof(double));
-  if (!m->row_cdf || !m->col_cdf || !rows) {
+  if (!m->row_cdf || !m->col_cdf || !m->row_guide || !m->col_guide || !rows) {
     free(rows);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the environment map");
   }
-  for (uint32_t y = 0; y < H; y++)
-    rows[y] = build_cdf(w + (size_t)y * W, W, m->col_cdf + (size_t)y * (W + 1));
+  for (uint32_t y = 0; y < H; y++) {
+    float *cdf = m->col_cdf + (size_t)y * (W + 1);
+    rows[y] = build_cdf(w + (size_t)y * W, W, cdf);
+    build_guide(cdf, W, m->col_guide + (size_t)y * W);
+  }
   m->total = (float)build_cdf(rows, H, m->row_cdf);
+  build_guide(m->row_cdf, H, m->row_guide);
   free(rows);
   return HUSH_OK;
 }
@@ -210,9 +242,9 @@ float hush__envmap_pdf(const hush_envmap *m, hush_vec3 d) {
  * direction as drawn (looked up again, so eval and pdf agree exactly). */
 static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, float *pdf,
                                      const float **texel) {
-  const uint32_t y = cdf_find(m->row_cdf, m->height, u2);
+  const uint32_t y = cdf_find(m->row_cdf, m->row_guide, m->height, u2);
   const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
-  const uint32_t x = cdf_find(cc, m->width, u1);
+  const uint32_t x = cdf_find(cc, m->col_guide + (size_t)y * m->width, m->width, u1);
   /* where inside the bins the numbers fell, reused as the position in the texel */
   const float pr = m->row_cdf[y + 1] - m->row_cdf[y], pc = cc[x + 1] - cc[x];
   const float fy = pr > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u2 - m->row_cdf[y]) / pr)) : 0.5f;
@@ -650,7 +682,7 @@ uint32_t hush__lights_intersect_sphere(const hush_lights *L, hush_vec3 o, hush_v
 static int sample_triangle(const hush_lights *L, hush_vec3 p, float u0, float u1, float u2,
                            hush_light_sample *s) {
   const hush_scene *sc = L->scene;
-  const uint32_t i = cdf_find(L->tri_cdf, L->tri_count, u0);
+  const uint32_t i = cdf_search(L->tri_cdf, L->tri_count, u0);
   const uint32_t tri = L->tris[i];
   hush_vec3 c[3];
   triangle_corners(sc, tri, L->frame, c);

@@ -32,6 +32,8 @@ typedef struct hush_envmap {
   float *rgb;              /* width * height * 3, radiance (scale applied) */
   float *row_cdf;          /* height + 1 */
   float *col_cdf;          /* height * (width + 1) */
+  uint32_t *row_guide;     /* height: where to start looking in row_cdf for u in [k/h, (k+1)/h) */
+  uint32_t *col_guide;     /* height * width: the same for each row's col_cdf */
   float total;             /* sum of the weights (0: a black map) */
   float to_world[9];       /* local -> world rotation, row-major 3x3 */
 } hush_envmap;
