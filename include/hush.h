@@ -366,8 +366,9 @@ typedef enum hush_exr_type {
 
 /* Writes every layer to one EXR (ZIP compression) through a temporary file
  * renamed into place, so a failure never leaves a partial file. With
- * HUSH_EXR_HALF the "id", "depth" and "position" layers are still written
- * as float: ids must stay exact and half is too coarse for geometry. */
+ * HUSH_EXR_HALF the "id", "depth", "position" and "vis" layers are still
+ * written as float: ids and the visibility buffer's triangle indices must
+ * stay exact and half is too coarse for geometry and barycentrics. */
 HUSH_API hush_status hush_frame_write_exr(hush_frame frame, const char *path, hush_exr_type type);
 
 /* Display transform for pictures: radiance * 2^exposure, then tone mapping,

@@ -648,7 +648,9 @@ static int compare_channels(const void *a, const void *b) {
 
 /* Geometry that must stay exact is stored as float even in half files. */
 static int needs_float(const char *layer) {
-  return strcmp(layer, "id") == 0 || strcmp(layer, "depth") == 0 || strcmp(layer, "position") == 0;
+  /* vis holds triangle indices and barycentrics: half would scramble both */
+  return strcmp(layer, "id") == 0 || strcmp(layer, "depth") == 0 ||
+         strcmp(layer, "position") == 0 || strcmp(layer, "vis") == 0;
 }
 
 /* Lists the channels of every layer, sorted as EXR requires, and checks

@@ -7,8 +7,9 @@
  *   DIFFUSE     Lambert.
  *   PLASTIC     a dielectric coat (Fresnel of ior, scaled by Ks / F0(ior))
  *               over a Lambert base; smooth coat (alpha 0) is a delta lobe,
- *               else GGX. The base follows Mitsuba 0.5's plastic:
- *               Kd (1 - Fi)(1 - Fo) / (eta^2 (1 - Fdr_int)) / pi.
+ *               else GGX. The base follows Mitsuba 0.5's "nonlinear"
+ *               plastic (and Tungsten's):
+ *               Kd / (1 - Kd Fdr_int) (1 - Fi)(1 - Fo) / eta^2 / pi.
  *   CONDUCTOR   GGX with Schlick's Fresnel, F0 = Ks; alpha 0 is a mirror.
  *   DIELECTRIC  smooth glass: delta reflection / refraction chosen by Fresnel.
  *

@@ -218,8 +218,8 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
     float vsum[3] = {0.0f, 0.0f, 0.0f};
     if (h.kind == HUSH_FIRST_SKY) {
       float le[3];
-      hush__lights_env_radiance(L, d, le);
-      const float w = prev_delta ? 1.0f : power_heuristic(prev_pdf, hush__lights_env_pdf(L, d));
+      const float pdf_env = hush__lights_env_eval(L, d, le);
+      const float w = prev_delta ? 1.0f : power_heuristic(prev_pdf, pdf_env);
       add(it, out, vsum, beta, le, w, depth, direct);
       return;
     }

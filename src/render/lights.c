@@ -25,8 +25,23 @@ static float lum3(const float c[3]) {
   return hush_luminance(c[0], c[1], c[2]);
 }
 
-/* Index i with cdf[i] <= u < cdf[i + 1], for a cdf of n + 1 entries from 0 to 1. */
-static uint32_t cdf_find(const float *cdf, uint32_t n, float u) {
+/* Index i with cdf[i] <= u < cdf[i + 1], for a cdf of n + 1 entries from 0
+ * to 1. guide[k] (see build_guide) is an index at or near the answer for
+ * u in [k/n, (k+1)/n): one or two cache lines are read instead of the
+ * dependent loads of a binary search, and the answer is the same. */
+static uint32_t cdf_find(const float *cdf, const uint32_t *guide, uint32_t n, float u) {
+  uint32_t k = (uint32_t)(u * (float)n);
+  if (k >= n) k = n - 1;
+  uint32_t lo = guide[k];
+  while (lo > 0 && cdf[lo] > u) lo--; /* in case u * n rounded up */
+  while (lo + 1 < n && cdf[lo + 1] <= u) lo++;
+  /* skip empty bins at the start of a run of equal values */
+  while (lo > 0 && cdf[lo + 1] == cdf[lo]) lo--;
+  return lo;
+}
+
+/* The same by binary search, for tables without a guide (triangle lights). */
+static uint32_t cdf_search(const float *cdf, uint32_t n, float u) {
   uint32_t lo = 0, hi = n;
   while (hi - lo > 1) {
     const uint32_t mid = (lo + hi) / 2;
@@ -35,10 +50,19 @@ static uint32_t cdf_find(const float *cdf, uint32_t n, float u) {
     else
       hi = mid;
   }
-  /* skip empty bins at the start of a run of equal values */
   while (lo + 1 < n && cdf[lo + 1] <= u) lo++;
   while (lo > 0 && cdf[lo + 1] == cdf[lo]) lo--;
   return lo;
+}
+
+/* guide[k] = the last i with cdf[i] <= k / n. */
+static void build_guide(const float *cdf, uint32_t n, uint32_t *guide) {
+  uint32_t i = 0;
+  for (uint32_t k = 0; k < n; k++) {
+    const float t = (float)k / (float)n;
+    while (i + 1 < n && cdf[i + 1] <= t) i++;
+    guide[k] = i;
+  }
 }
 
 /* Fills cdf[0..n] from weights; returns the total (0: cdf is uniform). */
@@ -120,6 +144,8 @@ void hush__envmap_free(hush_envmap *m) {
   free(m->rgb);
   free(m->row_cdf);
   free(m->col_cdf);
+  free(m->row_guide);
+  free(m->col_guide);
   memset(m, 0, sizeof *m);
 }
 
@@ -128,14 +154,20 @@ static hush_status envmap_tables(hush_device device, hush_envmap *m, const doubl
   const uint32_t W = m->width, H = m->height;
   m->row_cdf = malloc((H + 1) * sizeof(float));
   m->col_cdf = malloc((size_t)H * (W + 1) * sizeof(float));
+  m->row_guide = malloc(H * sizeof(uint32_t));
+  m->col_guide = malloc((size_t)H * W * sizeof(uint32_t));
   double *rows = malloc(H * sizeof(double));
-  if (!m->row_cdf || !m->col_cdf || !rows) {
+  if (!m->row_cdf || !m->col_cdf || !m->row_guide || !m->col_guide || !rows) {
     free(rows);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the environment map");
   }
-  for (uint32_t y = 0; y < H; y++)
-    rows[y] = build_cdf(w + (size_t)y * W, W, m->col_cdf + (size_t)y * (W + 1));
+  for (uint32_t y = 0; y < H; y++) {
+    float *cdf = m->col_cdf + (size_t)y * (W + 1);
+    rows[y] = build_cdf(w + (size_t)y * W, W, cdf);
+    build_guide(cdf, W, m->col_guide + (size_t)y * W);
+  }
   m->total = (float)build_cdf(rows, H, m->row_cdf);
+  build_guide(m->row_cdf, H, m->row_guide);
   free(rows);
   return HUSH_OK;
 }
@@ -176,21 +208,16 @@ hush_status hush__envmap_build(hush_device device, hush_envmap *m, const float *
   return st;
 }
 
-void hush__envmap_eval(const hush_envmap *m, hush_vec3 d, float out[3]) {
-  float u, v;
-  uint32_t x, y;
-  hush__envmap_dir_to_uv(map_to_local(m, d), &u, &v);
-  texel_of(m, u, v, &x, &y);
-  memcpy(out, m->rgb + 3 * ((size_t)y * m->width + x), 3 * sizeof(float));
-}
-
-float hush__envmap_pdf(const hush_envmap *m, hush_vec3 d) {
-  if (!(m->total > 0.0f)) return 0.0f;
+/* The texel along world direction d, and the density (solid angle) with
+ * which envmap_sample draws d: one direction-to-texel conversion for both. */
+static float envmap_lookup(const hush_envmap *m, hush_vec3 d, const float **texel) {
   float u, v;
   uint32_t x, y;
   const hush_vec3 l = map_to_local(m, d);
   hush__envmap_dir_to_uv(l, &u, &v);
   texel_of(m, u, v, &x, &y);
+  *texel = m->rgb + 3 * ((size_t)y * m->width + x);
+  if (!(m->total > 0.0f)) return 0.0f;
   const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
   const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
   const float p_col = cc[x + 1] - cc[x];
@@ -200,18 +227,37 @@ float hush__envmap_pdf(const hush_envmap *m, hush_vec3 d) {
   return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
 }
 
-hush_vec3 hush__envmap_sample(const hush_envmap *m, float u1, float u2, float *pdf) {
-  const uint32_t y = cdf_find(m->row_cdf, m->height, u2);
+void hush__envmap_eval(const hush_envmap *m, hush_vec3 d, float out[3]) {
+  const float *texel;
+  envmap_lookup(m, d, &texel);
+  memcpy(out, texel, 3 * sizeof(float));
+}
+
+float hush__envmap_pdf(const hush_envmap *m, hush_vec3 d) {
+  const float *texel;
+  return envmap_lookup(m, d, &texel);
+}
+
+/* A direction drawn from the map; its density and texel are those of the
+ * direction as drawn (looked up again, so eval and pdf agree exactly). */
+static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, float *pdf,
+                                     const float **texel) {
+  const uint32_t y = cdf_find(m->row_cdf, m->row_guide, m->height, u2);
   const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
-  const uint32_t x = cdf_find(cc, m->width, u1);
+  const uint32_t x = cdf_find(cc, m->col_guide + (size_t)y * m->width, m->width, u1);
   /* where inside the bins the numbers fell, reused as the position in the texel */
   const float pr = m->row_cdf[y + 1] - m->row_cdf[y], pc = cc[x + 1] - cc[x];
   const float fy = pr > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u2 - m->row_cdf[y]) / pr)) : 0.5f;
   const float fx = pc > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u1 - cc[x]) / pc)) : 0.5f;
   const float u = ((float)x + fx) / (float)m->width, v = ((float)y + fy) / (float)m->height;
   const hush_vec3 d = map_to_world(m, hush__envmap_uv_to_dir(u, v));
-  *pdf = hush__envmap_pdf(m, d);
+  *pdf = envmap_lookup(m, d, texel);
   return d;
+}
+
+hush_vec3 hush__envmap_sample(const hush_envmap *m, float u1, float u2, float *pdf) {
+  const float *texel;
+  return envmap_sample_texel(m, u1, u2, pdf, &texel);
 }
 
 /* ---- sun and sky --------------------------------------------------------------------- */
@@ -221,18 +267,17 @@ static float perez(const float c[5], float cos_theta, float gamma, float cos_gam
          (1.0f + c[2] * expf(c[3] * gamma) + c[4] * cos_gamma * cos_gamma);
 }
 
-void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float T, float out[3]) {
-  out[0] = out[1] = out[2] = 0.0f;
-  if (d.y <= 0.0f) return; /* Mitsuba's sky is black below the horizon */
+void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float T) {
+  sky->sun_dir = sun_dir;
   const float ts = acosf(fminf(1.0f, fmaxf(-1.0f, sun_dir.y)));
-  const float cos_gamma = fminf(1.0f, fmaxf(-1.0f, hush_v3_dot(d, sun_dir)));
-  const float gamma = acosf(cos_gamma);
-  const float cY[5] = {0.1787f * T - 1.4630f, -0.3554f * T + 0.4275f, -0.0227f * T + 5.3251f,
-                       0.1206f * T - 2.5771f, -0.0670f * T + 0.3703f};
-  const float cx[5] = {-0.0193f * T - 0.2592f, -0.0665f * T + 0.0008f, -0.0004f * T + 0.2125f,
-                       -0.0641f * T - 0.8989f, -0.0033f * T + 0.0452f};
-  const float cy[5] = {-0.0167f * T - 0.2608f, -0.0950f * T + 0.0092f, -0.0079f * T + 0.2102f,
-                       -0.0441f * T - 1.6537f, -0.0109f * T + 0.0529f};
+  const float c[3][5] = {
+      {0.1787f * T - 1.4630f, -0.3554f * T + 0.4275f, -0.0227f * T + 5.3251f,
+       0.1206f * T - 2.5771f, -0.0670f * T + 0.3703f},
+      {-0.0193f * T - 0.2592f, -0.0665f * T + 0.0008f, -0.0004f * T + 0.2125f,
+       -0.0641f * T - 0.8989f, -0.0033f * T + 0.0452f},
+      {-0.0167f * T - 0.2608f, -0.0950f * T + 0.0092f, -0.0079f * T + 0.2102f,
+       -0.0441f * T - 1.6537f, -0.0109f * T + 0.0529f}};
+  memcpy(sky->coef, c, sizeof sky->coef);
   const float chi = (4.0f / 9.0f - T / 120.0f) * (L_PI - 2.0f * ts);
   const float Yz = fmaxf(0.0f, (4.0453f * T - 4.9710f) * tanf(chi) - 0.2155f * T + 2.4192f);
   const float t2 = ts * ts, t3 = t2 * ts;
@@ -242,10 +287,19 @@ void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float T, float out[3]) {
   const float yz = T * T * (0.00275f * t3 - 0.00610f * t2 + 0.00317f * ts) +
                    T * (-0.04214f * t3 + 0.08970f * t2 - 0.04153f * ts + 0.00516f) +
                    (0.15346f * t3 - 0.26756f * t2 + 0.06670f * ts + 0.26688f);
+  const float z[3] = {Yz, xz, yz};
   const float cos_ts = cosf(ts);
-  const float Y = Yz * perez(cY, d.y, gamma, cos_gamma) / perez(cY, 1.0f, ts, cos_ts);
-  const float x = xz * perez(cx, d.y, gamma, cos_gamma) / perez(cx, 1.0f, ts, cos_ts);
-  const float y = yz * perez(cy, d.y, gamma, cos_gamma) / perez(cy, 1.0f, ts, cos_ts);
+  for (int k = 0; k < 3; k++) sky->zenith[k] = z[k] / perez(sky->coef[k], 1.0f, ts, cos_ts);
+}
+
+void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  if (d.y <= 0.0f) return; /* Mitsuba's sky is black below the horizon */
+  const float cos_gamma = fminf(1.0f, fmaxf(-1.0f, hush_v3_dot(d, sky->sun_dir)));
+  const float gamma = acosf(cos_gamma);
+  const float Y = sky->zenith[0] * perez(sky->coef[0], d.y, gamma, cos_gamma);
+  const float x = sky->zenith[1] * perez(sky->coef[1], d.y, gamma, cos_gamma);
+  const float y = sky->zenith[2] * perez(sky->coef[2], d.y, gamma, cos_gamma);
   if (!(y > 0.0f)) return;
   /* kcd/m^2 -> Mitsuba's W / (m^2 sr nm) as RGB: 1000 / (683 lm/W * 106.857 nm) */
   const float Yu = Y * (1000.0f / (683.0f * 106.857f));
@@ -253,6 +307,12 @@ void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float T, float out[3]) {
   out[0] = fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
   out[1] = fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
   out[2] = fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
+}
+
+void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float T, float out[3]) {
+  hush_sky_model sky;
+  hush__sky_model_init(&sky, sun_dir, T);
+  hush__sky_model_eval(&sky, d, out);
 }
 
 /* Sun radiance after the atmosphere, as in Mitsuba's computeSunRadiance
@@ -286,13 +346,15 @@ static hush_status sky_build(hush_device device, hush_lights *L, const hush_envi
     hush__envmap_free(m);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the sky");
   }
+  hush__sky_model_init(&L->sky, L->sun_dir, env->turbidity);
+  L->sky_scale = env->sky_scale;
   double sum = 0.0;
   for (uint32_t y = 0; y < H; y++)
     for (uint32_t x = 0; x < W; x++) {
       const size_t i = (size_t)y * W + x;
       const hush_vec3 d = hush__envmap_uv_to_dir(((float)x + 0.5f) / W, ((float)y + 0.5f) / H);
       float *o = m->rgb + 3 * i;
-      hush__preetham_sky(d, L->sun_dir, env->turbidity, o);
+      hush__sky_model_eval(&L->sky, d, o);
       for (int k = 0; k < 3; k++) o[k] *= env->sky_scale;
       w[i] = (double)lum3(o) * sin(((double)y + 0.5) / H * 3.14159265358979);
       sum += w[i];
@@ -496,6 +558,18 @@ static int in_sun(const hush_lights *L, hush_vec3 d) {
   return L->env_type == HUSH_ENV_SUNSKY && hush_v3_dot(d, L->sun_dir) >= L->sun_cos_max;
 }
 
+static float sun_pdf(const hush_lights *L) {
+  return L->p_sun / cone_solid_angle(L->sun_cos_max, 1.0f - L->sun_cos_max * L->sun_cos_max);
+}
+
+/* Sky plus, inside the disc, the sun. */
+static void sunsky_radiance(const hush_lights *L, hush_vec3 d, int sun, float out[3]) {
+  hush__sky_model_eval(&L->sky, d, out);
+  for (int k = 0; k < 3; k++) out[k] *= L->sky_scale;
+  if (sun)
+    for (int k = 0; k < 3; k++) out[k] += L->sun_radiance[k];
+}
+
 void hush__lights_env_radiance(const hush_lights *L, hush_vec3 d, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   switch (L->env_type) {
@@ -506,10 +580,7 @@ void hush__lights_env_radiance(const hush_lights *L, hush_vec3 d, float out[3]) 
     hush__envmap_eval(&L->map, d, out);
     break;
   case HUSH_ENV_SUNSKY:
-    hush__preetham_sky(d, L->sun_dir, L->scene->env.turbidity, out);
-    for (int k = 0; k < 3; k++) out[k] *= L->scene->env.sky_scale;
-    if (in_sun(L, d))
-      for (int k = 0; k < 3; k++) out[k] += L->sun_radiance[k];
+    sunsky_radiance(L, d, in_sun(L, d), out);
     break;
   default:
     break;
@@ -522,11 +593,29 @@ float hush__lights_env_pdf(const hush_lights *L, hush_vec3 d) {
     return L->p_env / (4.0f * L_PI);
   case HUSH_ENV_MAP:
     return L->p_env * hush__envmap_pdf(&L->map, d);
+  case HUSH_ENV_SUNSKY:
+    return L->p_env * hush__envmap_pdf(&L->map, d) + (in_sun(L, d) ? sun_pdf(L) : 0.0f);
+  default:
+    return 0.0f;
+  }
+}
+
+float hush__lights_env_eval(const hush_lights *L, hush_vec3 d, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  const float *texel;
+  switch (L->env_type) {
+  case HUSH_ENV_CONSTANT:
+    memcpy(out, L->env_color, 3 * sizeof(float));
+    return L->p_env / (4.0f * L_PI);
+  case HUSH_ENV_MAP: {
+    const float pdf = envmap_lookup(&L->map, d, &texel);
+    memcpy(out, texel, 3 * sizeof(float));
+    return L->p_env * pdf;
+  }
   case HUSH_ENV_SUNSKY: {
-    float p = L->p_env * hush__envmap_pdf(&L->map, d);
-    if (in_sun(L, d))
-      p += L->p_sun / cone_solid_angle(L->sun_cos_max, 1.0f - L->sun_cos_max * L->sun_cos_max);
-    return p;
+    const int sun = in_sun(L, d);
+    sunsky_radiance(L, d, sun, out);
+    return L->p_env * envmap_lookup(&L->map, d, &texel) + (sun ? sun_pdf(L) : 0.0f);
   }
   default:
     return 0.0f;
@@ -593,7 +682,7 @@ uint32_t hush__lights_intersect_sphere(const hush_lights *L, hush_vec3 o, hush_v
 static int sample_triangle(const hush_lights *L, hush_vec3 p, float u0, float u1, float u2,
                            hush_light_sample *s) {
   const hush_scene *sc = L->scene;
-  const uint32_t i = cdf_find(L->tri_cdf, L->tri_count, u0);
+  const uint32_t i = cdf_search(L->tri_cdf, L->tri_count, u0);
   const uint32_t tri = L->tris[i];
   hush_vec3 c[3];
   triangle_corners(sc, tri, L->frame, c);
@@ -646,21 +735,32 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
     if (x < L->p_sphere[i]) return sample_sphere(L, i, p, u[1], u[2], s);
     x -= L->p_sphere[i];
   }
-  int sun = 0;
-  if (L->p_sun > 0.0f && (L->p_env <= 0.0f || x >= L->p_env)) sun = 1;
+  const int sun = L->p_sun > 0.0f && (L->p_env <= 0.0f || x >= L->p_env);
   if (L->p_env <= 0.0f && !sun) return 0;
-  if (sun) {
-    s->wi = sample_cone(L->sun_dir, L->sun_cos_max, u[1], u[2]);
-  } else if (L->env_type == HUSH_ENV_CONSTANT) {
-    const float z = 1.0f - 2.0f * u[1], r = sqrtf(fmaxf(0.0f, 1.0f - z * z));
-    const float phi = 2.0f * L_PI * u[2];
-    s->wi = hush_v3(r * cosf(phi), r * sinf(phi), z);
-  } else {
-    float pdf_map;
-    s->wi = hush__envmap_sample(&L->map, u[1], u[2], &pdf_map);
-  }
   s->dist = INFINITY;
-  s->pdf = hush__lights_env_pdf(L, s->wi);
-  hush__lights_env_radiance(L, s->wi, s->radiance);
+  if (sun || L->env_type == HUSH_ENV_CONSTANT) {
+    if (sun) {
+      s->wi = sample_cone(L->sun_dir, L->sun_cos_max, u[1], u[2]);
+    } else {
+      const float z = 1.0f - 2.0f * u[1], r = sqrtf(fmaxf(0.0f, 1.0f - z * z));
+      const float phi = 2.0f * L_PI * u[2];
+      s->wi = hush_v3(r * cosf(phi), r * sinf(phi), z);
+    }
+    s->pdf = hush__lights_env_eval(L, s->wi, s->radiance);
+    return s->pdf > 0.0f;
+  }
+  /* the map (or the tabulated sky): its density and texel come with the
+   * sample, so the direction is not converted back a second time */
+  float pdf_map;
+  const float *texel;
+  s->wi = envmap_sample_texel(&L->map, u[1], u[2], &pdf_map, &texel);
+  s->pdf = L->p_env * pdf_map;
+  if (L->env_type == HUSH_ENV_MAP) {
+    memcpy(s->radiance, texel, 3 * sizeof(float));
+  } else {
+    const int in = in_sun(L, s->wi);
+    sunsky_radiance(L, s->wi, in, s->radiance);
+    if (in) s->pdf += sun_pdf(L);
+  }
   return s->pdf > 0.0f;
 }

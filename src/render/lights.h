@@ -32,9 +32,20 @@ typedef struct hush_envmap {
   float *rgb;              /* width * height * 3, radiance (scale applied) */
   float *row_cdf;          /* height + 1 */
   float *col_cdf;          /* height * (width + 1) */
+  uint32_t *row_guide;     /* height: where to start looking in row_cdf for u in [k/h, (k+1)/h) */
+  uint32_t *col_guide;     /* height * width: the same for each row's col_cdf */
   float total;             /* sum of the weights (0: a black map) */
   float to_world[9];       /* local -> world rotation, row-major 3x3 */
 } hush_envmap;
+
+/* Preetham sky for one sun position and turbidity: everything of the model
+ * that does not depend on the view direction, computed once, so that an
+ * evaluation costs one acosf and six expf. */
+typedef struct hush_sky_model {
+  hush_vec3 sun_dir;       /* towards the sun (world) */
+  float coef[3][5];        /* Perez coefficients of Y, x and y */
+  float zenith[3];         /* Y, x, y at the zenith over the Perez value there */
+} hush_sky_model;
 
 typedef struct hush_lights {
   /* emissive triangles */
@@ -48,6 +59,8 @@ typedef struct hush_lights {
   float env_color[3];      /* CONSTANT */
   hush_envmap map;         /* MAP, or the sky of SUNSKY */
   hush_vec3 sun_dir;       /* SUNSKY: towards the sun (world) */
+  hush_sky_model sky;      /* SUNSKY: the sky (sky_scale not applied) */
+  float sky_scale;
   float sun_cos_max;       /* cosine of the (scaled) sun's angular radius */
   float sun_radiance[3];   /* radiance of the disc */
   float scene_radius;      /* for the power estimate of distant lights */
@@ -83,6 +96,9 @@ int hush__lights_sample(const hush_lights *lights, hush_vec3 p, const float u[3]
 
 /* Radiance of the environment (sky, map or constant, and the sun disc) along d. */
 void hush__lights_env_radiance(const hush_lights *lights, hush_vec3 d, float out[3]);
+/* Both at once: the radiance along d into out, and returns the density of
+ * hush__lights_env_pdf (one map lookup instead of two). */
+float hush__lights_env_eval(const hush_lights *lights, hush_vec3 d, float out[3]);
 /* The solid-angle density with which hush__lights_sample picks direction d
  * on the environment (sky and sun together). */
 float hush__lights_env_pdf(const hush_lights *lights, hush_vec3 d);
@@ -117,5 +133,7 @@ hush_vec3 hush__envmap_sample(const hush_envmap *map, float u1, float u2, float 
 /* Preetham sky radiance (linear sRGB, Mitsuba's spectral units, sky_scale
  * not applied) for a world direction d with the sun towards sun_dir. */
 void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float turbidity, float out[3]);
+void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float turbidity);
+void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]);
 
 #endif

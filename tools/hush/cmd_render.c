@@ -62,7 +62,7 @@ static const char *const help_text =
     "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
     "                       camera_matrices.h, the input of the published BMFR code\n"
-    "  --half               write half-float EXRs (depth, position and id stay float)\n"
+    "  --half               write half-float EXRs (depth, position, id, vis stay float)\n"
     "  --threads N          worker threads, 0 = one per core (default 0)\n"
     "  --quiet              print only warnings and errors (default: progress per\n"
     "                       frame on stderr: time, Mrays/s, time left)\n"

@@ -15,6 +15,7 @@ int cmd_synth(int argc, char **argv);
 int cmd_bench(int argc, char **argv);
 int cmd_render(int argc, char **argv);
 int cmd_eval(int argc, char **argv);
+int cmd_compare(int argc, char **argv);
 
 static const struct {
   const char *name;
@@ -28,6 +29,7 @@ static const struct {
     {"bench", cmd_bench, "time filters on synthetic frames in memory"},
     {"render", cmd_render, "path-trace a noisy frame sequence (or references) of a scene"},
     {"eval", cmd_eval, "compare filters against references: metrics, timings, report"},
+    {"compare", cmd_compare, "mean luminance ratio and RMSE of a render against a reference"},
 };
 
 #define COMMAND_COUNT (sizeof commands / sizeof commands[0])
