@@ -19,7 +19,7 @@ trap 'rm -rf "$out"' EXIT
 i=0
 while [ "$i" -lt "$repeats" ]; do
   "$hush" render --scene "$scene" --path path --size 1280x720 --frames "$frames" --spp 1 \
-    --out "$out/run" 2>&1 | awk '/^frame [0-9]+\/[0-9]+ / {print $3, $5}' >>"$out/times"
+    --out "$out/run" 2>&1 | awk '/^frame [0-9]+\/[0-9]+  render / {print $4, $6}' >>"$out/times"
   i=$((i + 1))
 done
 sort -n "$out/times" | awk -v scene="$scene" '
