@@ -13,6 +13,7 @@
 #include "hush.h"
 
 #include <stdint.h>
+#include <stdio.h>
 
 #define CLI_EXIT_RUNTIME 1
 #define CLI_EXIT_USAGE 2
@@ -113,5 +114,8 @@ void cli_layer_channels(const char *layer, int channels, char *buf, size_t size)
  */
 int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hush_frame frame,
                     const char *file);
+
+/* Writes s to f as a JSON string literal (quoted, escaped). */
+void cli_json_string(FILE *f, const char *s);
 
 #endif

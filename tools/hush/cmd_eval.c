@@ -760,23 +760,9 @@ static void write_summary(const eval_run *r, FILE *f) {
   }
 }
 
-static void json_string(FILE *f, const char *s) {
-  fputc('"', f);
-  for (; *s; s++) {
-    const unsigned char c = (unsigned char)*s;
-    if (c == '"' || c == '\\')
-      fprintf(f, "\\%c", c);
-    else if (c < 0x20)
-      fprintf(f, "\\u%04x", c);
-    else
-      fputc(c, f);
-  }
-  fputc('"', f);
-}
-
 static void write_json(const eval_run *r, FILE *f) {
   fputs("{\n  \"format\": \"hush-eval/1\",\n  \"seq\": ", f);
-  json_string(f, r->seq_dir);
+  cli_json_string(f, r->seq_dir);
   /* always a string, for people to read: ref_layer says where it came from */
   char ref[HUSH_PATH_MAX + 32];
   if (r->have_ref)
@@ -784,11 +770,11 @@ static void write_json(const eval_run *r, FILE *f) {
   else
     snprintf(ref, sizeof ref, "%s (layer ref)", r->seq_dir);
   fputs(",\n  \"ref\": ", f);
-  json_string(f, ref);
+  cli_json_string(f, ref);
   fprintf(f, ",\n  \"ref_layer\": \"%s\"", r->have_ref ? "color" : "ref");
   fputs(",\n  \"scene\": ", f);
   if (r->o->scene)
-    json_string(f, r->o->scene);
+    cli_json_string(f, r->o->scene);
   else
     fputs("null", f);
   if (r->o->scene) fprintf(f, ",\n  \"ref_spp\": %u", r->o->ref_spp);
@@ -796,13 +782,13 @@ static void write_json(const eval_run *r, FILE *f) {
           r->first, r->last, r->width, r->height);
   for (uint32_t k = 0; k < r->filter_count; k++) {
     if (k) fputs(", ", f);
-    json_string(f, r->filters[k].name);
+    cli_json_string(f, r->filters[k].name);
   }
   fprintf(f, "],\n  \"threads\": %d,\n  \"command\": [", r->threads);
-  json_string(f, "hush");
+  cli_json_string(f, "hush");
   for (int i = 0; i < r->argc; i++) {
     fputs(", ", f);
-    json_string(f, r->argv[i]);
+    cli_json_string(f, r->argv[i]);
   }
   fputs("]\n}\n", f);
 }

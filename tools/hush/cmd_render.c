@@ -287,21 +287,6 @@ static void progress(void *user, uint32_t done, uint32_t rows) {
   render_progress_rows(&r->progress, done, rows);
 }
 
-/* Writes a JSON string literal (escaped) to f. */
-static void json_string(FILE *f, const char *s) {
-  fputc('"', f);
-  for (; *s; s++) {
-    const unsigned char c = (unsigned char)*s;
-    if (c == '"' || c == '\\')
-      fprintf(f, "\\%c", c);
-    else if (c < 0x20)
-      fprintf(f, "\\u%04x", c);
-    else
-      fputc(c, f);
-  }
-  fputc('"', f);
-}
-
 static int write_render_json(render_run *r, int argc, char **argv, double seconds, uint64_t rays) {
   char path[HUSH_PATH_MAX], tmp[HUSH_PATH_MAX];
   if ((size_t)snprintf(path, sizeof path, "%s/render.json", r->o->out) >= sizeof path)
@@ -311,11 +296,11 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
   const hush_render_params *p = &r->o->params;
   static const char *const moves[] = {"path", "static", "orbit", "dolly"};
   fprintf(f, "{\n  \"format\": \"hush-render/1\",\n  \"scene\": ");
-  json_string(f, r->o->scene);
+  cli_json_string(f, r->o->scene);
   fprintf(f, ",\n  \"scene_name\": ");
-  json_string(f, r->scene.name);
+  cli_json_string(f, r->scene.name);
   fprintf(f, ",\n  \"camera\": ");
-  json_string(f, r->o->path && r->move == HUSH_MOVE_PATH && r->path == &r->file_path
+  cli_json_string(f, r->o->path && r->move == HUSH_MOVE_PATH && r->path == &r->file_path
                      ? r->o->path
                      : moves[r->move]);
   fprintf(f,
@@ -332,10 +317,10 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
           r->o->spp_fraction < 1.0 ? r->o->progressive.m : 1u,
           r->o->export_bmfr ? "\"bmfr\"" : "null", r->scene.triangle_count,
           r->scene.skipped_triangles, seconds, (unsigned long long)rays);
-  json_string(f, "hush");
+  cli_json_string(f, "hush");
   for (int i = 0; i < argc; i++) {
     fputs(", ", f);
-    json_string(f, argv[i]);
+    cli_json_string(f, argv[i]);
   }
   fprintf(f, "]\n}\n");
   const hush_status st = hush__atomic_commit(r->device, f, tmp, path);

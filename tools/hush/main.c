@@ -26,7 +26,7 @@ static const struct {
     {"denoise", cmd_denoise, "run a filter over a frame sequence"},
     {"convert", cmd_convert, "convert between EXR, PNG and PFM"},
     {"synth", cmd_synth, "write a synthetic noisy sequence with its reference"},
-    {"bench", cmd_bench, "time filters on synthetic frames in memory"},
+    {"bench", cmd_bench, "time filters on frames in memory (synthetic or rendered)"},
     {"render", cmd_render, "path-trace a noisy frame sequence (or references) of a scene"},
     {"eval", cmd_eval, "compare filters against references: metrics, timings, report"},
     {"compare", cmd_compare, "mean luminance ratio and RMSE of a render against a reference"},
