@@ -19,6 +19,7 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 
 #define T_PI 3.14159265358979
@@ -524,8 +525,41 @@ static void test_camera(void) {
   CHECK_NEAR(j0[0], 0.0, 1e-6);  /* halton(1, 2) = 0.5 */
 }
 
+/* The tabulated sky against the exact Preetham model over the upper
+ * hemisphere, for a high and a low sun and three turbidities: the largest
+ * relative error of the luminance and of each channel stays small. */
+static void test_sky_table(void) {
+  static hush_sky_table table;
+  const float suns[2][3] = {{-0.865804f, 0.416766f, -0.276929f}, {0.3f, 0.08f, 0.95f}};
+  const float turbidity[3] = {2.0f, 3.0f, 6.0f};
+  double worst_lum = 0.0, worst_rgb = 0.0;
+  for (int si = 0; si < 2; si++)
+    for (int ti = 0; ti < 3; ti++) {
+      hush_sky_model sky;
+      const hush_vec3 sun = hush_v3_normalize(hush_v3(suns[si][0], suns[si][1], suns[si][2]));
+      hush__sky_model_init(&sky, sun, turbidity[ti]);
+      hush__sky_table_init(&table, &sky);
+      for (uint32_t i = 0; i < 200000; i++) {
+        hush_vec3 d = uniform_sphere(rnd(40, i), rnd(41, i));
+        if (d.y < 0.0f) d.y = -d.y;
+        if (d.y <= 0.0f) continue;
+        float a[3], b[3];
+        hush__sky_model_eval(&sky, d, a);
+        hush__sky_table_eval(&table, d, b);
+        const double la = hush_luminance(a[0], a[1], a[2]), lb = hush_luminance(b[0], b[1], b[2]);
+        if (la > 0.0) worst_lum = fmax(worst_lum, fabs(lb / la - 1.0));
+        for (int k = 0; k < 3; k++)
+          if (a[k] > 1e-3f * (float)la) worst_rgb = fmax(worst_rgb, fabs(b[k] / a[k] - 1.0));
+      }
+    }
+  printf("sky table: max relative error %.2e (luminance), %.2e (channels)\n", worst_lum, worst_rgb);
+  CHECK_MSG(worst_lum < 1e-3, "sky table luminance error %g", worst_lum);
+  CHECK_MSG(worst_rgb < 1e-3, "sky table channel error %g", worst_rgb);
+}
+
 int main(void) {
   test_camera();
+  test_sky_table();
   test_bsdfs();
   test_envmap();
   test_furnace();

@@ -16,8 +16,8 @@
 #include <string.h>
 
 #define L_PI 3.14159265358979f
-#define SKY_WIDTH 512u
-#define SKY_HEIGHT 256u
+#define SKY_WIDTH 128u
+#define SKY_HEIGHT 64u
 /* Mitsuba's SUN_APP_RADIUS is the apparent diameter, 0.5358 degrees */
 #define SUN_HALF_ANGLE_DEG 0.2679f
 
@@ -292,6 +292,18 @@ void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float T) {
   for (int k = 0; k < 3; k++) sky->zenith[k] = z[k] / perez(sky->coef[k], 1.0f, ts, cos_ts);
 }
 
+/* Y, x, y (Perez times zenith values) to Mitsuba's RGB radiance. */
+static void sky_xyy_to_rgb(float Y, float x, float y, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  if (!(y > 0.0f)) return;
+  /* kcd/m^2 -> Mitsuba's W / (m^2 sr nm) as RGB: 1000 / (683 lm/W * 106.857 nm) */
+  const float Yu = Y * (1000.0f / (683.0f * 106.857f));
+  const float X = x / y * Yu, Z = (1.0f - x - y) / y * Yu;
+  out[0] = fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
+  out[1] = fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
+  out[2] = fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
+}
+
 void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   if (d.y <= 0.0f) return; /* Mitsuba's sky is black below the horizon */
@@ -300,13 +312,42 @@ void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]) 
   const float Y = sky->zenith[0] * perez(sky->coef[0], d.y, gamma, cos_gamma);
   const float x = sky->zenith[1] * perez(sky->coef[1], d.y, gamma, cos_gamma);
   const float y = sky->zenith[2] * perez(sky->coef[2], d.y, gamma, cos_gamma);
-  if (!(y > 0.0f)) return;
-  /* kcd/m^2 -> Mitsuba's W / (m^2 sr nm) as RGB: 1000 / (683 lm/W * 106.857 nm) */
-  const float Yu = Y * (1000.0f / (683.0f * 106.857f));
-  const float X = x / y * Yu, Z = (1.0f - x - y) / y * Yu;
-  out[0] = fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
-  out[1] = fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
-  out[2] = fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
+  sky_xyy_to_rgb(Y, x, y, out);
+}
+
+void hush__sky_table_init(hush_sky_table *t, const hush_sky_model *sky) {
+  const uint32_t n = HUSH_SKY_TABLE;
+  t->sun_dir = sky->sun_dir;
+  for (uint32_t i = 0; i <= n; i++) {
+    const double c = (double)i / n;                  /* cos theta */
+    const double s = (double)i / n;                  /* sin(gamma / 2) */
+    const double gamma = 2.0 * asin(s), cg = cos(gamma);
+    for (int k = 0; k < 3; k++) {
+      const float *cf = sky->coef[k];
+      t->theta[i][k] = (float)(sky->zenith[k] * (1.0 + cf[0] * exp(cf[1] / fmax(c, 1e-3))));
+      t->gamma[i][k] = (float)(1.0 + cf[2] * exp(cf[3] * gamma) + cf[4] * cg * cg);
+    }
+  }
+}
+
+/* Row a of a table at x in [0, 1], linearly interpolated. */
+static void table_lerp(const float (*tab)[3], float x, float out[3]) {
+  const float f = fminf(fmaxf(x, 0.0f), 1.0f) * (float)HUSH_SKY_TABLE;
+  uint32_t i = (uint32_t)f;
+  if (i >= HUSH_SKY_TABLE) i = HUSH_SKY_TABLE - 1;
+  const float w = f - (float)i;
+  for (int k = 0; k < 3; k++) out[k] = tab[i][k] + w * (tab[i + 1][k] - tab[i][k]);
+}
+
+void hush__sky_table_eval(const hush_sky_table *t, hush_vec3 d, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  if (d.y <= 0.0f) return;
+  const float cos_gamma = hush_v3_dot(d, t->sun_dir);
+  const float s = sqrtf(fmaxf(0.0f, 0.5f - 0.5f * cos_gamma));
+  float a[3], b[3];
+  table_lerp(t->theta, d.y, a);
+  table_lerp(t->gamma, s, b);
+  sky_xyy_to_rgb(a[0] * b[0], a[1] * b[1], a[2] * b[2], out);
 }
 
 void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float T, float out[3]) {
@@ -348,6 +389,13 @@ static hush_status sky_build(hush_device device, hush_lights *L, const hush_envi
   }
   hush__sky_model_init(&L->sky, L->sun_dir, env->turbidity);
   L->sky_scale = env->sky_scale;
+  L->sky_table = malloc(sizeof *L->sky_table);
+  if (!L->sky_table) {
+    free(w);
+    hush__envmap_free(m);
+    return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the sky");
+  }
+  hush__sky_table_init(L->sky_table, &L->sky);
   double sum = 0.0;
   for (uint32_t y = 0; y < H; y++)
     for (uint32_t x = 0; x < W; x++) {
@@ -495,6 +543,7 @@ void hush__lights_free(hush_lights *L) {
   free(L->tri_pmf);
   free(L->p_sphere);
   hush__envmap_free(&L->map);
+  free(L->sky_table);
   memset(L, 0, sizeof *L);
 }
 
@@ -564,7 +613,7 @@ static float sun_pdf(const hush_lights *L) {
 
 /* Sky plus, inside the disc, the sun. */
 static void sunsky_radiance(const hush_lights *L, hush_vec3 d, int sun, float out[3]) {
-  hush__sky_model_eval(&L->sky, d, out);
+  hush__sky_table_eval(L->sky_table, d, out);
   for (int k = 0; k < 3; k++) out[k] *= L->sky_scale;
   if (sun)
     for (int k = 0; k < 3; k++) out[k] += L->sun_radiance[k];
