@@ -557,8 +557,27 @@ static void test_sky_table(void) {
   CHECK_MSG(worst_rgb < 1e-3, "sky table channel error %g", worst_rgb);
 }
 
+/* hush__envmap_dir_to_uv's polynomial acos and atan2 against libm. */
+static void test_dir_to_uv(void) {
+  double worst = 0.0;
+  for (uint32_t i = 0; i < 400000; i++) {
+    const hush_vec3 d = uniform_sphere(rnd(42, i), rnd(43, i));
+    float u, v;
+    hush__envmap_dir_to_uv(d, &u, &v);
+    double eu = atan2((double)d.x, -(double)d.z) / (2.0 * T_PI);
+    if (eu < 0.0) eu += 1.0;
+    const double ev = acos(fmin(1.0, fmax(-1.0, (double)d.y))) / T_PI;
+    double du = fabs(u - eu);
+    if (du > 0.5) du = 1.0 - du; /* wrap-around at u = 0 */
+    worst = fmax(worst, fmax(du, fabs(v - ev)));
+  }
+  printf("dir_to_uv: max error %.2e\n", worst);
+  CHECK_MSG(worst < 1e-6, "dir_to_uv error %g", worst);
+}
+
 int main(void) {
   test_camera();
+  test_dir_to_uv();
   test_sky_table();
   test_bsdfs();
   test_envmap();

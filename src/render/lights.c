@@ -104,14 +104,51 @@ static float cone_solid_angle(float cos_max, float sin2_max) {
 
 /* ---- environment maps ------------------------------------------------------- */
 
+/* acos and atan2 to within a few 1e-8 rad (Abramowitz and Stegun 4.4.46
+ * and 4.4.49), about float precision: libm's acosf and atanf were ~5% of
+ * the render (every escaped ray and env sample finds its texel). A
+ * direction within ~1e-7 rad of a texel edge may land in the neighbour, as
+ * it already could by rounding. */
+static float acos_poly(float x) {
+  const float a = fabsf(x);
+  const float p =
+      1.5707963050f +
+      a * (-0.2145988016f +
+           a * (0.0889789874f +
+                a * (-0.0501743046f +
+                     a * (0.0308918810f +
+                          a * (-0.0170881256f + a * (0.0066700901f + a * -0.0012624911f))))));
+  const float r = sqrtf(fmaxf(0.0f, 1.0f - a)) * p;
+  return x < 0.0f ? L_PI - r : r;
+}
+
+static float atan2_poly(float y, float x) {
+  const float ax = fabsf(x), ay = fabsf(y);
+  const float hi = fmaxf(ax, ay), lo = fminf(ax, ay);
+  if (!(hi > 0.0f)) return 0.0f;
+  const float t = lo / hi, t2 = t * t;
+  float r = t * (1.0f +
+                 t2 * (-0.3333314528f +
+                       t2 * (0.1999355085f +
+                             t2 * (-0.1420889944f +
+                                   t2 * (0.1065626393f +
+                                         t2 * (-0.0752896400f +
+                                               t2 * (0.0429096138f +
+                                                     t2 * (-0.0161657367f +
+                                                           t2 * 0.0028662257f))))))));
+  if (ay > ax) r = 0.5f * L_PI - r;
+  if (x < 0.0f) r = L_PI - r;
+  return y < 0.0f ? -r : r;
+}
+
 void hush__envmap_dir_to_uv(hush_vec3 d, float *u, float *v) {
   /* Mitsuba 0.5's envmap.cpp: u = atan2(d.x, -d.z) / (2 pi) wrapped into
    * [0, 1), v = acos(d.y) / pi. (Not (1 + atan2 / pi) / 2, which turns the
    * map by 180 degrees: checked against living-room/TungstenRender.exr.) */
-  float a = atan2f(d.x, -d.z) / (2.0f * L_PI);
+  float a = atan2_poly(d.x, -d.z) / (2.0f * L_PI);
   if (a < 0.0f) a += 1.0f;
   *u = a < 1.0f ? a : 0.0f;
-  *v = acosf(fminf(1.0f, fmaxf(-1.0f, d.y))) / L_PI;
+  *v = acos_poly(fminf(1.0f, fmaxf(-1.0f, d.y))) / L_PI;
 }
 
 hush_vec3 hush__envmap_uv_to_dir(float u, float v) {
