@@ -245,6 +245,19 @@ hush_status hush__envmap_build(hush_device device, hush_envmap *m, const float *
   return st;
 }
 
+/* The density (solid angle) with which envmap_sample draws a direction in
+ * texel (x, y), at local polar cosine cos_t. */
+static float texel_pdf(const hush_envmap *m, uint32_t x, uint32_t y, float cos_t) {
+  if (!(m->total > 0.0f)) return 0.0f;
+  const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
+  const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
+  const float p_col = cc[x + 1] - cc[x];
+  const float sin_t = sqrtf(fmaxf(0.0f, 1.0f - cos_t * cos_t));
+  if (sin_t <= 0.0f) return 0.0f;
+  const float pdf_uv = p_row * p_col * (float)m->width * (float)m->height;
+  return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
+}
+
 /* The texel along world direction d, and the density (solid angle) with
  * which envmap_sample draws d: one direction-to-texel conversion for both. */
 static float envmap_lookup(const hush_envmap *m, hush_vec3 d, const float **texel) {
@@ -254,14 +267,7 @@ static float envmap_lookup(const hush_envmap *m, hush_vec3 d, const float **texe
   hush__envmap_dir_to_uv(l, &u, &v);
   texel_of(m, u, v, &x, &y);
   *texel = m->rgb + 3 * ((size_t)y * m->width + x);
-  if (!(m->total > 0.0f)) return 0.0f;
-  const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
-  const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
-  const float p_col = cc[x + 1] - cc[x];
-  const float sin_t = sqrtf(fmaxf(0.0f, 1.0f - l.y * l.y));
-  if (sin_t <= 0.0f) return 0.0f;
-  const float pdf_uv = p_row * p_col * (float)m->width * (float)m->height;
-  return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
+  return texel_pdf(m, x, y, l.y);
 }
 
 void hush__envmap_eval(const hush_envmap *m, hush_vec3 d, float out[3]) {
@@ -275,8 +281,9 @@ float hush__envmap_pdf(const hush_envmap *m, hush_vec3 d) {
   return envmap_lookup(m, d, &texel);
 }
 
-/* A direction drawn from the map; its density and texel are those of the
- * direction as drawn (looked up again, so eval and pdf agree exactly). */
+/* A direction drawn from the map, with the density and texel of the texel
+ * it was drawn in: no conversion of the direction back to a texel (that
+ * could only differ within rounding of a texel's edge). */
 static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, float *pdf,
                                      const float **texel) {
   const uint32_t y = cdf_find(m->row_cdf, m->row_guide, m->height, u2);
@@ -287,9 +294,10 @@ static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, f
   const float fy = pr > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u2 - m->row_cdf[y]) / pr)) : 0.5f;
   const float fx = pc > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u1 - cc[x]) / pc)) : 0.5f;
   const float u = ((float)x + fx) / (float)m->width, v = ((float)y + fy) / (float)m->height;
-  const hush_vec3 d = map_to_world(m, hush__envmap_uv_to_dir(u, v));
-  *pdf = envmap_lookup(m, d, texel);
-  return d;
+  const hush_vec3 l = hush__envmap_uv_to_dir(u, v);
+  *pdf = texel_pdf(m, x, y, l.y);
+  *texel = m->rgb + 3 * ((size_t)y * m->width + x);
+  return map_to_world(m, l);
 }
 
 hush_vec3 hush__envmap_sample(const hush_envmap *m, float u1, float u2, float *pdf) {
