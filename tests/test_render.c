@@ -19,6 +19,7 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <string.h>
 
 #define T_PI 3.14159265358979
@@ -524,8 +525,60 @@ static void test_camera(void) {
   CHECK_NEAR(j0[0], 0.0, 1e-6);  /* halton(1, 2) = 0.5 */
 }
 
+/* The tabulated sky against the exact Preetham model over the upper
+ * hemisphere, for a high and a low sun and three turbidities: the largest
+ * relative error of the luminance and of each channel stays small. */
+static void test_sky_table(void) {
+  static hush_sky_table table;
+  const float suns[2][3] = {{-0.865804f, 0.416766f, -0.276929f}, {0.3f, 0.08f, 0.95f}};
+  const float turbidity[3] = {2.0f, 3.0f, 6.0f};
+  double worst_lum = 0.0, worst_rgb = 0.0;
+  for (int si = 0; si < 2; si++)
+    for (int ti = 0; ti < 3; ti++) {
+      hush_sky_model sky;
+      const hush_vec3 sun = hush_v3_normalize(hush_v3(suns[si][0], suns[si][1], suns[si][2]));
+      hush__sky_model_init(&sky, sun, turbidity[ti]);
+      hush__sky_table_init(&table, &sky);
+      for (uint32_t i = 0; i < 200000; i++) {
+        hush_vec3 d = uniform_sphere(rnd(40, i), rnd(41, i));
+        if (d.y < 0.0f) d.y = -d.y;
+        if (d.y <= 0.0f) continue;
+        float a[3], b[3];
+        hush__sky_model_eval(&sky, d, a);
+        hush__sky_table_eval(&table, d, b);
+        const double la = hush_luminance(a[0], a[1], a[2]), lb = hush_luminance(b[0], b[1], b[2]);
+        if (la > 0.0) worst_lum = fmax(worst_lum, fabs(lb / la - 1.0));
+        for (int k = 0; k < 3; k++)
+          if (a[k] > 1e-3f * (float)la) worst_rgb = fmax(worst_rgb, fabs(b[k] / a[k] - 1.0));
+      }
+    }
+  printf("sky table: max relative error %.2e (luminance), %.2e (channels)\n", worst_lum, worst_rgb);
+  CHECK_MSG(worst_lum < 1e-3, "sky table luminance error %g", worst_lum);
+  CHECK_MSG(worst_rgb < 1e-3, "sky table channel error %g", worst_rgb);
+}
+
+/* hush__envmap_dir_to_uv's polynomial acos and atan2 against libm. */
+static void test_dir_to_uv(void) {
+  double worst = 0.0;
+  for (uint32_t i = 0; i < 400000; i++) {
+    const hush_vec3 d = uniform_sphere(rnd(42, i), rnd(43, i));
+    float u, v;
+    hush__envmap_dir_to_uv(d, &u, &v);
+    double eu = atan2((double)d.x, -(double)d.z) / (2.0 * T_PI);
+    if (eu < 0.0) eu += 1.0;
+    const double ev = acos(fmin(1.0, fmax(-1.0, (double)d.y))) / T_PI;
+    double du = fabs(u - eu);
+    if (du > 0.5) du = 1.0 - du; /* wrap-around at u = 0 */
+    worst = fmax(worst, fmax(du, fabs(v - ev)));
+  }
+  printf("dir_to_uv: max error %.2e\n", worst);
+  CHECK_MSG(worst < 1e-6, "dir_to_uv error %g", worst);
+}
+
 int main(void) {
   test_camera();
+  test_dir_to_uv();
+  test_sky_table();
   test_bsdfs();
   test_envmap();
   test_furnace();

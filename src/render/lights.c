@@ -16,8 +16,8 @@
 #include <string.h>
 
 #define L_PI 3.14159265358979f
-#define SKY_WIDTH 512u
-#define SKY_HEIGHT 256u
+#define SKY_WIDTH 128u
+#define SKY_HEIGHT 64u
 /* Mitsuba's SUN_APP_RADIUS is the apparent diameter, 0.5358 degrees */
 #define SUN_HALF_ANGLE_DEG 0.2679f
 
@@ -104,14 +104,51 @@ static float cone_solid_angle(float cos_max, float sin2_max) {
 
 /* ---- environment maps ------------------------------------------------------- */
 
+/* acos and atan2 to within a few 1e-8 rad (Abramowitz and Stegun 4.4.46
+ * and 4.4.49), about float precision: libm's acosf and atanf were ~5% of
+ * the render (every escaped ray and env sample finds its texel). A
+ * direction within ~1e-7 rad of a texel edge may land in the neighbour, as
+ * it already could by rounding. */
+static float acos_poly(float x) {
+  const float a = fabsf(x);
+  const float p =
+      1.5707963050f +
+      a * (-0.2145988016f +
+           a * (0.0889789874f +
+                a * (-0.0501743046f +
+                     a * (0.0308918810f +
+                          a * (-0.0170881256f + a * (0.0066700901f + a * -0.0012624911f))))));
+  const float r = sqrtf(fmaxf(0.0f, 1.0f - a)) * p;
+  return x < 0.0f ? L_PI - r : r;
+}
+
+static float atan2_poly(float y, float x) {
+  const float ax = fabsf(x), ay = fabsf(y);
+  const float hi = fmaxf(ax, ay), lo = fminf(ax, ay);
+  if (!(hi > 0.0f)) return 0.0f;
+  const float t = lo / hi, t2 = t * t;
+  float r = t * (1.0f +
+                 t2 * (-0.3333314528f +
+                       t2 * (0.1999355085f +
+                             t2 * (-0.1420889944f +
+                                   t2 * (0.1065626393f +
+                                         t2 * (-0.0752896400f +
+                                               t2 * (0.0429096138f +
+                                                     t2 * (-0.0161657367f +
+                                                           t2 * 0.0028662257f))))))));
+  if (ay > ax) r = 0.5f * L_PI - r;
+  if (x < 0.0f) r = L_PI - r;
+  return y < 0.0f ? -r : r;
+}
+
 void hush__envmap_dir_to_uv(hush_vec3 d, float *u, float *v) {
   /* Mitsuba 0.5's envmap.cpp: u = atan2(d.x, -d.z) / (2 pi) wrapped into
    * [0, 1), v = acos(d.y) / pi. (Not (1 + atan2 / pi) / 2, which turns the
    * map by 180 degrees: checked against living-room/TungstenRender.exr.) */
-  float a = atan2f(d.x, -d.z) / (2.0f * L_PI);
+  float a = atan2_poly(d.x, -d.z) / (2.0f * L_PI);
   if (a < 0.0f) a += 1.0f;
   *u = a < 1.0f ? a : 0.0f;
-  *v = acosf(fminf(1.0f, fmaxf(-1.0f, d.y))) / L_PI;
+  *v = acos_poly(fminf(1.0f, fmaxf(-1.0f, d.y))) / L_PI;
 }
 
 hush_vec3 hush__envmap_uv_to_dir(float u, float v) {
@@ -208,6 +245,19 @@ hush_status hush__envmap_build(hush_device device, hush_envmap *m, const float *
   return st;
 }
 
+/* The density (solid angle) with which envmap_sample draws a direction in
+ * texel (x, y), at local polar cosine cos_t. */
+static float texel_pdf(const hush_envmap *m, uint32_t x, uint32_t y, float cos_t) {
+  if (!(m->total > 0.0f)) return 0.0f;
+  const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
+  const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
+  const float p_col = cc[x + 1] - cc[x];
+  const float sin_t = sqrtf(fmaxf(0.0f, 1.0f - cos_t * cos_t));
+  if (sin_t <= 0.0f) return 0.0f;
+  const float pdf_uv = p_row * p_col * (float)m->width * (float)m->height;
+  return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
+}
+
 /* The texel along world direction d, and the density (solid angle) with
  * which envmap_sample draws d: one direction-to-texel conversion for both. */
 static float envmap_lookup(const hush_envmap *m, hush_vec3 d, const float **texel) {
@@ -217,14 +267,7 @@ static float envmap_lookup(const hush_envmap *m, hush_vec3 d, const float **texe
   hush__envmap_dir_to_uv(l, &u, &v);
   texel_of(m, u, v, &x, &y);
   *texel = m->rgb + 3 * ((size_t)y * m->width + x);
-  if (!(m->total > 0.0f)) return 0.0f;
-  const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
-  const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
-  const float p_col = cc[x + 1] - cc[x];
-  const float sin_t = sqrtf(fmaxf(0.0f, 1.0f - l.y * l.y));
-  if (sin_t <= 0.0f) return 0.0f;
-  const float pdf_uv = p_row * p_col * (float)m->width * (float)m->height;
-  return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
+  return texel_pdf(m, x, y, l.y);
 }
 
 void hush__envmap_eval(const hush_envmap *m, hush_vec3 d, float out[3]) {
@@ -238,8 +281,9 @@ float hush__envmap_pdf(const hush_envmap *m, hush_vec3 d) {
   return envmap_lookup(m, d, &texel);
 }
 
-/* A direction drawn from the map; its density and texel are those of the
- * direction as drawn (looked up again, so eval and pdf agree exactly). */
+/* A direction drawn from the map, with the density and texel of the texel
+ * it was drawn in: no conversion of the direction back to a texel (that
+ * could only differ within rounding of a texel's edge). */
 static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, float *pdf,
                                      const float **texel) {
   const uint32_t y = cdf_find(m->row_cdf, m->row_guide, m->height, u2);
@@ -250,9 +294,10 @@ static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, f
   const float fy = pr > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u2 - m->row_cdf[y]) / pr)) : 0.5f;
   const float fx = pc > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u1 - cc[x]) / pc)) : 0.5f;
   const float u = ((float)x + fx) / (float)m->width, v = ((float)y + fy) / (float)m->height;
-  const hush_vec3 d = map_to_world(m, hush__envmap_uv_to_dir(u, v));
-  *pdf = envmap_lookup(m, d, texel);
-  return d;
+  const hush_vec3 l = hush__envmap_uv_to_dir(u, v);
+  *pdf = texel_pdf(m, x, y, l.y);
+  *texel = m->rgb + 3 * ((size_t)y * m->width + x);
+  return map_to_world(m, l);
 }
 
 hush_vec3 hush__envmap_sample(const hush_envmap *m, float u1, float u2, float *pdf) {
@@ -292,6 +337,18 @@ void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float T) {
   for (int k = 0; k < 3; k++) sky->zenith[k] = z[k] / perez(sky->coef[k], 1.0f, ts, cos_ts);
 }
 
+/* Y, x, y (Perez times zenith values) to Mitsuba's RGB radiance. */
+static void sky_xyy_to_rgb(float Y, float x, float y, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  if (!(y > 0.0f)) return;
+  /* kcd/m^2 -> Mitsuba's W / (m^2 sr nm) as RGB: 1000 / (683 lm/W * 106.857 nm) */
+  const float Yu = Y * (1000.0f / (683.0f * 106.857f));
+  const float X = x / y * Yu, Z = (1.0f - x - y) / y * Yu;
+  out[0] = fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
+  out[1] = fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
+  out[2] = fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
+}
+
 void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   if (d.y <= 0.0f) return; /* Mitsuba's sky is black below the horizon */
@@ -300,13 +357,42 @@ void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]) 
   const float Y = sky->zenith[0] * perez(sky->coef[0], d.y, gamma, cos_gamma);
   const float x = sky->zenith[1] * perez(sky->coef[1], d.y, gamma, cos_gamma);
   const float y = sky->zenith[2] * perez(sky->coef[2], d.y, gamma, cos_gamma);
-  if (!(y > 0.0f)) return;
-  /* kcd/m^2 -> Mitsuba's W / (m^2 sr nm) as RGB: 1000 / (683 lm/W * 106.857 nm) */
-  const float Yu = Y * (1000.0f / (683.0f * 106.857f));
-  const float X = x / y * Yu, Z = (1.0f - x - y) / y * Yu;
-  out[0] = fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
-  out[1] = fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
-  out[2] = fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
+  sky_xyy_to_rgb(Y, x, y, out);
+}
+
+void hush__sky_table_init(hush_sky_table *t, const hush_sky_model *sky) {
+  const uint32_t n = HUSH_SKY_TABLE;
+  t->sun_dir = sky->sun_dir;
+  for (uint32_t i = 0; i <= n; i++) {
+    const double c = (double)i / n;                  /* cos theta */
+    const double s = (double)i / n;                  /* sin(gamma / 2) */
+    const double gamma = 2.0 * asin(s), cg = cos(gamma);
+    for (int k = 0; k < 3; k++) {
+      const float *cf = sky->coef[k];
+      t->theta[i][k] = (float)(sky->zenith[k] * (1.0 + cf[0] * exp(cf[1] / fmax(c, 1e-3))));
+      t->gamma[i][k] = (float)(1.0 + cf[2] * exp(cf[3] * gamma) + cf[4] * cg * cg);
+    }
+  }
+}
+
+/* Row a of a table at x in [0, 1], linearly interpolated. */
+static void table_lerp(const float (*tab)[3], float x, float out[3]) {
+  const float f = fminf(fmaxf(x, 0.0f), 1.0f) * (float)HUSH_SKY_TABLE;
+  uint32_t i = (uint32_t)f;
+  if (i >= HUSH_SKY_TABLE) i = HUSH_SKY_TABLE - 1;
+  const float w = f - (float)i;
+  for (int k = 0; k < 3; k++) out[k] = tab[i][k] + w * (tab[i + 1][k] - tab[i][k]);
+}
+
+void hush__sky_table_eval(const hush_sky_table *t, hush_vec3 d, float out[3]) {
+  out[0] = out[1] = out[2] = 0.0f;
+  if (d.y <= 0.0f) return;
+  const float cos_gamma = hush_v3_dot(d, t->sun_dir);
+  const float s = sqrtf(fmaxf(0.0f, 0.5f - 0.5f * cos_gamma));
+  float a[3], b[3];
+  table_lerp(t->theta, d.y, a);
+  table_lerp(t->gamma, s, b);
+  sky_xyy_to_rgb(a[0] * b[0], a[1] * b[1], a[2] * b[2], out);
 }
 
 void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float T, float out[3]) {
@@ -348,6 +434,13 @@ static hush_status sky_build(hush_device device, hush_lights *L, const hush_envi
   }
   hush__sky_model_init(&L->sky, L->sun_dir, env->turbidity);
   L->sky_scale = env->sky_scale;
+  L->sky_table = malloc(sizeof *L->sky_table);
+  if (!L->sky_table) {
+    free(w);
+    hush__envmap_free(m);
+    return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the sky");
+  }
+  hush__sky_table_init(L->sky_table, &L->sky);
   double sum = 0.0;
   for (uint32_t y = 0; y < H; y++)
     for (uint32_t x = 0; x < W; x++) {
@@ -495,6 +588,7 @@ void hush__lights_free(hush_lights *L) {
   free(L->tri_pmf);
   free(L->p_sphere);
   hush__envmap_free(&L->map);
+  free(L->sky_table);
   memset(L, 0, sizeof *L);
 }
 
@@ -564,7 +658,7 @@ static float sun_pdf(const hush_lights *L) {
 
 /* Sky plus, inside the disc, the sun. */
 static void sunsky_radiance(const hush_lights *L, hush_vec3 d, int sun, float out[3]) {
-  hush__sky_model_eval(&L->sky, d, out);
+  hush__sky_table_eval(L->sky_table, d, out);
   for (int k = 0; k < 3; k++) out[k] *= L->sky_scale;
   if (sun)
     for (int k = 0; k < 3; k++) out[k] += L->sun_radiance[k];

@@ -47,6 +47,20 @@ typedef struct hush_sky_model {
   float zenith[3];         /* Y, x, y at the zenith over the Perez value there */
 } hush_sky_model;
 
+/* The sky model as two 1D tables, for escaped rays and light samples: the
+ * Perez function is a product of a factor of cos(theta) (zenith scale
+ * included) and a factor of the angle gamma to the sun, each tabulated with
+ * HUSH_SKY_TABLE steps and interpolated linearly (no acos, no exp per
+ * lookup). The gamma factor is tabulated over t = sqrt((1 - cos gamma) / 2)
+ * = sin(gamma / 2), in which it is smooth near the sun. Max relative error
+ * against hush__sky_model_eval: see docs/renderer.md. */
+#define HUSH_SKY_TABLE 1024
+typedef struct hush_sky_table {
+  float theta[HUSH_SKY_TABLE + 1][3]; /* zenith[k] (1 + c0 exp(c1 / cos theta)), cos theta in [0, 1] */
+  float gamma[HUSH_SKY_TABLE + 1][3]; /* 1 + c2 exp(c3 gamma) + c4 cos^2 gamma, t in [0, 1] */
+  hush_vec3 sun_dir;
+} hush_sky_table;
+
 typedef struct hush_lights {
   /* emissive triangles */
   uint32_t tri_count;
@@ -60,6 +74,7 @@ typedef struct hush_lights {
   hush_envmap map;         /* MAP, or the sky of SUNSKY */
   hush_vec3 sun_dir;       /* SUNSKY: towards the sun (world) */
   hush_sky_model sky;      /* SUNSKY: the sky (sky_scale not applied) */
+  hush_sky_table *sky_table; /* SUNSKY: the same, tabulated (owned) */
   float sky_scale;
   float sun_cos_max;       /* cosine of the (scaled) sun's angular radius */
   float sun_radiance[3];   /* radiance of the disc */
@@ -135,5 +150,8 @@ hush_vec3 hush__envmap_sample(const hush_envmap *map, float u1, float u2, float 
 void hush__preetham_sky(hush_vec3 d, hush_vec3 sun_dir, float turbidity, float out[3]);
 void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float turbidity);
 void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]);
+/* The table of a model, and a lookup in it (what rendering uses). */
+void hush__sky_table_init(hush_sky_table *t, const hush_sky_model *sky);
+void hush__sky_table_eval(const hush_sky_table *t, hush_vec3 d, float out[3]);
 
 #endif

@@ -82,6 +82,9 @@ void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint
   out->variance = p->spp > 1 ? (float)(m2 / (p->spp - 1)) : 0.0f;
 }
 
+/* Tile edge in pixels (see hush__render_frame). */
+#define TILE 16u
+
 /* ---- G-buffer ------------------------------------------------------------------ */
 
 typedef struct layers {
@@ -233,24 +236,34 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
 
   const int threads = p->threads > 0 ? p->threads : hush_device_threads(device);
   const uint32_t H = p->height, W = p->width;
+  /* Square tiles instead of rows: neighbouring rays of a tile hit the same
+   * BVH nodes, triangles and texels, so they stay in cache. Every pixel's
+   * random numbers depend only on (x, y), so the order does not matter. */
+  const uint32_t tx = (W + TILE - 1) / TILE, ty = (H + TILE - 1) / TILE;
+  const uint32_t tiles = tx * ty;
   uint64_t total = 0;
-  uint32_t rows_done = 0;
+  uint32_t tiles_done = 0;
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads) reduction(+ : total)
-  for (uint32_t y = 0; y < H; y++) {
-    for (uint32_t x = 0; x < W; x++) {
-      if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) {
-        write_hole(ctx, &L, x, y);
-        continue;
+  for (uint32_t t = 0; t < tiles; t++) {
+    const uint32_t x0 = (t % tx) * TILE, y0 = (t / tx) * TILE;
+    const uint32_t x1 = x0 + TILE < W ? x0 + TILE : W, y1 = y0 + TILE < H ? y0 + TILE : H;
+    for (uint32_t y = y0; y < y1; y++)
+      for (uint32_t x = x0; x < x1; x++) {
+        if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) {
+          write_hole(ctx, &L, x, y);
+          continue;
+        }
+        hush_pixel_result r;
+        hush__render_pixel(ctx, x, y, ctx->frame, &r);
+        write_pixel(ctx, &L, x, y, &r);
+        total += r.rays;
       }
-      hush_pixel_result r;
-      hush__render_pixel(ctx, x, y, ctx->frame, &r);
-      write_pixel(ctx, &L, x, y, &r);
-      total += r.rays;
-    }
     uint32_t done;
 #pragma omp atomic capture
-    done = ++rows_done;
-    if (progress && omp_get_thread_num() == 0) progress(user, done, H);
+    done = ++tiles_done;
+    /* progress counts rows; a tile stands for its share of them */
+    if (progress && omp_get_thread_num() == 0)
+      progress(user, (uint32_t)((uint64_t)done * H / tiles), H);
   }
   if (progress) progress(user, H, H);
   if (rays) *rays = total;

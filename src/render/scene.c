@@ -34,6 +34,19 @@ typedef struct mask_data {
   const hush_texture *textures;
 } mask_data;
 
+/* Everything hush__scene_surface reads of one triangle, side by side: a hit
+ * then touches two cache lines instead of the ~10 scattered ones of the
+ * index, position, normal, uv, material and object arrays. Copies of the
+ * same floats, so the results are bit-identical. */
+typedef struct tri_record {
+  float p[3][3];
+  float n[3][3];           /* zero when the scene has no normals */
+  float uv[3][2];          /* zero when the scene has no uvs */
+  uint32_t material, object;
+  uint32_t pad[6];         /* 128 bytes: two whole cache lines */
+} tri_record;
+_Static_assert(sizeof(tri_record) == 128, "tri_record is two cache lines");
+
 typedef struct rtc_state {
   RTCDevice device;
   RTCScene top;
@@ -41,6 +54,7 @@ typedef struct rtc_state {
   float *vertices;       /* padded copies of the positions and indices: Embree */
   uint32_t *indices;     /* may read 16 bytes at the last element of a buffer  */
   mask_data *masks;      /* per object */
+  tri_record *records;   /* per triangle (64-byte aligned) */
   char error[512];       /* the first Embree error, for messages */
 } rtc_state;
 
@@ -62,6 +76,7 @@ static void rtc_state_free(rtc_state *rs, uint32_t object_count) {
   free(rs->vertices);
   free(rs->indices);
   free(rs->masks);
+  free(rs->records);
   free(rs);
 }
 
@@ -270,6 +285,19 @@ static hush_status attach_object(hush_device device, rtc_state *rs, hush_scene *
   return HUSH_OK;
 }
 
+/* Gathers triangle tri's data from the scene's arrays. */
+static void fill_record(const hush_scene *scene, uint32_t tri, tri_record *r) {
+  memset(r, 0, sizeof *r);
+  const uint32_t *ix = scene->indices + 3 * (size_t)tri;
+  for (int c = 0; c < 3; c++) {
+    memcpy(r->p[c], scene->positions + 3 * (size_t)ix[c], 3 * sizeof(float));
+    if (scene->normals) memcpy(r->n[c], scene->normals + 3 * (size_t)ix[c], 3 * sizeof(float));
+    if (scene->uvs) memcpy(r->uv[c], scene->uvs + 2 * (size_t)ix[c], 2 * sizeof(float));
+  }
+  r->material = scene->triangle_material[tri];
+  r->object = scene->triangle_object[tri];
+}
+
 static hush_status build(hush_device device, rtc_state *rs, hush_scene *scene) {
   char config[64];
   snprintf(config, sizeof config, "threads=%d", device ? device->threads : 0);
@@ -287,13 +315,16 @@ static hush_status build(hush_device device, rtc_state *rs, hush_scene *scene) {
   rs->masks = calloc(scene->object_count ? scene->object_count : 1, sizeof *rs->masks);
   scene->object_to_world =
       malloc((scene->object_count ? scene->object_count : 1) * 16 * sizeof(float));
-  if (!rs->vertices || !rs->indices || !rs->sub || !rs->masks || !scene->object_to_world)
+  rs->records = aligned_alloc(64, ((size_t)scene->triangle_count + 1) * sizeof *rs->records);
+  if (!rs->vertices || !rs->indices || !rs->sub || !rs->masks || !scene->object_to_world ||
+      !rs->records)
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "scene '%s': out of memory for Embree",
                       scene->name);
   if (nv) memcpy(rs->vertices, scene->positions, nv * sizeof *rs->vertices);
   memset(rs->vertices + nv, 0, 4 * sizeof *rs->vertices);
   if (ni) memcpy(rs->indices, scene->indices, ni * sizeof *rs->indices);
   memset(rs->indices + ni, 0, 4 * sizeof *rs->indices);
+  for (uint32_t t = 0; t < scene->triangle_count; t++) fill_record(scene, t, &rs->records[t]);
   scene->frame = 0;
   for (uint32_t o = 0; o < scene->object_count; o++)
     hush__scene_object_transform(scene, o, 0, scene->object_to_world + 16 * (size_t)o);
@@ -446,16 +477,22 @@ void hush__scene_surface(const hush_scene *scene, const hush_hit *hit, const flo
   memset(s, 0, sizeof *s);
   const uint32_t tri = hit->triangle;
   if (!scene || tri >= scene->triangle_count) return;
-  const uint32_t *ix = scene->indices + 3 * (size_t)tri;
+  /* the committed scene's record, or one gathered now */
+  const rtc_state *rs = scene->rtc_data;
+  tri_record local;
+  const tri_record *r = rs ? &rs->records[tri] : &local;
+  if (!rs) fill_record(scene, tri, &local);
   const float u = hit->u, v = hit->v, w = 1.0f - u - v;
-  const uint32_t object = scene->triangle_object[tri];
+  const uint32_t object = r->object;
   float tmp[16];
   const float *m = current_transform(scene, object, tmp);
   s->object = object;
-  s->material = scene->triangle_material[tri];
+  s->material = r->material;
   const hush_material *mat = &scene->materials[s->material];
 
-  const hush_vec3 p0 = vertex(scene, ix[0]), p1 = vertex(scene, ix[1]), p2 = vertex(scene, ix[2]);
+  const hush_vec3 p0 = hush_v3(r->p[0][0], r->p[0][1], r->p[0][2]);
+  const hush_vec3 p1 = hush_v3(r->p[1][0], r->p[1][1], r->p[1][2]);
+  const hush_vec3 p2 = hush_v3(r->p[2][0], r->p[2][1], r->p[2][2]);
   const hush_vec3 p = hush_v3_add(hush_v3_add(hush_v3_scale(p0, w), hush_v3_scale(p1, u)),
                                   hush_v3_scale(p2, v));
   s->p = xform_point(m, p);
@@ -463,9 +500,7 @@ void hush__scene_surface(const hush_scene *scene, const hush_hit *hit, const flo
                                                               hush_v3_sub(p2, p0))));
   hush_vec3 ns = ng;
   if (scene->normals) {
-    const float *n0 = scene->normals + 3 * (size_t)ix[0];
-    const float *n1 = scene->normals + 3 * (size_t)ix[1];
-    const float *n2 = scene->normals + 3 * (size_t)ix[2];
+    const float *n0 = r->n[0], *n1 = r->n[1], *n2 = r->n[2];
     const hush_vec3 n = hush_v3(w * n0[0] + u * n1[0] + v * n2[0],
                                 w * n0[1] + u * n1[1] + v * n2[1],
                                 w * n0[2] + u * n1[2] + v * n2[2]);
@@ -489,9 +524,7 @@ void hush__scene_surface(const hush_scene *scene, const hush_hit *hit, const flo
   s->ns = ns;
 
   if (scene->uvs) {
-    const float *t0 = scene->uvs + 2 * (size_t)ix[0];
-    const float *t1 = scene->uvs + 2 * (size_t)ix[1];
-    const float *t2 = scene->uvs + 2 * (size_t)ix[2];
+    const float *t0 = r->uv[0], *t1 = r->uv[1], *t2 = r->uv[2];
     s->uv[0] = w * t0[0] + u * t1[0] + v * t2[0];
     s->uv[1] = w * t0[1] + u * t1[1] + v * t2[1];
   }

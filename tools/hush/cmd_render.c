@@ -396,10 +396,10 @@ static int render_frames(render_run *r, int argc, char **argv) {
     hush__render_ctx_init(&ctx, &r->scene, &r->lights, &params, &cam, have_prev ? &prev : NULL, f);
     hush_frame frame = hush_frame_new(r->device, W, H);
     if (!frame) return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
-    const double start_ms = hush__now_ms();
+    const double start_ms = hush__now_ms(), start_cpu = hush__cpu_seconds();
     uint64_t rays = 0;
     st = hush__render_frame(r->device, &ctx, frame, progress, r, &rays);
-    const double ms = hush__now_ms() - start_ms;
+    const double ms = hush__now_ms() - start_ms, cpu = hush__cpu_seconds() - start_cpu;
     rays_total += rays;
     char path[HUSH_PATH_MAX];
     if (st == HUSH_OK) st = hush__sequence_frame_path(r->device, &r->seq, i, path, sizeof path);
@@ -419,7 +419,7 @@ static int render_frames(render_run *r, int argc, char **argv) {
     memcpy(c->world_to_view, cam.world_to_view, sizeof c->world_to_view);
     memcpy(c->view_to_clip, cam.view_to_clip, sizeof c->view_to_clip);
     memcpy(c->jitter, cam.jitter, sizeof c->jitter);
-    render_progress_frame_done(&r->progress, ms / 1000.0, rays);
+    render_progress_frame_done(&r->progress, ms / 1000.0, cpu, rays);
   }
   render_progress_break(&r->progress);
   st = hush__sequence_write_cameras(r->device, &r->seq);

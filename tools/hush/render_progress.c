@@ -71,16 +71,18 @@ void render_progress_rows(render_progress *p, uint32_t rows_done, uint32_t rows)
   report(p, text);
 }
 
-void render_progress_frame_done(render_progress *p, double render_seconds, uint64_t rays) {
+void render_progress_frame_done(render_progress *p, double render_seconds, double cpu_seconds,
+                                uint64_t rays) {
   if (p->quiet) return;
   const double now = hush__now_ms();
   const uint32_t done = p->frame + 1;
   const double per_frame = (now - p->start_ms) / 1000.0 / done;
   const double mrays = render_seconds > 0.0 ? (double)rays / (render_seconds * 1e6) : 0.0;
-  char left_text[32], text[160];
+  char left_text[32], cpu_text[32] = "", text[200];
   duration(per_frame * (double)(p->frames - done), left_text, sizeof left_text);
-  snprintf(text, sizeof text, "frame %u/%u  render %.3f s  %.2f Mrays/s  %.3f s/frame  %s left",
-           done, p->frames, render_seconds, mrays, per_frame, left_text);
+  if (cpu_seconds >= 0.0) snprintf(cpu_text, sizeof cpu_text, "  cpu %.3f s", cpu_seconds);
+  snprintf(text, sizeof text, "frame %u/%u  render %.3f s  %.2f Mrays/s  %.3f s/frame  %s left%s",
+           done, p->frames, render_seconds, mrays, per_frame, left_text, cpu_text);
   report(p, text);
 }
 

@@ -24,7 +24,11 @@ void render_progress_begin(render_progress *p, uint32_t frames, int tty, int qui
 void render_progress_frame_start(render_progress *p, uint32_t frame);
 /* rows_done of rows of the current frame (the renderer's progress callback). */
 void render_progress_rows(render_progress *p, uint32_t rows_done, uint32_t rows);
-void render_progress_frame_done(render_progress *p, double render_seconds, uint64_t rays);
+/* cpu_seconds: the process's CPU time for the frame's rendering (all
+ * threads), printed when >= 0: the figure that does not depend on how busy
+ * the machine is. */
+void render_progress_frame_done(render_progress *p, double render_seconds, double cpu_seconds,
+                                uint64_t rays);
 /* Ends an open terminal line, before other output and at the end. */
 void render_progress_break(render_progress *p);
 

@@ -139,7 +139,7 @@ int scene_frames_render(scene_frames *s, uint32_t i, const hush_render_params *p
     if (progress) render_progress_break(progress);
     return fail(s, st, "render");
   }
-  if (progress) render_progress_frame_done(progress, (hush__now_ms() - t0) / 1000.0, rays);
+  if (progress) render_progress_frame_done(progress, (hush__now_ms() - t0) / 1000.0, -1.0, rays);
   memcpy(camera->world_to_view, cam.world_to_view, sizeof camera->world_to_view);
   memcpy(camera->view_to_clip, cam.view_to_clip, sizeof camera->view_to_clip);
   memcpy(camera->jitter, cam.jitter, sizeof camera->jitter);
