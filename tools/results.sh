@@ -1,78 +1,127 @@
 #!/usr/bin/env bash
-# Writes docs/RESULTS.md from measurements taken now on this machine:
-# `hush bench` CSV for speed (1 and 2 threads, same run) and `hush denoise
-# --ref` on a synthetic sequence for quality. Nothing in the file is typed
-# by hand; rerun this after changing a filter.
-#   tools/results.sh [path/to/hush] [frames]
+# Writes docs/RESULTS.md from measurements taken on this machine. Nothing in
+# it is typed by hand: each part is measured and written to docs/results/,
+# and RESULTS.md is their concatenation, so a part can be re-measured alone
+# (the speed part wants a quiet machine, the scenes part takes long).
+#
+#   tools/results.sh [PART...]     PART: speed synthetic scenes render (default: all)
+#
+# Environment: HUSH (build/hush), BENCH_FRAMES (60); for the scenes part
+# SCENE_SIZE (640x360), SCENE_FRAMES (16), SCENE_REF_SPP (64); the scenes and
+# render parts need ../shared/scenes and are skipped without it.
 set -euo pipefail
-hush=${1:-build/hush}
-frames=${2:-60}
 # Pinned threads: on these VMs two unpinned OpenMP threads sometimes share a
 # core (papers/NOTES.md), which makes 2-thread timings meaningless.
 export OMP_PLACES=cores OMP_PROC_BIND=spread
 cd "$(dirname "$0")/.."
+hush=${HUSH:-build/hush}
+parts=${*:-speed synthetic scenes render}
+mkdir -p docs/results
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-
-cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')
 filters=$("$hush" filters --names | paste -sd, -)
+today=$(date -u +%Y-%m-%d)
 
-"$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 1 --csv "$work/t1.csv" >/dev/null
-"$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 2 --csv "$work/t2.csv" >/dev/null
-
-"$hush" synth --out "$work/seq" --size 640x360 --frames 48 --camera orbit --quiet
-"$hush" eval --seq "$work/seq" --filters "$filters" --out "$work/eval" --no-video --quiet >/dev/null
-
-render_line=""
-if [ -d ../shared/scenes/classroom ]; then
-  render_line=$(tools/bench-render.sh "$hush" ../shared/scenes/classroom 3 3)
-fi
-
-table() { # CSV -> Markdown rows: filter | stage | median | p5 | p95
+bench_table() { # bench CSV -> Markdown rows: filter | stage | median | p5 | p95
   tail -n +2 "$1" | awk -F, '{ printf "| `%s` | %s | %.2f | %.2f | %.2f |\n", $1, $2, $(NF-2), $(NF-1), $NF }'
 }
 
+summary_table() { # the table of a hush eval summary.md
+  sed -n '/^| filter/,/^$/p' "$1"
+}
+
+part_speed() {
+  local frames=${BENCH_FRAMES:-60}
+  "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 1 --csv "$work/t1.csv" >/dev/null
+  "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 2 --csv "$work/t2.csv" >/dev/null
+  {
+    echo "## Speed: \`hush bench --size 1280x720 --frames $frames\` ($today)"
+    echo
+    echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded."
+    echo
+    for t in 1 2; do
+      echo "### $t thread(s)"
+      echo
+      echo "| filter | stage | median | p5 | p95 |"
+      echo "|---|---|---|---|---|"
+      bench_table "$work/t$t.csv"
+      echo
+    done
+  } >docs/results/speed.md
+}
+
+part_synthetic() {
+  "$hush" synth --out "$work/seq" --size 640x360 --frames 48 --camera orbit --quiet
+  "$hush" eval --seq "$work/seq" --filters "$filters" --out "$work/eval" --no-video --quiet >/dev/null
+  {
+    echo "## Quality: synthetic orbit sequence, 640x360, 48 frames ($today)"
+    echo
+    echo "\`hush synth --size 640x360 --frames 48 --camera orbit\`, then \`hush eval --seq SEQ --filters $filters\`"
+    echo "against the exact expectation stored in each frame (the \`ref\` layer)."
+    echo
+    summary_table "$work/eval/summary.md"
+  } >docs/results/synthetic.md
+}
+
+part_scenes() {
+  [ -d ../shared/scenes ] || { echo "results: ../shared/scenes absent, scenes part skipped" >&2; return 0; }
+  local size=${SCENE_SIZE:-640x360} frames=${SCENE_FRAMES:-16} spp=${SCENE_REF_SPP:-64}
+  {
+    echo "## Quality: the shared scenes ($today)"
+    echo
+    echo "Each scene rendered at 1 spp (the papers' configuration: primary ray, one secondary ray, two"
+    echo "shadow rays) and at $spp spp as the reference (same cameras, jitter and bounce count, another"
+    echo "seed), then evaluated: $frames frames at $size, means over the frames. The filters' acceptance"
+    echo "runs (60+ frames, 1024-spp references) use this script with SCENE_FRAMES and SCENE_REF_SPP raised."
+    echo
+    for entry in classroom:path living-room:path sponza-dabrovic:orbit cornell-box:orbit; do
+      local name=${entry%%:*} move=${entry##*:}
+      "$hush" eval --scene "../shared/scenes/$name" --path "$move" --size "$size" --frames "$frames" \
+        --ref-spp "$spp" --filters "$filters" --no-video --quiet --out "$work/scene-$name" >/dev/null
+      echo "### $name"
+      echo
+      echo "\`hush eval --scene ../shared/scenes/$name --path $move --size $size --frames $frames --ref-spp $spp --filters $filters\`"
+      echo
+      summary_table "$work/scene-$name/summary.md"
+    done
+  } >"$work/scenes.md"
+  mv "$work/scenes.md" docs/results/scenes.md
+}
+
+part_render() {
+  [ -d ../shared/scenes/classroom ] || { echo "results: classroom absent, render part skipped" >&2; return 0; }
+  local line
+  line=$(tools/bench-render.sh "$hush" ../shared/scenes/classroom 3 3)
+  {
+    echo "## Renderer: 1 spp, 1 bounce, 1280x720, classroom camera path ($today)"
+    echo
+    echo "\`tools/bench-render.sh build/hush ../shared/scenes/classroom 3 3\` (render time, EXR writing excluded):"
+    echo
+    echo "    $line"
+    echo
+  } >docs/results/render.md
+}
+
+for p in $parts; do
+  case $p in
+    speed | synthetic | scenes | render) "part_$p" ;;
+    *) echo "results: unknown part '$p' (speed, synthetic, scenes, render)" >&2; exit 2 ;;
+  esac
+done
+
+cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')
 {
   echo "# Measured results"
   echo
-  echo "Written by \`tools/results.sh\` on $(date -u +%Y-%m-%d) — do not edit by hand."
+  echo "Written by \`tools/results.sh\` from the parts in \`docs/results/\` — do not edit by hand. Each"
+  echo "part carries the date it was measured."
   echo
-  echo "Machine: $cpu, $(nproc) cores, $(free -g | awk '/Mem:/ {print $2}') GiB. Shared and noisy: compare"
-  echo "ratios within one run."
+  echo "Machine: $cpu, $(nproc) cores, $(free -g | awk '/Mem:/ {print $2}') GiB, Debian 12. Shared and"
+  echo "noisy: compare ratios measured within one run."
   echo
-  echo "## Speed: \`hush bench --size 1280x720 --frames $frames\`"
-  echo
-  echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded."
-  echo
-  echo "### 1 thread"
-  echo
-  echo "| filter | stage | median | p5 | p95 |"
-  echo "|---|---|---|---|---|"
-  table "$work/t1.csv"
-  echo
-  echo "### 2 threads"
-  echo
-  echo "| filter | stage | median | p5 | p95 |"
-  echo "|---|---|---|---|---|"
-  table "$work/t2.csv"
-  echo
-  echo "## Quality: synthetic orbit sequence, 640x360, 48 frames"
-  echo
-  echo "\`hush synth --size 640x360 --frames 48 --camera orbit\`, then \`hush eval --seq SEQ --filters $filters\`"
-  echo "against the exact expectation stored in each frame (the \`ref\` layer). The shared scenes with"
-  echo "rendered references are still to come (issue 4)."
-  echo
-  sed -n '/^| filter/,/^$/p' "$work/eval/summary.md"
-  echo
-  echo "## Renderer: 1 spp, 1 bounce, 1280x720, classroom camera path"
-  echo
-  if [ -n "$render_line" ]; then
-    echo "\`tools/bench-render.sh build/hush ../shared/scenes/classroom 3 3\` (render time, EXR writing excluded):"
-    echo
-    echo "    $render_line"
-  else
-    echo "Not measured: ../shared/scenes/classroom is absent."
-  fi
-} > docs/RESULTS.md.tmp
+  for p in speed synthetic scenes render; do
+    [ -f "docs/results/$p.md" ] && { cat "docs/results/$p.md"; echo; }
+  done
+} >docs/RESULTS.md.tmp
 mv docs/RESULTS.md.tmp docs/RESULTS.md
-echo "wrote docs/RESULTS.md"
+echo "wrote docs/RESULTS.md ($parts)"
