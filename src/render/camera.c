@@ -280,3 +280,39 @@ hush_status hush__camera_path_load(hush_device device, const char *file, hush_ca
   }
   return st;
 }
+
+void hush__camera_move_init(hush_camera_move_setup *m, const hush_scene *scene,
+                            hush_camera_move move, const hush_camera_path *path, uint32_t width,
+                            uint32_t height, int jitter, uint32_t first_frame) {
+  m->scene = scene;
+  m->move = move;
+  m->path = path;
+  m->width = width;
+  m->height = height;
+  m->jitter = jitter;
+  hush_camera_pose pose;
+  int axis_x;
+  hush__camera_pose(scene, move, path, first_frame, &pose, &axis_x);
+  hush__camera_clip_range(scene, hush_v3(pose.position[0], pose.position[1], pose.position[2]),
+                          &m->z_near, &m->z_far);
+  /* margin: later frames' eyes may see a little more of the scene */
+  m->z_near *= 2.0f;
+  m->z_far *= 2.0f;
+}
+
+int hush__camera_move_frame(const hush_camera_move_setup *m, uint32_t frame, hush_render_camera *cam,
+                            hush_render_camera *prev, int *have_prev) {
+  hush_camera_pose pose;
+  int axis_x;
+  hush__camera_pose(m->scene, m->move, m->path, frame, &pose, &axis_x);
+  if (!hush__camera_setup(cam, &pose, axis_x, m->width, m->height, m->z_near, m->z_far, frame,
+                          m->jitter))
+    return 0;
+  *have_prev = 0;
+  if (frame > 0) {
+    hush__camera_pose(m->scene, m->move, m->path, frame - 1, &pose, &axis_x);
+    *have_prev = hush__camera_setup(prev, &pose, axis_x, m->width, m->height, m->z_near, m->z_far,
+                                    frame - 1, m->jitter);
+  }
+  return 1;
+}

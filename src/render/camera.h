@@ -60,6 +60,29 @@ int hush__camera_setup(hush_render_camera *cam, const hush_camera_pose *pose, in
                        uint32_t width, uint32_t height, float z_near, float z_far, uint32_t frame,
                        int jitter);
 
+/* A camera move over a sequence: one projection (near/far planes from the
+ * eye of the sequence's first frame, with margin) for every frame, so that
+ * inputs and references rendered separately get identical cameras. */
+typedef struct hush_camera_move_setup {
+  const hush_scene *scene;
+  hush_camera_move move;
+  const hush_camera_path *path; /* HUSH_MOVE_PATH; else may be NULL */
+  uint32_t width, height;
+  int jitter;
+  float z_near, z_far;
+} hush_camera_move_setup;
+
+/* Fills m for a sequence that starts at first_frame. */
+void hush__camera_move_init(hush_camera_move_setup *m, const hush_scene *scene,
+                            hush_camera_move move, const hush_camera_path *path, uint32_t width,
+                            uint32_t height, int jitter, uint32_t first_frame);
+
+/* The cameras of `frame` and of the frame before it (*have_prev = 0 at frame
+ * 0, or when that pose is degenerate). Returns 0 if this frame's pose is
+ * degenerate. */
+int hush__camera_move_frame(const hush_camera_move_setup *m, uint32_t frame, hush_render_camera *cam,
+                            hush_render_camera *prev, int *have_prev);
+
 /* Halton(2,3) point of frame (index frame % 16 + 1) minus 0.5: in (-0.5, 0.5). */
 void hush__camera_jitter(uint32_t frame, float jitter[2]);
 

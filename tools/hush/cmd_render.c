@@ -361,15 +361,8 @@ static int render_frames(render_run *r, int argc, char **argv) {
   params.height = H;
   params.threads = (int)o->threads;
   if (o->spp_fraction < 1.0) params.progressive = &o->progressive;
-  /* one projection for the whole sequence, from the first frame's eye */
-  hush_camera_pose pose;
-  int axis_x;
-  hush__camera_pose(&r->scene, r->move, r->path, o->first, &pose, &axis_x);
-  float z_near, z_far;
-  hush__camera_clip_range(&r->scene, hush_v3(pose.position[0], pose.position[1], pose.position[2]),
-                          &z_near, &z_far);
-  z_far *= 2.0f;
-  z_near *= 2.0f;
+  hush_camera_move_setup moves;
+  hush__camera_move_init(&moves, &r->scene, r->move, r->path, W, H, params.jitter, o->first);
 
   const double t0 = hush__now_ms();
   uint64_t rays_total = 0;
@@ -381,16 +374,11 @@ static int render_frames(render_run *r, int argc, char **argv) {
     if (st != HUSH_OK) return fail(r, st, "set frame");
     hush__lights_set_frame(&r->lights, f);
     hush_render_camera cam, prev;
-    hush__camera_pose(&r->scene, r->move, r->path, f, &pose, &axis_x);
-    if (!hush__camera_setup(&cam, &pose, axis_x, W, H, z_near, z_far, f, params.jitter)) {
+    int have_prev;
+    if (!hush__camera_move_frame(&moves, f, &cam, &prev, &have_prev)) {
       render_progress_break(&r->progress);
       return cli_error("render", "frame %u: degenerate camera (eye on target, or up along the view)",
                        f);
-    }
-    int have_prev = 0;
-    if (f > 0) {
-      hush__camera_pose(&r->scene, r->move, r->path, f - 1, &pose, &axis_x);
-      have_prev = hush__camera_setup(&prev, &pose, axis_x, W, H, z_near, z_far, f - 1, params.jitter);
     }
     hush_render_ctx ctx;
     hush__render_ctx_init(&ctx, &r->scene, &r->lights, &params, &cam, have_prev ? &prev : NULL, f);

@@ -86,14 +86,6 @@ int scene_frames_open(scene_frames *s, const char *cmd, hush_device device, cons
     fprintf(stderr, "hush %s: warning: scene '%s' has no light: the frames render black\n", cmd,
             s->scene.name);
   s->motion = moves_anything(&s->scene) ? HUSH_MOTION_VECTORS : HUSH_MOTION_CAMERA;
-  /* one projection for the whole sequence, from frame 0's eye (cmd_render.c) */
-  hush_camera_pose pose;
-  int axis_x;
-  hush__camera_pose(&s->scene, s->move, s->path, 0, &pose, &axis_x);
-  hush__camera_clip_range(&s->scene, hush_v3(pose.position[0], pose.position[1], pose.position[2]),
-                          &s->z_near, &s->z_far);
-  s->z_near *= 2.0f;
-  s->z_far *= 2.0f;
   return 0;
 }
 
@@ -112,20 +104,14 @@ int scene_frames_render(scene_frames *s, uint32_t i, const hush_render_params *p
   hush_status st = hush__scene_set_frame(s->device, &s->scene, i);
   if (st != HUSH_OK) return fail(s, st, "set frame");
   hush__lights_set_frame(&s->lights, i);
-  hush_camera_pose pose;
-  int axis_x;
   hush_render_camera cam, prev;
-  hush__camera_pose(&s->scene, s->move, s->path, i, &pose, &axis_x);
-  if (!hush__camera_setup(&cam, &pose, axis_x, s->width, s->height, s->z_near, s->z_far, i,
-                          p.jitter))
+  hush_camera_move_setup moves;
+  /* one projection for the whole sequence, from frame 0's eye, as hush render */
+  hush__camera_move_init(&moves, &s->scene, s->move, s->path, s->width, s->height, p.jitter, 0);
+  int have_prev;
+  if (!hush__camera_move_frame(&moves, i, &cam, &prev, &have_prev))
     return cli_error(s->cmd, "frame %u: degenerate camera (eye on target, or up along the view)",
                      i);
-  int have_prev = 0;
-  if (i > 0) {
-    hush__camera_pose(&s->scene, s->move, s->path, i - 1, &pose, &axis_x);
-    have_prev = hush__camera_setup(&prev, &pose, axis_x, s->width, s->height, s->z_near,
-                                   s->z_far, i - 1, p.jitter);
-  }
   hush_render_ctx ctx;
   hush__render_ctx_init(&ctx, &s->scene, &s->lights, &p, &cam, have_prev ? &prev : NULL, i);
   hush_frame frame = hush_frame_new(s->device, s->width, s->height);

@@ -29,7 +29,6 @@ typedef struct scene_frames {
   hush_camera_move move;
   uint32_t width, height;   /* resolved */
   uint32_t frames;          /* resolved: what the caller asked, or the path's length, or 16 */
-  float z_near, z_far;
   hush_motion_source motion; /* VECTORS when an object or sphere light moves */
 } scene_frames;
 
