@@ -328,6 +328,72 @@ static void test_sigma_n_general(hush_device dev) {
   hush_filter_release(f);
 }
 
+/* ---- taa ------------------------------------------------------------------ */
+
+static void test_taa_constant(hush_device dev, const char *cls) {
+  static scene s;
+  flat(&s, 0.7f, 0.2f, 3.0f, 2.5f);
+  hush_filter f = make(dev, cls, &s, 0);
+  if (strcmp(cls, "svgf") == 0) REQUIRE(hush_filter_set_bool(f, "taa", 1) == HUSH_OK);
+  for (int k = 0; k < 6; k++) {
+    run(f, (uint64_t)k);
+    CHECK_MSG(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f, "%s frame %d: %g", cls, k,
+              (double)max_abs_diff(s.output, s.color, N * 3));
+  }
+  hush_filter_release(f);
+}
+
+/* A bright half-plane whose edge moves 4 pixels a frame over a static
+ * background (the history stays where it was): away from the edge the 3x3
+ * box holds only the current value, so no trail of the old position may
+ * survive the clamp. */
+static void test_taa_ghosting(hush_device dev, const char *box) {
+  static scene s;
+  flat(&s, 0, 0, 0, 2.0f);
+  hush_filter f = make(dev, "taa", &s, 0);
+  REQUIRE(hush_filter_set_string(f, "box", box) == HUSH_OK);
+  float worst = 0.0f;
+  for (int k = 0; k < 8; k++) {
+    const int edge = 40 - 4 * k;
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++)
+        for (int c = 0; c < 3; c++) s.color[3 * (y * W + x) + c] = x < edge ? 1.0f : 0.0f;
+    run(f, (uint64_t)k);
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        if (x == edge - 1 || x == edge) continue; /* the box there holds both values */
+        const int i = 3 * (y * W + x);
+        const float d = fabsf(s.output[i] - s.color[i]);
+        worst = d > worst ? d : worst;
+      }
+  }
+  CHECK_MSG(worst <= 1e-5f, "taa (%s) ghosts: %g", box, (double)worst);
+  hush_filter_release(f);
+}
+
+/* Noise (a jittered signal) is smoothed over time: the output of a static
+ * noisy image converges towards the box-limited mean. */
+static void test_taa_smooths(hush_device dev) {
+  static scene s;
+  flat(&s, 0.5f, 0.5f, 0.5f, 2.0f);
+  hush_filter f = make(dev, "taa", &s, 0);
+  REQUIRE(hush_filter_set_bool(f, "tonemap", 0) == HUSH_OK);
+  double in_var = 0, out_var = 0;
+  for (int k = 0; k < 20; k++) {
+    for (int i = 0; i < N; i++) {
+      const float x = 0.5f + 0.2f * (rnd() - 0.5f);
+      for (int c = 0; c < 3; c++) s.color[3 * i + c] = x;
+    }
+    run(f, (uint64_t)k);
+  }
+  for (int i = 0; i < N; i++) {
+    in_var += (s.color[3 * i] - 0.5) * (s.color[3 * i] - 0.5);
+    out_var += (s.output[3 * i] - 0.5) * (s.output[3 * i] - 0.5);
+  }
+  CHECK_MSG(out_var < in_var / 3, "taa: in %g out %g", in_var / N, out_var / N);
+  hush_filter_release(f);
+}
+
 int main(void) {
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);
@@ -339,6 +405,12 @@ int main(void) {
   test_half(dev);
   test_misuse(dev);
   test_sigma_n_general(dev);
+  test_taa_constant(dev, "taa");
+  test_taa_constant(dev, "svgf");
+  test_taa_ghosting(dev, "clamp");
+  test_taa_ghosting(dev, "clip");
+  test_taa_smooths(dev);
+  test_determinism("taa");
   hush_device_release(dev);
   return check_summary();
 }

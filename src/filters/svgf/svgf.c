@@ -7,7 +7,9 @@
  *   is short -> edge-avoiding a-trous (5x5 B3 kernel, step 2^i), guided by
  *   depth (with its screen-space gradient), normal and luminance (scaled by
  *   the 3x3-blurred variance), the variance filtered along with squared
- *   weights -> the first level fed back as the colour history -> remodulate.
+ *   weights -> the first level fed back as the colour history -> remodulate
+ *   -> optionally TAA (src/temporal/taa.h, parameter "taa"; off by default,
+ *   the "taa" filter can also follow svgf).
  *
  * Follows Dundr 2018 §4.1.4-4.1.5 (a-trous, weights, variance propagation)
  * and §4.4 (spatial variance while history < 4 frames), with the published
@@ -22,6 +24,7 @@
 #include "filters/filter.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
+#include "temporal/taa.h"
 
 #include <math.h>
 #include <omp.h>
@@ -52,6 +55,8 @@ enum {
   P_SIGMA_L,
   P_SPATIAL_VARIANCE_FRAMES,
   P_FEEDBACK_FIRST_LEVEL,
+  P_TAA,
+  P_TAA_ALPHA,
   P_COUNT
 };
 
@@ -91,6 +96,12 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"feedback_first_level", HUSH_PARAM_BOOL, 1, 0, 1,
      "the first a-trous level becomes the next frame's colour history (else the accumulation)",
      NULL},
+    {"taa", HUSH_PARAM_BOOL, 0, 0, 1,
+     "finish with temporal anti-aliasing of the remodulated output (as the 'taa' filter: 3x3 "
+     "YCoCg clamp, tone-mapped); off by default so that svgf alone can be compared",
+     NULL},
+    {"taa_alpha", HUSH_PARAM_FLOAT, 0.1, 0.01, 1.0,
+     "with taa: weight of the current frame in the TAA blend", NULL},
 };
 
 enum {
@@ -150,6 +161,7 @@ typedef struct svgf_state {
   hush_planar albedo;
   hush_planar position;
   hush_planar motion;
+  hush_taa taa; /* its planes allocated when "taa" is first on */
 } svgf_state;
 
 /* Row accumulators of the a-trous: weight, colour (3), variance, and the
@@ -171,6 +183,7 @@ static void svgf_destroy(void *state) {
   hush__planar_free(&st->albedo);
   hush__planar_free(&st->position);
   hush__planar_free(&st->motion);
+  hush__taa_free(&st->taa);
   free(st);
 }
 
@@ -537,12 +550,17 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
   const int with_id = hush__param_i(f, P_USE_ID) && hush__filter_view(f, I_ID);
   const int use_motion = has_motion && info->motion == HUSH_MOTION_VECTORS;
+  const int with_taa = hush__param_i(f, P_TAA);
+  if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
 
   /* ---- import: nothing of the history changes until every input is read */
   if (has_position && (s = ensure(f, &st->position, 3))) return s;
   if (use_motion && (s = ensure(f, &st->motion, 2))) return s;
   if (demod && (s = ensure(f, &st->albedo, 3))) return s;
   if (with_id && (s = hush__reprojector_want_id(f->device, &st->rp))) return s;
+  if (with_taa && !st->taa.current.plane[0] &&
+      (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
+    return s;
 
   hush_gbuffer_store *g = hush__reprojector_next(&st->rp);
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
@@ -626,6 +644,15 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
+  if (with_taa) {
+    /* the paper's order: remodulate, then TAA on the final radiance */
+    hush_taa_params tp;
+    tp.alpha = hush__param_f(f, P_TAA_ALPHA);
+    tp.box = HUSH_TAA_CLAMP;
+    tp.tonemap = 1;
+    hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
+    rgb = *hush__taa_output(&st->taa);
+  }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
   if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
