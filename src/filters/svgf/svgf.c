@@ -87,7 +87,7 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"sigma_z", HUSH_PARAM_FLOAT, 1.0, 1e-6, 1e6,
      "depth weight exp(-|z_p - z_q| / (sigma_z |grad z . (p - q)| + eps))", NULL},
     {"sigma_n", HUSH_PARAM_FLOAT, 128.0, 0.0, 1024.0,
-     "normal weight max(0, n_p . n_q)^sigma_n (powers of two are computed by squaring)", NULL},
+     "normal weight max(0, n_p . n_q)^sigma_n", NULL},
     {"sigma_l", HUSH_PARAM_FLOAT, 4.0, 1e-6, 1e6,
      "luminance weight exp(-|l_p - l_q| / (sigma_l sqrt(g3x3(var_p)) + eps))", NULL},
     {"spatial_variance_frames", HUSH_PARAM_INT, 4, 0, 65535,
@@ -226,9 +226,13 @@ static inline float albedo_clamped(float a) {
 /* e^x for x <= 0 (larger x is not needed), branch-free so loops over it
  * vectorise without -ffast-math: 2^n * 2^f with n = round(x log2 e),
  * |f| <= 1/2 and a degree-6 Taylor polynomial of 2^f (relative error about
- * 1e-7). Far below -87 it returns 0 (2^-126 and less would be subnormal). */
+ * 1e-7). Below -20 it returns exactly 0: such a tap weighs under 2e-9 of
+ * the centre's, and tiny weights (squared for the variance) would
+ * otherwise make subnormal numbers, which cost x86 a microcode assist each
+ * (measured: 3x slower a-trous on frames with background). */
 static inline float exp_neg(float x) {
-  x = hush__select_bits(x > -87.0f, x, -87.0f);
+  const int keep = x > -20.0f;
+  x = hush__select_bits(keep, x, -20.0f);
   const float t = x * 1.44269504f;
   const float n = hush__floorf_vec(t + 0.5f);
   const float f = (t - n) * 0.693147181f; /* 2^(t-n) = e^f */
@@ -237,7 +241,27 @@ static inline float exp_neg(float x) {
   const int32_t bits = ((int32_t)n + 127) << 23;
   float scale;
   memcpy(&scale, &bits, sizeof scale);
-  return p * scale;
+  return hush__select_bits(keep, p * scale, 0.0f);
+}
+
+/* ln(d) for d > 0 (d <= 0 is taken as 1e-30), branch-free like exp_neg:
+ * d = m 2^e with m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh(s), s = (m-1)/(m+1),
+ * |s| < 0.172, by its series to s^9 (absolute error below 1e-9). It lets
+ * the normal weight max(0, dot)^sigma_n join the one exp of the tap. */
+static inline float log_pos(float d) {
+  d = hush__select_bits(d > 1e-30f, d, 1e-30f);
+  int32_t bits;
+  memcpy(&bits, &d, sizeof bits);
+  float e = (float)((bits >> 23) - 127);
+  const int32_t mbits = (bits & 0x007fffff) | 0x3f800000;
+  float m;
+  memcpy(&m, &mbits, sizeof m);
+  const int big = m > 1.41421356f;
+  m = hush__select_bits(big, 0.5f * m, m);
+  e = hush__select_bits(big, e + 1.0f, e);
+  const float sv = (m - 1.0f) / (m + 1.0f), s2 = sv * sv;
+  const float series = 1.0f + s2 * (1.0f / 3 + s2 * (1.0f / 5 + s2 * (1.0f / 7 + s2 * (1.0f / 9))));
+  return e * 0.693147181f + 2.0f * sv * series;
 }
 
 /* ---- demodulation ---------------------------------------------------------- */
@@ -297,22 +321,14 @@ typedef struct guide {
   const float *z, *gx, *gy;
   const float *n[3];
   float sigma_z, sigma_n;
-  int n_squarings; /* sigma_n = 2^n_squarings, or -1: powf */
 } guide;
-
-static inline float normal_weight(const guide *g, float d) {
-  d = d > 0.0f ? d : 0.0f;
-  if (g->n_squarings < 0) return powf(d, g->sigma_n);
-  for (int k = 0; k < g->n_squarings; k++) d *= d;
-  return d;
-}
 
 /* Depth and normal weight (no luminance) of q seen from p, offset (dx, dy). */
 static inline float geometry_weight(const guide *g, size_t p, size_t q, float dx, float dy) {
   const float dz = fabsf(g->z[p] - g->z[q]);
   const float dd = g->sigma_z * fabsf(g->gx[p] * dx + g->gy[p] * dy) + SVGF_EPS_Z;
   const float dn = g->n[0][p] * g->n[0][q] + g->n[1][p] * g->n[1][q] + g->n[2][p] * g->n[2][q];
-  return exp_neg(-dz / dd) * normal_weight(g, dn);
+  return exp_neg(g->sigma_n * log_pos(dn) - dz / dd);
 }
 
 /* var = max(0, m2 - m1^2) from the temporal moments (already there), except
@@ -385,28 +401,11 @@ typedef struct atrous_row {
   int ix;                         /* tap offset in x, pixels */
 } atrous_row;
 
-/* max(0, d)^(2^k) by k squarings, for k <= 10: a fixed count of selects so
- * that the loop around it vectorises. */
-static HUSH_ALWAYS_INLINE float pow2k(float d, int k) {
-  d = hush__select_bits(d > 0.0f, d, 0.0f);
-  d = hush__select_bits(0 < k, d * d, d);
-  d = hush__select_bits(1 < k, d * d, d);
-  d = hush__select_bits(2 < k, d * d, d);
-  d = hush__select_bits(3 < k, d * d, d);
-  d = hush__select_bits(4 < k, d * d, d);
-  d = hush__select_bits(5 < k, d * d, d);
-  d = hush__select_bits(6 < k, d * d, d);
-  d = hush__select_bits(7 < k, d * d, d);
-  d = hush__select_bits(8 < k, d * d, d);
-  d = hush__select_bits(9 < k, d * d, d);
-  return d;
-}
-
 /* Adds the taps (x + ix, tap row) of pixels x in [x0, x1) of the p row; with
- * clamp the tap column is clamped to the image. `general` (a constant at
- * each call) picks powf for a sigma_n that is no power of two. */
-static HUSH_ALWAYS_INLINE void atrous_span(const atrous_row *r, int x0, int x1, int W, int clamp,
-                                           int general) {
+ * clamp (a constant at each call) the tap column is clamped to the image.
+ * One exp per tap: exp(-dz/dd - dl/dl_max + sigma_n ln(dot)). */
+static HUSH_ALWAYS_INLINE void atrous_span(const atrous_row *r, int x0, int x1, int W,
+                                           int clamp) {
   const guide *g = r->g;
   /* unclamped: the tap rows are addressed from x + ix, so every access in
    * the loop is p[x], a plain vector load */
@@ -424,15 +423,16 @@ static HUSH_ALWAYS_INLINE void atrous_span(const atrous_row *r, int x0, int x1, 
   float *restrict sw = r->sw, *restrict s0 = r->sc[0], *restrict s1 = r->sc[1],
                   *restrict s2 = r->sc[2], *restrict sv = r->sv;
   const float h = r->h, dx = r->dx, dy = r->dy, sigma_z = g->sigma_z, sigma_n = g->sigma_n;
-  const int k = g->n_squarings, ix = r->ix;
+  const int ix = r->ix;
+  /* every x is independent (the accumulators are indexed by x) */
+#pragma omp simd
   for (int x = x0; x < x1; x++) {
     const int q = clamp ? clampi(x + ix, 0, W - 1) : x;
     const float dz = fabsf(zp[x] - zq[q]);
     const float dd = sigma_z * fabsf(gx[x] * dx + gy[x] * dy) + SVGF_EPS_Z;
     const float dl = fabsf(lp[x] - lq[q]);
     const float dn = n0p[x] * n0q[q] + n1p[x] * n1q[q] + n2p[x] * n2q[q];
-    const float wn = general ? powf(dn > 0.0f ? dn : 0.0f, sigma_n) : pow2k(dn, k);
-    const float w = h * exp_neg(-dz / dd - dl * inv_l[x]) * wn;
+    const float w = h * exp_neg(sigma_n * log_pos(dn) - dz / dd - dl * inv_l[x]);
     sw[x] += w;
     s0[x] += w * c0[q];
     s1[x] += w * c1[q];
@@ -448,15 +448,9 @@ static void atrous_tap_row(const atrous_row *r, int W) {
   int xb = r->ix > 0 ? W - r->ix : W;
   xa = xa < W ? xa : W;
   xb = xb > xa ? xb : xa;
-  if (r->g->n_squarings < 0) {
-    atrous_span(r, 0, xa, W, 1, 1);
-    atrous_span(r, xa, xb, W, 0, 1);
-    atrous_span(r, xb, W, W, 1, 1);
-    return;
-  }
-  atrous_span(r, 0, xa, W, 1, 0);
-  atrous_span(r, xa, xb, W, 0, 0);
-  atrous_span(r, xb, W, W, 1, 0);
+  atrous_span(r, 0, xa, W, 1);
+  atrous_span(r, xa, xb, W, 0);
+  atrous_span(r, xb, W, W, 1);
 }
 
 /* One a-trous level with tap step `step`: in (colour 3 + variance) -> out. */
@@ -522,13 +516,6 @@ static void luminance(const hush_planar *img, float *lum, int threads) {
 static void copy_planes(const hush_planar *src, hush_planar *dst, int channels) {
   const size_t n = hush__planar_pixels(src);
   for (int c = 0; c < channels; c++) memcpy(dst->plane[c], src->plane[c], n * sizeof(float));
-}
-
-/* sigma_n = 2^k for a whole k in 0..10: k, else -1 (use powf). */
-static int squarings_of(float sigma_n) {
-  for (int k = 0; k <= 10; k++)
-    if (sigma_n == (float)(1 << k)) return k;
-  return -1;
 }
 
 /* ---- execute --------------------------------------------------------------- */
@@ -608,7 +595,6 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   for (int c = 0; c < 3; c++) gd.n[c] = gb->normal.plane[c];
   gd.sigma_z = hush__param_f(f, P_SIGMA_Z);
   gd.sigma_n = hush__param_f(f, P_SIGMA_N);
-  gd.n_squarings = squarings_of(gd.sigma_n);
   spatial_variance(&gd, hush__accum_moments(&st->acc), hush__accum_age(&st->acc)->plane[0],
                    (float)hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES), cur->plane[3], threads);
   const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE);
