@@ -5,9 +5,13 @@
 #include "filters/filter.h"
 
 extern const hush_filter_class hush__filter_accumulate;
+extern const hush_filter_class hush__filter_svgf;
+extern const hush_filter_class hush__filter_taa;
 
 const hush_filter_class *const hush__filter_classes[] = {
     &hush__filter_accumulate,
+    &hush__filter_svgf,
+    &hush__filter_taa,
 };
 
 const uint32_t hush__filter_class_count =

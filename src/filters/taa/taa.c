@@ -1,0 +1,178 @@
+/*
+ * taa.c — the "taa" filter: temporal anti-aliasing on its own. The
+ * previous output is reprojected with the shared plan (camera matrices or
+ * motion vectors, with the depth/normal/id consistency tests), clamped or
+ * clipped to the current 3x3 neighbourhood in YCoCg and blended with a
+ * constant weight (src/temporal/taa.h).
+ *
+ * Follows Karis 2014 as summarised in papers/NOTES.md ("TAA"); the
+ * reprojection is Dundr 2018 §4.1.3 / Higginson 2023 §1.3.1 (reproject.h).
+ */
+#include "filters/filter.h"
+#include "temporal/reproject.h"
+#include "temporal/taa.h"
+
+#include <stdlib.h>
+
+static const char *const taa_box_names[] = {"clamp", "clip"};
+
+enum {
+  P_NONFINITE = 0,
+  P_ALPHA,
+  P_BOX,
+  P_TONEMAP,
+  P_DEPTH_TOLERANCE,
+  P_NORMAL_THRESHOLD,
+  P_USE_ID,
+  P_COUNT
+};
+
+static const hush_param_info taa_params[P_COUNT] = {
+    HUSH_PARAM_NONFINITE_ENTRY,
+    {"alpha", HUSH_PARAM_FLOAT, 0.1, 0.01, 1.0, "weight of the current frame in the blend", NULL},
+    {"box", HUSH_PARAM_ENUM, 0, 0, 1,
+     "history limited to the 3x3 neighbourhood's YCoCg box: clamp (per component) or clip "
+     "(towards the box centre)",
+     taa_box_names},
+    {"tonemap", HUSH_PARAM_BOOL, 1, 0, 1,
+     "resolve on tone-mapped values c / (1 + luma), inverted after", NULL},
+    {"depth_tolerance", HUSH_PARAM_FLOAT, 0.1, 0.0, 1e6,
+     "reprojection: relative depth tolerance of a history tap", NULL},
+    {"normal_threshold", HUSH_PARAM_FLOAT, -1.0, -1.0, 1.0,
+     "reprojection: minimum dot(normal, previous normal) of a history tap (-1: off)", NULL},
+    {"use_id", HUSH_PARAM_BOOL, 1, 0, 1,
+     "reject history from a pixel with another id (when 'id' is bound)", NULL},
+};
+
+enum { I_COLOR = 0, I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION, I_OUTPUT, I_COUNT };
+
+static const hush_image_info taa_images[I_COUNT] = {
+    {"color", HUSH_IMAGE_INPUT, 1, 3, "radiance of this frame (e.g. a denoiser's output)"},
+    {"depth", HUSH_IMAGE_INPUT, 1, 1, "linear view depth (0: background)"},
+    {"normal", HUSH_IMAGE_INPUT, 0, 3, "world-space shading normal (for the normal test)"},
+    {"position", HUSH_IMAGE_INPUT, 0, 3,
+     "world-space position (camera reprojection; else reconstructed from depth)"},
+    {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"},
+    {"motion", HUSH_IMAGE_INPUT, 0, 2,
+     "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
+    {"output", HUSH_IMAGE_OUTPUT, 1, 3, "anti-aliased radiance"},
+};
+
+static const hush_filter_class_info taa_info = {
+    "taa",
+    "temporal anti-aliasing: reprojected history clamped to the 3x3 YCoCg box, constant blend",
+    "Karis 2014 (papers/NOTES.md, TAA); Dundr 2018 §4.1.3 (reprojection)",
+    taa_params,
+    P_COUNT,
+    taa_images,
+    I_COUNT,
+};
+
+typedef struct taa_state {
+  hush_reprojector rp;
+  hush_taa taa;
+  hush_planar color;
+  hush_planar position;
+  hush_planar motion;
+} taa_state;
+
+static void taa_destroy(void *state) {
+  taa_state *st = state;
+  if (!st) return;
+  hush__reprojector_free(&st->rp);
+  hush__taa_free(&st->taa);
+  hush__planar_free(&st->color);
+  hush__planar_free(&st->position);
+  hush__planar_free(&st->motion);
+  free(st);
+}
+
+static hush_status taa_create(hush_filter f, void **state) {
+  taa_state *st = calloc(1, sizeof *st);
+  if (!st) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "taa: out of memory");
+  hush_status s = hush__reprojector_init(f->device, &st->rp, f->width, f->height);
+  if (!s) s = hush__taa_init(f->device, &st->taa, f->width, f->height);
+  if (!s) s = hush__planar_init(f->device, &st->color, 3, f->width, f->height);
+  if (s) {
+    taa_destroy(st);
+    return s;
+  }
+  *state = st;
+  return HUSH_OK;
+}
+
+static hush_status ensure(hush_filter f, hush_planar *img, int channels) {
+  if (img->plane[0]) return HUSH_OK;
+  return hush__planar_init(f->device, img, channels, f->width, f->height);
+}
+
+/* Without a normal image every normal is the same, so the test passes. */
+static void constant_normal(hush_planar *n) {
+  const size_t count = hush__planar_pixels(n);
+  for (size_t i = 0; i < count; i++) {
+    n->plane[0][i] = 0.0f;
+    n->plane[1][i] = 0.0f;
+    n->plane[2][i] = 1.0f;
+  }
+}
+
+static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info *info) {
+  taa_state *st = state;
+  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  hush_status s;
+  hush__filter_timing_begin(f);
+
+  const int has_motion = hush__filter_view(f, I_MOTION) != NULL;
+  if (info->motion == HUSH_MOTION_VECTORS && !has_motion)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "taa: the motion source is HUSH_MOTION_VECTORS but the 'motion' image is "
+                      "not bound");
+  const int has_position = hush__filter_view(f, I_POSITION) != NULL;
+  const int has_normal = hush__filter_view(f, I_NORMAL) != NULL;
+  const int with_id = hush__param_i(f, P_USE_ID) && hush__filter_view(f, I_ID);
+  const int use_motion = has_motion && info->motion == HUSH_MOTION_VECTORS;
+
+  if (has_position && (s = ensure(f, &st->position, 3))) return s;
+  if (use_motion && (s = ensure(f, &st->motion, 2))) return s;
+  if (with_id && (s = hush__reprojector_want_id(f->device, &st->rp))) return s;
+  hush_gbuffer_store *g = hush__reprojector_next(&st->rp);
+  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  if ((s = hush__filter_import(f, I_DEPTH, &g->depth))) return s;
+  if (has_normal && (s = hush__filter_import(f, I_NORMAL, &g->normal))) return s;
+  if (!has_normal) constant_normal(&g->normal);
+  if (with_id && (s = hush__filter_import(f, I_ID, &g->id))) return s;
+  if (has_position && (s = hush__filter_import(f, I_POSITION, &st->position))) return s;
+  if (use_motion && (s = hush__filter_import(f, I_MOTION, &st->motion))) return s;
+  g->has_id = with_id;
+  hush__filter_timing_stage(f, "import");
+
+  hush_reproject_params rp;
+  hush__reproject_params_default(&rp);
+  rp.depth_tolerance = hush__param_f(f, P_DEPTH_TOLERANCE);
+  rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
+  rp.use_id = hush__param_i(f, P_USE_ID);
+  s = hush__reprojector_build(f->device, &st->rp,
+                              has_position ? (const float *const *)st->position.plane : NULL,
+                              use_motion ? (const float *const *)st->motion.plane : NULL, info,
+                              &rp, threads);
+  if (s) return s;
+  hush__filter_timing_stage(f, "reproject");
+
+  hush_taa_params tp;
+  tp.alpha = hush__param_f(f, P_ALPHA);
+  tp.box = (hush_taa_box)hush__param_i(f, P_BOX);
+  tp.tonemap = hush__param_i(f, P_TONEMAP);
+  hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)st->color.plane, &tp, threads);
+  hush__filter_timing_stage(f, "resolve");
+
+  hush__view_export(hush__taa_output(&st->taa), hush__filter_view(f, I_OUTPUT), threads);
+  hush__filter_timing_stage(f, "export");
+  return HUSH_OK;
+}
+
+const hush_filter_class hush__filter_taa = {
+    &taa_info,
+    taa_create,
+    taa_destroy,
+    taa_execute,
+};

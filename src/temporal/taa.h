@@ -1,0 +1,53 @@
+/*
+ * taa.h — temporal anti-aliasing resolve (Karis 2014, as summarised in
+ * papers/NOTES.md "TAA"): the previous output, reprojected through a plan
+ * (reproject.h), is clamped or clipped to the min/max box of the current
+ * 3x3 neighbourhood in YCoCg, then blended with the current frame with a
+ * constant weight alpha; optionally on tone-mapped values
+ * (c / (1 + luma), inverted after), so that a few very bright samples do
+ * not dominate the box or the blend.
+ *
+ * Used by the "taa" filter on its own and by "svgf" as its last stage. The
+ * history is the module's own (its last output), ping-ponged; a pixel with
+ * no history in the plan takes the current frame.
+ */
+#ifndef HUSH_TEMPORAL_TAA_H
+#define HUSH_TEMPORAL_TAA_H
+
+#include "hush.h"
+#include "core/image.h"
+#include "temporal/reproject.h"
+
+typedef enum hush_taa_box {
+  HUSH_TAA_CLAMP = 0, /* clamp each YCoCg component to the box */
+  HUSH_TAA_CLIP = 1   /* move the history towards the box centre until it is inside */
+} hush_taa_box;
+
+typedef struct hush_taa_params {
+  float alpha;      /* weight of the current frame, (0, 1] */
+  hush_taa_box box;
+  int tonemap;      /* resolve on c / (1 + luma(c)) */
+} hush_taa_params;
+
+typedef struct hush_taa {
+  hush_planar history[2]; /* 3 planes: the last outputs */
+  hush_planar gathered;   /* 3 planes: history reprojected to this frame */
+  hush_planar current;    /* 3 planes: this frame, tone-mapped when asked */
+  int latest;
+  int has_history;
+} hush_taa;
+
+hush_status hush__taa_init(hush_device device, hush_taa *taa, uint32_t width, uint32_t height);
+void hush__taa_free(hush_taa *taa);
+
+/* Resolves this frame's colour (3 planes) with the history through plan
+ * (NULL: no history); the result, hush__taa_output(), is also the next
+ * frame's history. */
+void hush__taa_resolve(hush_taa *taa, const hush_reproject_plan *plan, const float *const *color,
+                       const hush_taa_params *params, int threads);
+
+static inline const hush_planar *hush__taa_output(const hush_taa *taa) {
+  return &taa->history[taa->latest];
+}
+
+#endif

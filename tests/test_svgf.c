@@ -1,0 +1,416 @@
+/*
+ * test_svgf.c — the "svgf" filter (and "taa" when this build has it),
+ * through the public API only, on synthetic G-buffers: a fronto-parallel
+ * plane seen by a static camera (so all history is reused), with edges in
+ * depth, normal or colour painted in.
+ */
+#include "hush.h"
+
+#include "check.h"
+#include "core/half.h"
+#include "core/hmath.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define W 64
+#define H 48
+#define N (W * H)
+
+typedef struct scene {
+  float color[N * 3];
+  float depth[N];
+  float normal[N * 3];
+  float albedo[N * 3];
+  float output[N * 3];
+} scene;
+
+static uint32_t rng_state = 12345u;
+static float rnd(void) { /* uniform in [0, 1), xorshift32 */
+  rng_state ^= rng_state << 13;
+  rng_state ^= rng_state >> 17;
+  rng_state ^= rng_state << 5;
+  return (float)(rng_state >> 8) / 16777216.0f;
+}
+
+static void flat(scene *s, float r, float g, float b, float z) {
+  for (int i = 0; i < N; i++) {
+    s->color[3 * i + 0] = r;
+    s->color[3 * i + 1] = g;
+    s->color[3 * i + 2] = b;
+    s->depth[i] = z;
+    s->normal[3 * i + 0] = 0.0f;
+    s->normal[3 * i + 1] = 0.0f;
+    s->normal[3 * i + 2] = 1.0f;
+    for (int c = 0; c < 3; c++) s->albedo[3 * i + c] = 1.0f;
+  }
+}
+
+static hush_image_view view_of(void *data, hush_format format) {
+  hush_image_view v;
+  memset(&v, 0, sizeof v);
+  v.data = data;
+  v.format = format;
+  v.width = W;
+  v.height = H;
+  return v;
+}
+
+static void frame_info(hush_frame_info *fi, uint64_t index) {
+  hush_frame_info_init(fi);
+  fi->frame_index = index;
+  float w2v[16], v2c[16];
+  hush_m4_look_at(w2v, hush_v3(0, 0, 5), hush_v3(0, 0, 0), hush_v3(0, 1, 0));
+  hush_m4_perspective(v2c, 60.0f, (float)W / H, 0.1f, 100.0f);
+  memcpy(fi->world_to_view, w2v, sizeof w2v);
+  memcpy(fi->prev_world_to_view, w2v, sizeof w2v);
+  memcpy(fi->view_to_clip, v2c, sizeof v2c);
+  memcpy(fi->prev_view_to_clip, v2c, sizeof v2c);
+}
+
+static int has_image(const char *cls, const char *name) {
+  const hush_filter_class_info *c = hush_filter_class_find(cls);
+  for (uint32_t i = 0; c && i < c->image_count; i++)
+    if (strcmp(c->images[i].name, name) == 0) return 1;
+  return 0;
+}
+
+static hush_filter make(hush_device dev, const char *cls, scene *s, int with_albedo) {
+  hush_filter f = hush_filter_new(dev, cls);
+  REQUIRE(f);
+  hush_image_view v = view_of(s->color, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "color", &v) == HUSH_OK);
+  if (has_image(cls, "depth")) {
+    v = view_of(s->depth, HUSH_FORMAT_FLOAT);
+    REQUIRE(hush_filter_set_image(f, "depth", &v) == HUSH_OK);
+  }
+  if (has_image(cls, "normal")) {
+    v = view_of(s->normal, HUSH_FORMAT_FLOAT3);
+    REQUIRE(hush_filter_set_image(f, "normal", &v) == HUSH_OK);
+  }
+  if (with_albedo) {
+    v = view_of(s->albedo, HUSH_FORMAT_FLOAT3);
+    REQUIRE(hush_filter_set_image(f, "albedo", &v) == HUSH_OK);
+  }
+  v = view_of(s->output, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "output", &v) == HUSH_OK);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+  return f;
+}
+
+static void run(hush_filter f, uint64_t index) {
+  hush_frame_info fi;
+  frame_info(&fi, index);
+  REQUIRE(hush_filter_execute(f, &fi) == HUSH_OK);
+}
+
+static float max_abs_diff(const float *a, const float *b, int n) {
+  float m = 0.0f;
+  for (int i = 0; i < n; i++) {
+    const float d = fabsf(a[i] - b[i]);
+    m = d > m ? d : m;
+  }
+  return m;
+}
+
+static int all_finite(const float *a, int n) {
+  for (int i = 0; i < n; i++)
+    if (!isfinite(a[i])) return 0;
+  return 1;
+}
+
+/* ---- svgf ---------------------------------------------------------------- */
+
+static void test_constant(hush_device dev, int with_albedo) {
+  static scene s;
+  flat(&s, 0.5f, 0.3f, 0.2f, 3.0f);
+  /* a textured wall under constant light: radiance = albedo * constant */
+  if (with_albedo)
+    for (int i = 0; i < N * 3; i++) {
+      s.albedo[i] = 0.25f + 0.5f * (float)(i % 7) / 7.0f;
+      s.color[i] = s.albedo[i] * 0.8f;
+    }
+  hush_filter f = make(dev, "svgf", &s, with_albedo);
+  for (int k = 0; k < 6; k++) {
+    run(f, (uint64_t)k);
+    CHECK_MSG(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f, "frame %d: %g", k,
+              (double)max_abs_diff(s.output, s.color, N * 3));
+  }
+  hush_filter_release(f);
+}
+
+/* Two half-planes: left at depth zl with colour cl, right at zr with cr;
+ * normals nl / nr. Checks the columns next to the edge keep their side's
+ * value. Noise on both halves makes the luminance weight permissive. */
+static void edge_case(hush_device dev, float zl, float zr, hush_vec3 nl, hush_vec3 nr,
+                      const char *what) {
+  static scene s;
+  flat(&s, 0, 0, 0, 1);
+  hush_filter f = make(dev, "svgf", &s, 0);
+  /* the luminance weight alone would keep the edge: switch it off */
+  REQUIRE(hush_filter_set_float(f, "sigma_l", 1e6f) == HUSH_OK);
+  for (int k = 0; k < 5; k++) {
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const int i = y * W + x, left = x < W / 2;
+        const float v = left ? 1.0f : 0.1f;
+        for (int c = 0; c < 3; c++) s.color[3 * i + c] = v;
+        s.depth[i] = left ? zl : zr;
+        const hush_vec3 n = left ? nl : nr;
+        s.normal[3 * i + 0] = n.x;
+        s.normal[3 * i + 1] = n.y;
+        s.normal[3 * i + 2] = n.z;
+      }
+    run(f, (uint64_t)k);
+  }
+  float worst = 0.0f;
+  for (int y = 0; y < H; y++)
+    for (int x = W / 2 - 2; x < W / 2 + 2; x++) {
+      const int i = y * W + x;
+      const float d = fabsf(s.output[3 * i] - s.color[3 * i]);
+      worst = d > worst ? d : worst;
+    }
+  CHECK_MSG(worst < 0.01f, "%s edge blurred: worst %g", what, (double)worst);
+  CHECK(all_finite(s.output, N * 3));
+  hush_filter_release(f);
+}
+
+static void test_edges(hush_device dev) {
+  const hush_vec3 nz = hush_v3(0, 0, 1);
+  edge_case(dev, 2.0f, 4.0f, nz, nz, "depth");
+  const float r = sqrtf(0.5f);
+  edge_case(dev, 3.0f, 3.0f, nz, hush_v3(r, 0, r), "normal");
+}
+
+/* A flat wall with white noise: the output is much less noisy, with the same
+ * mean (energy preserved), and a variance estimate near the true one. */
+static void test_noise(hush_device dev) {
+  static scene s;
+  flat(&s, 0.5f, 0.5f, 0.5f, 3.0f);
+  hush_filter f = make(dev, "svgf", &s, 0);
+  static float variance[N], age[N];
+  hush_image_view v = view_of(variance, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "variance", &v) == HUSH_OK);
+  v = view_of(age, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "history_length", &v) == HUSH_OK);
+  double in_var = 0, out_var = 0, out_mean = 0, var_first = 0, var_last = 0;
+  const int frames = 10;
+  for (int k = 0; k < frames; k++) {
+    for (int i = 0; i < N; i++) {
+      const float x = 0.5f + 0.8f * (rnd() - 0.5f);
+      for (int c = 0; c < 3; c++) s.color[3 * i + c] = x;
+    }
+    run(f, (uint64_t)k);
+    double mean_v = 0;
+    for (int i = 0; i < N; i++) mean_v += variance[i];
+    mean_v /= N;
+    if (k == 4) var_first = mean_v; /* the first temporal estimate */
+    if (k == frames - 1) var_last = mean_v;
+  }
+  CHECK_NEAR(age[N / 2], (float)frames, 0.0f);
+  for (int i = 0; i < N; i++) {
+    in_var += (s.color[3 * i] - 0.5) * (s.color[3 * i] - 0.5);
+    out_mean += s.output[3 * i];
+  }
+  out_mean /= N;
+  for (int i = 0; i < N; i++) out_var += (s.output[3 * i] - out_mean) * (s.output[3 * i] - out_mean);
+  in_var /= N;
+  out_var /= N;
+  CHECK_MSG(out_var < in_var / 50, "noise: in %g out %g", in_var, out_var);
+  CHECK_MSG(fabs(out_mean - 0.5) < 0.005, "mean %g", out_mean);
+  /* the moments estimate the per-frame sample variance (0.8^2 / 12): it
+   * converges to it rather than shrinking */
+  CHECK_MSG(fabs(var_last - 0.8 * 0.8 / 12) < 0.015, "variance %g -> %g", var_first, var_last);
+  CHECK(all_finite(s.output, N * 3));
+  hush_filter_release(f);
+}
+
+/* Bit-identical results with 1 and 2 threads, on noise with edges. */
+static void fill_busy(scene *s, int k) {
+  rng_state = 777u + (uint32_t)k;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const int i = y * W + x;
+      for (int c = 0; c < 3; c++) s->color[3 * i + c] = (x < W / 3 ? 2.0f : 0.3f) * rnd();
+      s->depth[i] = y < H / 2 ? 2.0f + 0.01f * (float)x : 6.0f;
+      s->normal[3 * i + 0] = 0.0f;
+      s->normal[3 * i + 1] = x > 2 * W / 3 ? 1.0f : 0.0f;
+      s->normal[3 * i + 2] = x > 2 * W / 3 ? 0.0f : 1.0f;
+    }
+}
+
+static void test_determinism(const char *cls) {
+  static scene a, b;
+  hush_device d1 = hush_device_new("threads=1"), d2 = hush_device_new("threads=2");
+  REQUIRE(d1 && d2);
+  flat(&a, 0, 0, 0, 1);
+  flat(&b, 0, 0, 0, 1);
+  hush_filter fa = make(d1, cls, &a, 0), fb = make(d2, cls, &b, 0);
+  for (int k = 0; k < 4; k++) {
+    fill_busy(&a, k);
+    fill_busy(&b, k);
+    run(fa, (uint64_t)k);
+    run(fb, (uint64_t)k);
+    CHECK_MSG(memcmp(a.output, b.output, sizeof a.output) == 0, "%s frame %d differs", cls, k);
+  }
+  hush_filter_release(fa);
+  hush_filter_release(fb);
+  hush_device_release(d1);
+  hush_device_release(d2);
+}
+
+/* Half-precision colour gives (nearly) the float result. */
+static void test_half(hush_device dev) {
+  static scene a, b;
+  static uint16_t half_color[N * 3];
+  flat(&a, 0, 0, 0, 1);
+  flat(&b, 0, 0, 0, 1);
+  hush_filter fa = make(dev, "svgf", &a, 0), fb = make(dev, "svgf", &b, 0);
+  hush_image_view v = view_of(half_color, HUSH_FORMAT_HALF3);
+  v.data = half_color;
+  REQUIRE(hush_filter_set_image(fb, "color", &v) == HUSH_OK);
+  for (int k = 0; k < 3; k++) {
+    fill_busy(&a, k);
+    fill_busy(&b, k);
+    for (int i = 0; i < N * 3; i++) {
+      half_color[i] = hush__float_to_half(a.color[i]);
+      a.color[i] = hush__half_to_float(half_color[i]);
+    }
+    run(fa, (uint64_t)k);
+    run(fb, (uint64_t)k);
+  }
+  CHECK_MSG(max_abs_diff(a.output, b.output, N * 3) <= 1e-4f, "half vs float: %g",
+            (double)max_abs_diff(a.output, b.output, N * 3));
+  hush_filter_release(fa);
+  hush_filter_release(fb);
+}
+
+static void test_misuse(hush_device dev) {
+  static scene s;
+  flat(&s, 1, 1, 1, 1);
+  hush_filter f = hush_filter_new(dev, "svgf");
+  REQUIRE(f);
+  hush_image_view v = view_of(s.color, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "color", &v) == HUSH_OK);
+  v = view_of(s.output, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "output", &v) == HUSH_OK);
+  CHECK(hush_filter_commit(f) != HUSH_OK); /* no depth, no normal */
+  hush_device_get_error(dev, NULL);
+  hush_filter_release(f);
+
+  f = make(dev, "svgf", &s, 0);
+  hush_frame_info fi;
+  frame_info(&fi, 0);
+  fi.motion = HUSH_MOTION_VECTORS; /* without a 'motion' image */
+  CHECK(hush_filter_execute(f, &fi) == HUSH_ERROR_INVALID_OPERATION);
+  hush_device_get_error(dev, NULL);
+  CHECK(hush_filter_set_float(f, "sigma_n", -1.0f) == HUSH_ERROR_OUT_OF_RANGE);
+  hush_device_get_error(dev, NULL);
+  s.color[5] = NAN;
+  frame_info(&fi, 1);
+  CHECK(hush_filter_execute(f, &fi) == HUSH_ERROR_NONFINITE);
+  hush_device_get_error(dev, NULL);
+  hush_filter_release(f);
+}
+
+/* A sigma_n that is no power of two takes the powf path: same result as a
+ * close power of two on a flat wall (all normals equal). */
+static void test_sigma_n_general(hush_device dev) {
+  static scene s;
+  flat(&s, 0.4f, 0.4f, 0.4f, 2.0f);
+  hush_filter f = make(dev, "svgf", &s, 0);
+  REQUIRE(hush_filter_set_float(f, "sigma_n", 100.0f) == HUSH_OK);
+  run(f, 0);
+  CHECK(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f);
+  hush_filter_release(f);
+}
+
+/* ---- taa ------------------------------------------------------------------ */
+
+static void test_taa_constant(hush_device dev, const char *cls) {
+  static scene s;
+  flat(&s, 0.7f, 0.2f, 3.0f, 2.5f);
+  hush_filter f = make(dev, cls, &s, 0);
+  if (strcmp(cls, "svgf") == 0) REQUIRE(hush_filter_set_bool(f, "taa", 1) == HUSH_OK);
+  for (int k = 0; k < 6; k++) {
+    run(f, (uint64_t)k);
+    CHECK_MSG(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f, "%s frame %d: %g", cls, k,
+              (double)max_abs_diff(s.output, s.color, N * 3));
+  }
+  hush_filter_release(f);
+}
+
+/* A bright half-plane whose edge moves 4 pixels a frame over a static
+ * background (the history stays where it was): away from the edge the 3x3
+ * box holds only the current value, so no trail of the old position may
+ * survive the clamp. */
+static void test_taa_ghosting(hush_device dev, const char *box) {
+  static scene s;
+  flat(&s, 0, 0, 0, 2.0f);
+  hush_filter f = make(dev, "taa", &s, 0);
+  REQUIRE(hush_filter_set_string(f, "box", box) == HUSH_OK);
+  float worst = 0.0f;
+  for (int k = 0; k < 8; k++) {
+    const int edge = 40 - 4 * k;
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++)
+        for (int c = 0; c < 3; c++) s.color[3 * (y * W + x) + c] = x < edge ? 1.0f : 0.0f;
+    run(f, (uint64_t)k);
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        if (x == edge - 1 || x == edge) continue; /* the box there holds both values */
+        const int i = 3 * (y * W + x);
+        const float d = fabsf(s.output[i] - s.color[i]);
+        worst = d > worst ? d : worst;
+      }
+  }
+  CHECK_MSG(worst <= 1e-5f, "taa (%s) ghosts: %g", box, (double)worst);
+  hush_filter_release(f);
+}
+
+/* Noise (a jittered signal) is smoothed over time: the output of a static
+ * noisy image converges towards the box-limited mean. */
+static void test_taa_smooths(hush_device dev) {
+  static scene s;
+  flat(&s, 0.5f, 0.5f, 0.5f, 2.0f);
+  hush_filter f = make(dev, "taa", &s, 0);
+  REQUIRE(hush_filter_set_bool(f, "tonemap", 0) == HUSH_OK);
+  double in_var = 0, out_var = 0;
+  for (int k = 0; k < 20; k++) {
+    for (int i = 0; i < N; i++) {
+      const float x = 0.5f + 0.2f * (rnd() - 0.5f);
+      for (int c = 0; c < 3; c++) s.color[3 * i + c] = x;
+    }
+    run(f, (uint64_t)k);
+  }
+  for (int i = 0; i < N; i++) {
+    in_var += (s.color[3 * i] - 0.5) * (s.color[3 * i] - 0.5);
+    out_var += (s.output[3 * i] - 0.5) * (s.output[3 * i] - 0.5);
+  }
+  CHECK_MSG(out_var < in_var / 3, "taa: in %g out %g", in_var / N, out_var / N);
+  hush_filter_release(f);
+}
+
+int main(void) {
+  hush_device dev = hush_device_new("threads=2");
+  REQUIRE(dev);
+  test_constant(dev, 0);
+  test_constant(dev, 1);
+  test_edges(dev);
+  test_noise(dev);
+  test_determinism("svgf");
+  test_half(dev);
+  test_misuse(dev);
+  test_sigma_n_general(dev);
+  test_taa_constant(dev, "taa");
+  test_taa_constant(dev, "svgf");
+  test_taa_ghosting(dev, "clamp");
+  test_taa_ghosting(dev, "clip");
+  test_taa_smooths(dev);
+  test_determinism("taa");
+  hush_device_release(dev);
+  return check_summary();
+}
