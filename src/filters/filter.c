@@ -487,6 +487,11 @@ hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar 
   return s;
 }
 
+hush_status hush__filter_scratch(struct hush_filter_t *f, hush_planar *img, int channels) {
+  if (img->plane[0]) return HUSH_OK;
+  return hush__planar_init(f->device, img, channels, f->width, f->height);
+}
+
 void hush__filter_timing_begin(struct hush_filter_t *f) {
   f->stage_count = 0;
   f->stage_start = hush__now_ms();

@@ -74,6 +74,10 @@ static inline const hush_image_view *hush__filter_view(const struct hush_filter_
  * "nonfinite" parameter; reports errors naming the image. */
 hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar *dst);
 
+/* Allocates a planar image of the filter's size the first time it is
+ * needed (a no-op when img already has planes). */
+hush_status hush__filter_scratch(struct hush_filter_t *f, hush_planar *img, int channels);
+
 /* Stage timing: call begin at the start of execute, then stage(name) at the
  * end of each stage; the time since the previous mark goes to that name. */
 void hush__filter_timing_begin(struct hush_filter_t *f);

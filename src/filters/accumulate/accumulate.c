@@ -12,6 +12,7 @@
  * accumulation.h), which the later filters share.
  */
 #include "filters/filter.h"
+#include "filters/gbuffer.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 
@@ -110,8 +111,7 @@ typedef struct accumulate_state {
   hush_planar color;   /* this frame's colour, demodulated in place */
   /* allocated on first use: */
   hush_planar albedo;   /* imported albedo, then the remodulated output */
-  hush_planar position; /* 3 */
-  hush_planar motion;   /* 2 */
+  hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_planar variance; /* 1 */
 } accumulate_state;
 
@@ -122,8 +122,7 @@ static void accumulate_destroy(void *state) {
   hush__accum_free(&st->acc);
   hush__planar_free(&st->color);
   hush__planar_free(&st->albedo);
-  hush__planar_free(&st->position);
-  hush__planar_free(&st->motion);
+  hush__gbuffer_inputs_free(&st->gin);
   hush__planar_free(&st->variance);
   free(st);
 }
@@ -140,12 +139,6 @@ static hush_status accumulate_create(hush_filter f, void **state) {
   }
   *state = st;
   return HUSH_OK;
-}
-
-/* Allocates a scratch planar image the first time it is needed. */
-static hush_status ensure(hush_filter f, hush_planar *img, int channels) {
-  if (img->plane[0]) return HUSH_OK;
-  return hush__planar_init(f->device, img, channels, f->width, f->height);
 }
 
 /* color[c] /= max(albedo[c], eps) */
@@ -186,33 +179,17 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush_status s;
   hush__filter_timing_begin(f);
 
-  const int has_motion = hush__filter_view(f, I_MOTION) != NULL;
-  if (info->motion == HUSH_MOTION_VECTORS && !has_motion)
-    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
-                      "accumulate: the motion source is HUSH_MOTION_VECTORS but the 'motion' "
-                      "image is not bound");
-  const int has_position = hush__filter_view(f, I_POSITION) != NULL;
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
-  const int with_id = hush__param_i(f, P_USE_ID) && hush__filter_view(f, I_ID);
-  const int use_motion = has_motion && info->motion == HUSH_MOTION_VECTORS;
 
-  /* ---- import (into the reprojector's next G-buffer and scratch planes;
-   * nothing of the history changes until every input has been read) */
-  if (has_position && (s = ensure(f, &st->position, 3))) return s;
-  if (use_motion && (s = ensure(f, &st->motion, 2))) return s;
-  if (demod && (s = ensure(f, &st->albedo, 3))) return s;
-  if (hush__filter_view(f, I_VARIANCE) && (s = ensure(f, &st->variance, 1))) return s;
-  if (with_id && (s = hush__reprojector_want_id(f->device, &st->rp))) return s;
-
-  hush_gbuffer_store *g = hush__reprojector_next(&st->rp);
+  /* ---- import: nothing of the history changes until every input is read */
+  if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (hush__filter_view(f, I_VARIANCE) && (s = hush__filter_scratch(f, &st->variance, 1)))
+    return s;
+  static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
-  if ((s = hush__filter_import(f, I_DEPTH, &g->depth))) return s;
-  if ((s = hush__filter_import(f, I_NORMAL, &g->normal))) return s;
-  if (with_id && (s = hush__filter_import(f, I_ID, &g->id))) return s;
-  if (has_position && (s = hush__filter_import(f, I_POSITION, &st->position))) return s;
-  if (use_motion && (s = hush__filter_import(f, I_MOTION, &st->motion))) return s;
+  if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
+    return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
-  g->has_id = with_id;
   hush__filter_timing_stage(f, "import");
 
   /* ---- reproject */
@@ -222,11 +199,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
-  s = hush__reprojector_build(f->device, &st->rp,
-                              has_position ? (const float *const *)st->position.plane : NULL,
-                              use_motion ? (const float *const *)st->motion.plane : NULL, info,
-                              &rp, threads);
-  if (s) return s;
+  if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- accumulate */

@@ -22,6 +22,7 @@
  * computed on its own: the result does not depend on the thread count.
  */
 #include "filters/filter.h"
+#include "filters/gbuffer.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
@@ -159,8 +160,7 @@ typedef struct svgf_state {
   int threads;
   /* allocated on first use: */
   hush_planar albedo;
-  hush_planar position;
-  hush_planar motion;
+  hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
 } svgf_state;
 
@@ -181,8 +181,7 @@ static void svgf_destroy(void *state) {
   hush__planar_free(&st->gvar);
   hush__free_floats(st->rows);
   hush__planar_free(&st->albedo);
-  hush__planar_free(&st->position);
-  hush__planar_free(&st->motion);
+  hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   free(st);
 }
@@ -210,11 +209,6 @@ static hush_status svgf_create(hush_filter f, void **state) {
   }
   *state = st;
   return HUSH_OK;
-}
-
-static hush_status ensure(hush_filter f, hush_planar *img, int channels) {
-  if (img->plane[0]) return HUSH_OK;
-  return hush__planar_init(f->device, img, channels, f->width, f->height);
 }
 
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
@@ -527,38 +521,22 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   hush_status s;
   hush__filter_timing_begin(f);
 
-  const int has_motion = hush__filter_view(f, I_MOTION) != NULL;
-  if (info->motion == HUSH_MOTION_VECTORS && !has_motion)
-    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
-                      "svgf: the motion source is HUSH_MOTION_VECTORS but the 'motion' image is "
-                      "not bound");
-  const int has_position = hush__filter_view(f, I_POSITION) != NULL;
   const int has_dgrad = hush__filter_view(f, I_DEPTH_GRADIENT) != NULL;
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
-  const int with_id = hush__param_i(f, P_USE_ID) && hush__filter_view(f, I_ID);
-  const int use_motion = has_motion && info->motion == HUSH_MOTION_VECTORS;
   const int with_taa = hush__param_i(f, P_TAA);
   if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
 
   /* ---- import: nothing of the history changes until every input is read */
-  if (has_position && (s = ensure(f, &st->position, 3))) return s;
-  if (use_motion && (s = ensure(f, &st->motion, 2))) return s;
-  if (demod && (s = ensure(f, &st->albedo, 3))) return s;
-  if (with_id && (s = hush__reprojector_want_id(f->device, &st->rp))) return s;
+  if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
-
-  hush_gbuffer_store *g = hush__reprojector_next(&st->rp);
+  static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
-  if ((s = hush__filter_import(f, I_DEPTH, &g->depth))) return s;
-  if ((s = hush__filter_import(f, I_NORMAL, &g->normal))) return s;
+  if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
+    return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
-  if (with_id && (s = hush__filter_import(f, I_ID, &g->id))) return s;
-  if (has_position && (s = hush__filter_import(f, I_POSITION, &st->position))) return s;
-  if (use_motion && (s = hush__filter_import(f, I_MOTION, &st->motion))) return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
-  g->has_id = with_id;
   hush__filter_timing_stage(f, "import");
 
   /* ---- reproject + accumulate */
@@ -568,11 +546,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
-  s = hush__reprojector_build(f->device, &st->rp,
-                              has_position ? (const float *const *)st->position.plane : NULL,
-                              use_motion ? (const float *const *)st->motion.plane : NULL, info,
-                              &rp, threads);
-  if (s) return s;
+  if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   if (demod) demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA);

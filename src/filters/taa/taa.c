@@ -9,6 +9,7 @@
  * reprojection is Dundr 2018 §4.1.3 / Higginson 2023 §1.3.1 (reproject.h).
  */
 #include "filters/filter.h"
+#include "filters/gbuffer.h"
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
 
@@ -72,8 +73,7 @@ typedef struct taa_state {
   hush_reprojector rp;
   hush_taa taa;
   hush_planar color;
-  hush_planar position;
-  hush_planar motion;
+  hush_gbuffer_inputs gin; /* position and motion between import and build */
 } taa_state;
 
 static void taa_destroy(void *state) {
@@ -82,8 +82,7 @@ static void taa_destroy(void *state) {
   hush__reprojector_free(&st->rp);
   hush__taa_free(&st->taa);
   hush__planar_free(&st->color);
-  hush__planar_free(&st->position);
-  hush__planar_free(&st->motion);
+  hush__gbuffer_inputs_free(&st->gin);
   free(st);
 }
 
@@ -101,49 +100,16 @@ static hush_status taa_create(hush_filter f, void **state) {
   return HUSH_OK;
 }
 
-static hush_status ensure(hush_filter f, hush_planar *img, int channels) {
-  if (img->plane[0]) return HUSH_OK;
-  return hush__planar_init(f->device, img, channels, f->width, f->height);
-}
-
-/* Without a normal image every normal is the same, so the test passes. */
-static void constant_normal(hush_planar *n) {
-  const size_t count = hush__planar_pixels(n);
-  for (size_t i = 0; i < count; i++) {
-    n->plane[0][i] = 0.0f;
-    n->plane[1][i] = 0.0f;
-    n->plane[2][i] = 1.0f;
-  }
-}
-
 static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info *info) {
   taa_state *st = state;
   const int threads = f->device->threads > 0 ? f->device->threads : 1;
   hush_status s;
   hush__filter_timing_begin(f);
 
-  const int has_motion = hush__filter_view(f, I_MOTION) != NULL;
-  if (info->motion == HUSH_MOTION_VECTORS && !has_motion)
-    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
-                      "taa: the motion source is HUSH_MOTION_VECTORS but the 'motion' image is "
-                      "not bound");
-  const int has_position = hush__filter_view(f, I_POSITION) != NULL;
-  const int has_normal = hush__filter_view(f, I_NORMAL) != NULL;
-  const int with_id = hush__param_i(f, P_USE_ID) && hush__filter_view(f, I_ID);
-  const int use_motion = has_motion && info->motion == HUSH_MOTION_VECTORS;
-
-  if (has_position && (s = ensure(f, &st->position, 3))) return s;
-  if (use_motion && (s = ensure(f, &st->motion, 2))) return s;
-  if (with_id && (s = hush__reprojector_want_id(f->device, &st->rp))) return s;
-  hush_gbuffer_store *g = hush__reprojector_next(&st->rp);
+  static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
-  if ((s = hush__filter_import(f, I_DEPTH, &g->depth))) return s;
-  if (has_normal && (s = hush__filter_import(f, I_NORMAL, &g->normal))) return s;
-  if (!has_normal) constant_normal(&g->normal);
-  if (with_id && (s = hush__filter_import(f, I_ID, &g->id))) return s;
-  if (has_position && (s = hush__filter_import(f, I_POSITION, &st->position))) return s;
-  if (use_motion && (s = hush__filter_import(f, I_MOTION, &st->motion))) return s;
-  g->has_id = with_id;
+  if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
+    return s;
   hush__filter_timing_stage(f, "import");
 
   hush_reproject_params rp;
@@ -151,11 +117,7 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
   rp.depth_tolerance = hush__param_f(f, P_DEPTH_TOLERANCE);
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
-  s = hush__reprojector_build(f->device, &st->rp,
-                              has_position ? (const float *const *)st->position.plane : NULL,
-                              use_motion ? (const float *const *)st->motion.plane : NULL, info,
-                              &rp, threads);
-  if (s) return s;
+  if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   hush__filter_timing_stage(f, "reproject");
 
   hush_taa_params tp;
