@@ -11,6 +11,7 @@
  * §1.3 / §1.3.1; the work is done by src/temporal/ (reproject.h,
  * accumulation.h), which the later filters share.
  */
+#include "filters/albedo.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
 #include "temporal/accumulation.h"
@@ -20,7 +21,6 @@
 #include <string.h>
 
 /* Albedo below this is clamped before dividing (demodulation). */
-#define ACCUMULATE_ALBEDO_EPS 1e-3f
 
 enum {
   P_NONFINITE = 0,
@@ -141,38 +141,6 @@ static hush_status accumulate_create(hush_filter f, void **state) {
   return HUSH_OK;
 }
 
-/* color[c] /= max(albedo[c], eps) */
-static void demodulate(hush_planar *color, const hush_planar *albedo, int threads) {
-  const int H = (int)color->height;
-  const size_t W = color->width;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++)
-    for (int c = 0; c < 3; c++) {
-      float *col = color->plane[c] + (size_t)y * W;
-      const float *alb = albedo->plane[c] + (size_t)y * W;
-      for (size_t x = 0; x < W; x++) {
-        const float a = alb[x] > ACCUMULATE_ALBEDO_EPS ? alb[x] : ACCUMULATE_ALBEDO_EPS;
-        col[x] = col[x] / a;
-      }
-    }
-}
-
-/* albedo[c] = accumulated[c] * max(albedo[c], eps), in place */
-static void remodulate(hush_planar *albedo, const hush_planar *accumulated, int threads) {
-  const int H = (int)albedo->height;
-  const size_t W = albedo->width;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++)
-    for (int c = 0; c < 3; c++) {
-      float *alb = albedo->plane[c] + (size_t)y * W;
-      const float *acc = accumulated->plane[c] + (size_t)y * W;
-      for (size_t x = 0; x < W; x++) {
-        const float a = alb[x] > ACCUMULATE_ALBEDO_EPS ? alb[x] : ACCUMULATE_ALBEDO_EPS;
-        alb[x] = acc[x] * a;
-      }
-    }
-}
-
 static hush_status accumulate_execute(hush_filter f, void *state, const hush_frame_info *info) {
   accumulate_state *st = state;
   const int threads = f->device->threads > 0 ? f->device->threads : 1;
@@ -203,7 +171,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- accumulate */
-  if (demod) demodulate(&st->color, &st->albedo, threads);
+  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA_MIN);
   ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS_MIN);
@@ -216,7 +184,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   /* ---- export */
   const hush_planar *result = hush__accum_color(&st->acc);
   if (demod) {
-    remodulate(&st->albedo, result, threads);
+    hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
   }
   hush__view_export(result, hush__filter_view(f, I_OUTPUT), threads);

@@ -21,6 +21,7 @@
  * coordinates (done in short separate loops at the row ends). Every pixel is
  * computed on its own: the result does not depend on the thread count.
  */
+#include "filters/albedo.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
 #include "temporal/accumulation.h"
@@ -33,7 +34,6 @@
 #include <string.h>
 
 /* Albedo below this is clamped before dividing (demodulation). */
-#define SVGF_ALBEDO_EPS 1e-3f
 /* Keep the depth and luminance weights' denominators away from 0: a flat
  * facing plane (zero gradient) or zero variance must not divide by 0. */
 #define SVGF_EPS_Z 1e-3f
@@ -213,10 +213,6 @@ static hush_status svgf_create(hush_filter f, void **state) {
 
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
-static inline float albedo_clamped(float a) {
-  return a > SVGF_ALBEDO_EPS ? a : SVGF_ALBEDO_EPS;
-}
-
 /* e^x for x <= 0 (larger x is not needed), branch-free so loops over it
  * vectorise without -ffast-math: 2^n * 2^f with n = round(x log2 e),
  * |f| <= 1/2 and a degree-6 Taylor polynomial of 2^f (relative error about
@@ -259,31 +255,6 @@ static inline float log_pos(float d) {
 }
 
 /* ---- demodulation ---------------------------------------------------------- */
-
-static void demodulate(hush_planar *color, const hush_planar *albedo, int threads) {
-  const int H = (int)color->height;
-  const size_t W = color->width;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++)
-    for (int c = 0; c < 3; c++) {
-      float *col = color->plane[c] + (size_t)y * W;
-      const float *alb = albedo->plane[c] + (size_t)y * W;
-      for (size_t x = 0; x < W; x++) col[x] = col[x] / albedo_clamped(alb[x]);
-    }
-}
-
-/* albedo[c] = filtered[c] * max(albedo[c], eps), in place */
-static void remodulate(hush_planar *albedo, const hush_planar *filtered, int threads) {
-  const int H = (int)albedo->height;
-  const size_t W = albedo->width;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++)
-    for (int c = 0; c < 3; c++) {
-      float *alb = albedo->plane[c] + (size_t)y * W;
-      const float *flt = filtered->plane[c] + (size_t)y * W;
-      for (size_t x = 0; x < W; x++) alb[x] = flt[x] * albedo_clamped(alb[x]);
-    }
-}
 
 /* ---- depth gradient -------------------------------------------------------- */
 
@@ -547,7 +518,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-  if (demod) demodulate(&st->color, &st->albedo, threads);
+  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA);
   ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS);
@@ -599,7 +570,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   /* ---- export */
   const hush_planar *result = cur;
   if (demod) {
-    remodulate(&st->albedo, cur, threads);
+    hush__remodulate(&st->albedo, cur, threads);
     result = &st->albedo;
   }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
