@@ -180,13 +180,16 @@ typedef struct next_hit {
   float t;
 } next_hit;
 
-static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_hit *h) {
-  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+/* What a ray whose closest triangle is `tri` (triangle UINT32_MAX: none)
+ * hits: that triangle, or a sphere light in front of it, or nothing. */
+static void complete_hit(const hush_integrator *it, hush_vec3 o, hush_vec3 d, const hush_hit *tri,
+                         next_hit *h) {
   h->kind = HUSH_FIRST_SKY;
   h->t = INFINITY;
-  if (hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &h->hit)) {
+  h->hit = *tri;
+  if (tri->triangle != UINT32_MAX) {
     h->kind = HUSH_FIRST_TRIANGLE;
-    h->t = h->hit.t;
+    h->t = tri->t;
   }
   float ts;
   const uint32_t s = hush__lights_intersect_sphere(it->lights, o, d, 0.0f, h->t, &ts);
@@ -195,6 +198,13 @@ static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_
     h->sphere = s - 1;
     h->t = ts;
   }
+}
+
+static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_hit *h) {
+  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+  hush_hit tri;
+  hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &tri);
+  complete_hit(it, o, d, &tri, h);
 }
 
 /* ---- the path ------------------------------------------------------------------ */
@@ -309,12 +319,21 @@ int hush__integrator_first_hit(const hush_integrator *it, hush_vec3 eye, uint32_
 void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
                             const hush_rand *rng, uint32_t x, uint32_t y, hush_first_hit *first,
                             hush_path_result *out) {
+  const float oo[3] = {eye.x, eye.y, eye.z}, dd[3] = {d.x, d.y, d.z};
+  hush_hit tri;
+  hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &tri);
+  hush__integrator_trace_hit(it, eye, d, &tri, rng, x, y, first, out);
+}
+
+void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                                const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
+                                hush_first_hit *first, hush_path_result *out) {
   hush_first_hit local;
   hush_first_hit *f = first ? first : &local;
   memset(f, 0, sizeof *f);
   f->dir = d;
   next_hit h;
-  trace_ray(it, eye, d, &h);
+  complete_hit(it, eye, d, tri, &h);
   f->kind = h.kind;
   f->t = h.t;
   if (h.kind == HUSH_FIRST_TRIANGLE) {

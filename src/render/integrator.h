@@ -107,6 +107,13 @@ void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 
                             const hush_rand *rng, uint32_t x, uint32_t y, hush_first_hit *first,
                             hush_path_result *out);
 
+/* The same for a camera ray whose closest triangle was already found (by
+ * a packet, hush__scene_intersect_packet; triangle UINT32_MAX: none): the
+ * sphere lights are tested, then the path is shaded. */
+void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                                const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
+                                hush_first_hit *first, hush_path_result *out);
+
 /* The first hit of visibility sample (triangle, u, v) at the scene's
  * current frame, seen from eye: what a forward-projected sample needs to be
  * re-shaded. Returns 0 if the point coincides with the eye. */

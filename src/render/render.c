@@ -44,26 +44,66 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
   ctx->it.vertex_user = params->vertex_user;
 }
 
-void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint32_t seed_frame,
-                        hush_pixel_result *out) {
+/* Sample 0's primary rays are traced as packets of BLOCK x BLOCK pixels
+ * (hush__scene_intersect_packet), blocks aligned to multiples of BLOCK.
+ * A packet's hits may depend on its other lanes (ties), so re-rendering one
+ * pixel traces its whole block again: a packet is a pure function of the
+ * camera and the block. */
+#define BLOCK 4u
+_Static_assert(BLOCK * BLOCK == HUSH_PACKET, "a block is one packet");
+
+typedef struct primary_block {
+  float dir[HUSH_PACKET][3];
+  hush_hit hit[HUSH_PACKET];
+} primary_block;
+
+/* Sample 0's primary rays of the block whose corner is (x0, y0): lane
+ * i is pixel (x0 + i % BLOCK, y0 + i / BLOCK); lanes outside the image
+ * stay empty. */
+static void trace_block(const hush_render_ctx *ctx, uint32_t x0, uint32_t y0, primary_block *b) {
+  const hush_render_params *p = &ctx->params;
+  uint32_t lanes = 0;
+  memset(b->dir, 0, sizeof b->dir);
+  for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+    const uint32_t x = x0 + i % BLOCK, y = y0 + i / BLOCK;
+    if (x >= p->width || y >= p->height) continue;
+    const hush_vec3 d = hush__camera_ray(&ctx->cam, (float)x + 0.5f + ctx->cam.jitter[0],
+                                         (float)y + 0.5f + ctx->cam.jitter[1]);
+    b->dir[i][0] = d.x;
+    b->dir[i][1] = d.y;
+    b->dir[i][2] = d.z;
+    lanes |= 1u << i;
+  }
+  const float eye[3] = {ctx->cam.eye.x, ctx->cam.eye.y, ctx->cam.eye.z};
+  hush__scene_intersect_packet(ctx->scene, eye, (const float(*)[3])b->dir, lanes, b->hit);
+}
+
+/* Pixel (x, y), lane `lane` of its traced block b. */
+static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint32_t lane,
+                        uint32_t x, uint32_t y, uint32_t seed_frame, hush_pixel_result *out) {
   memset(out, 0, sizeof *out);
   const hush_render_params *p = &ctx->params;
   double mean = 0.0, m2 = 0.0, sum[3] = {0, 0, 0}, dsum[3] = {0, 0, 0};
   for (uint32_t s = 0; s < p->spp; s++) {
     hush_rand rng;
     hush__rand_init(&rng, p->sampler, p->seed, seed_frame, x, y, s, p->spp);
-    /* sample 0 goes through the frame's jitter (the G-buffer's ray); the
-     * others spread over the pixel, a box filter, when jitter is on */
-    float jx = ctx->cam.jitter[0], jy = ctx->cam.jitter[1];
-    if (s > 0 && p->jitter) {
-      jx = hush__rand(&rng, 0) - 0.5f;
-      jy = hush__rand(&rng, 1) - 0.5f;
-    }
-    const hush_vec3 d = hush__camera_ray(&ctx->cam, (float)x + 0.5f + jx, (float)y + 0.5f + jy);
     hush_path_result r;
-    hush_first_hit first;
-    hush__integrator_trace(&ctx->it, ctx->cam.eye, d, &rng, x, y, s == 0 ? &out->first : &first,
-                           &r);
+    if (s == 0) {
+      const hush_vec3 d = hush_v3(b->dir[lane][0], b->dir[lane][1], b->dir[lane][2]);
+      hush__integrator_trace_hit(&ctx->it, ctx->cam.eye, d, &b->hit[lane], &rng, x, y,
+                                 &out->first, &r);
+    } else {
+      /* the other samples spread over the pixel, a box filter, when jitter
+       * is on; they are single rays */
+      float jx = ctx->cam.jitter[0], jy = ctx->cam.jitter[1];
+      if (p->jitter) {
+        jx = hush__rand(&rng, 0) - 0.5f;
+        jy = hush__rand(&rng, 1) - 0.5f;
+      }
+      const hush_vec3 d = hush__camera_ray(&ctx->cam, (float)x + 0.5f + jx, (float)y + 0.5f + jy);
+      hush_first_hit first;
+      hush__integrator_trace(&ctx->it, ctx->cam.eye, d, &rng, x, y, &first, &r);
+    }
     out->rays += r.rays;
     for (int k = 0; k < 3; k++) {
       sum[k] += r.radiance[k];
@@ -82,8 +122,17 @@ void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint
   out->variance = p->spp > 1 ? (float)(m2 / (p->spp - 1)) : 0.0f;
 }
 
-/* Tile edge in pixels (see hush__render_frame). */
+void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint32_t seed_frame,
+                        hush_pixel_result *out) {
+  primary_block b;
+  const uint32_t x0 = x - x % BLOCK, y0 = y - y % BLOCK;
+  trace_block(ctx, x0, y0, &b);
+  shade_pixel(ctx, &b, (y - y0) * BLOCK + (x - x0), x, y, seed_frame, out);
+}
+
+/* Tile edge in pixels (see hush__render_frame), a multiple of BLOCK. */
 #define TILE 16u
+_Static_assert(TILE % BLOCK == 0, "tiles hold whole blocks");
 
 /* ---- G-buffer ------------------------------------------------------------------ */
 
@@ -247,16 +296,24 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
   for (uint32_t t = 0; t < tiles; t++) {
     const uint32_t x0 = (t % tx) * TILE, y0 = (t / tx) * TILE;
     const uint32_t x1 = x0 + TILE < W ? x0 + TILE : W, y1 = y0 + TILE < H ? y0 + TILE : H;
-    for (uint32_t y = y0; y < y1; y++)
-      for (uint32_t x = x0; x < x1; x++) {
-        if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) {
-          write_hole(ctx, &L, x, y);
-          continue;
+    for (uint32_t by = y0; by < y1; by += BLOCK)
+      for (uint32_t bx = x0; bx < x1; bx += BLOCK) {
+        primary_block b;
+        int traced = 0;
+        for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+          const uint32_t x = bx + i % BLOCK, y = by + i / BLOCK;
+          if (x >= x1 || y >= y1) continue;
+          if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) {
+            write_hole(ctx, &L, x, y);
+            continue;
+          }
+          if (!traced) trace_block(ctx, bx, by, &b);
+          traced = 1;
+          hush_pixel_result r;
+          shade_pixel(ctx, &b, i, x, y, ctx->frame, &r);
+          write_pixel(ctx, &L, x, y, &r);
+          total += r.rays;
         }
-        hush_pixel_result r;
-        hush__render_pixel(ctx, x, y, ctx->frame, &r);
-        write_pixel(ctx, &L, x, y, &r);
-        total += r.rays;
       }
     uint32_t done;
 #pragma omp atomic capture
