@@ -501,6 +501,24 @@ static void test_cornell_gbuffer(void) {
   }
   CHECK_MSG(outside == 0, "%d depths outside the box", outside);
   CHECK(dark == 0);
+  /* depth_gradient is the depth of the tangent plane at the next pixel:
+   * where that pixel lies on the same plane, its depth is the prediction */
+  const float *g = layer(f, "depth_gradient"), *pos = layer(f, "position");
+  int pairs = 0, off = 0;
+  for (uint32_t y = 0; y + 1 < H; y++)
+    for (uint32_t x = 0; x + 1 < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      for (int k = 0; k < 2; k++) {
+        const size_t j = k == 0 ? i + 1 : i + W;
+        const float *a = pos + 3 * i, *b = pos + 3 * j, *na = n + 3 * i;
+        const float dist = (b[0] - a[0]) * na[0] + (b[1] - a[1]) * na[1] + (b[2] - a[2]) * na[2];
+        if (!(fabsf(dist) < 1e-5f) || z[i] <= 0.0f || z[j] <= 0.0f) continue;
+        pairs++;
+        if (!(fabsf(z[i] + g[2 * i + k] - z[j]) <= 1e-4f * z[j])) off++;
+      }
+    }
+  CHECK_MSG(pairs > (int)(W * H), "only %d coplanar neighbours", pairs);
+  CHECK_MSG(off == 0, "%d of %d depth gradients miss the neighbour's depth", off, pairs);
   hush_frame_release(f);
   rig_close(&r);
 }

@@ -8,6 +8,7 @@
 
 #include "core/rng.h"
 #include "render/bsdf.h"
+#include "render/fminmax.h"
 
 #include <math.h>
 #include <string.h>
@@ -95,21 +96,21 @@ static float power_heuristic(float a, float b) {
 }
 
 static float max3(const float c[3]) {
-  return fmaxf(c[0], fmaxf(c[1], c[2]));
+  return hush_fmaxf(c[0], hush_fmaxf(c[1], c[2]));
 }
 
 /* A ray origin just off the surface on the side of direction w: the offset
  * scales with the magnitude of the position so large scenes stay clean. */
 static hush_vec3 offset_origin(hush_vec3 p, hush_vec3 ng, hush_vec3 w) {
-  const float mag = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
-  const float eps = 1e-4f * fmaxf(1.0f, mag);
+  const float mag = hush_fmaxf(fabsf(p.x), hush_fmaxf(fabsf(p.y), fabsf(p.z)));
+  const float eps = 1e-4f * hush_fmaxf(1.0f, mag);
   const float side = hush_v3_dot(w, ng) >= 0.0f ? eps : -eps;
   return hush_v3_add(p, hush_v3_scale(ng, side));
 }
 
 static float ray_eps(hush_vec3 p) {
-  const float mag = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
-  return 1e-4f * fmaxf(1.0f, mag);
+  const float mag = hush_fmaxf(fabsf(p.x), hush_fmaxf(fabsf(p.y), fabsf(p.z)));
+  return 1e-4f * hush_fmaxf(1.0f, mag);
 }
 
 /* Adds beta * c * w to the result; contributions beyond the first hit are
@@ -280,7 +281,7 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
     for (int k = 0; k < 3; k++) beta[k] *= bs.weight[k];
     if (!(max3(beta) > 0.0f)) return;
     if (depth + 1 > it->rr_depth) {
-      const float q = fminf(0.95f, max3(beta));
+      const float q = hush_fminf(0.95f, max3(beta));
       if (hush__rand(rng, base + D_RR) >= q) return;
       for (int k = 0; k < 3; k++) beta[k] /= q;
     }

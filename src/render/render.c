@@ -146,19 +146,28 @@ static float view_depth(const hush_render_camera *cam, hush_vec3 p) {
   return -v.z;
 }
 
-/* Depth of the first hit's tangent plane one pixel to the right and below. */
+/* Depth of the first hit's tangent plane one pixel to the right and below,
+ * minus z. In view space the ray through image point (px, py) runs along
+ * D = (ndc_x tan_half_x, ndc_y tan_half_y, -1), so the point at view depth
+ * s is s D, and the plane n . X = n . P meets it at s = (n . P) / (n . D):
+ * one dot product per neighbour instead of a camera ray and a projection.
+ * A plane seen edge-on (|n . D| < 1e-6 |D|) or behind the eye gives 0. */
 static void depth_gradient(const hush_render_ctx *ctx, float px, float py, hush_vec3 p, hush_vec3 n,
                            float z, float out[2]) {
   out[0] = out[1] = 0.0f;
-  const hush_vec3 eye = ctx->cam.eye;
-  const float pn = hush_v3_dot(hush_v3_sub(p, eye), n);
-  for (int k = 0; k < 2; k++) {
-    const hush_vec3 d = hush__camera_ray(&ctx->cam, px + (k == 0), py + (k == 1));
-    const float dn = hush_v3_dot(d, n);
-    if (fabsf(dn) < 1e-6f) continue;
-    const float t = pn / dn;
-    if (!(t > 0.0f) || !isfinite(t)) continue;
-    out[k] = view_depth(&ctx->cam, hush_v3_add(eye, hush_v3_scale(d, t))) - z;
+  const hush_render_camera *cam = &ctx->cam;
+  const hush_vec4 pv = hush_m4_mul_v4(cam->world_to_view, p.x, p.y, p.z, 1.0f);
+  const hush_vec4 nv = hush_m4_mul_v4(cam->world_to_view, n.x, n.y, n.z, 0.0f);
+  const float k = nv.x * pv.x + nv.y * pv.y + nv.z * pv.z;
+  for (int i = 0; i < 2; i++) {
+    const float qx = px + (float)(i == 0), qy = py + (float)(i == 1);
+    const float dx = (qx / (float)cam->width * 2.0f - 1.0f) * cam->tan_half_x;
+    const float dy = (1.0f - qy / (float)cam->height * 2.0f) * cam->tan_half_y;
+    const float dn = nv.x * dx + nv.y * dy - nv.z;
+    if (!(fabsf(dn) >= 1e-6f * sqrtf(dx * dx + dy * dy + 1.0f))) continue;
+    const float s = k / dn;
+    if (!(s > 0.0f) || !isfinite(s)) continue;
+    out[i] = s - z;
   }
 }
 
