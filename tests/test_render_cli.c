@@ -239,8 +239,8 @@ int main(void) {
         strstr(json, "\"command\": [\"hush\", \"render\""));
 
   /* references: spp and variance layers; a static scene uses camera motion */
-  expect("--scene builtin:cornell --size 16x12 --frames 1 --spp 4 --no-jitter --split --quiet "
-         "--out " WORK "/ref",
+  expect("--scene builtin:cornell --size 16x12 --frames 1 --spp 4 --no-jitter --split "
+         "--split-lobes --quiet --out " WORK "/ref",
          0, NULL);
   REQUIRE(hush__sequence_read(dev, WORK "/ref", &seq) == HUSH_OK);
   CHECK(seq.motion == HUSH_MOTION_CAMERA);
@@ -250,6 +250,19 @@ int main(void) {
   CHECK(hush_frame_get_layer(f, "variance", NULL) == HUSH_OK);
   CHECK(hush_frame_get_layer(f, "direct", NULL) == HUSH_OK);
   CHECK(hush_frame_get_layer(f, "indirect", NULL) == HUSH_OK);
+  hush_image_view dv, sv, cv;
+  REQUIRE(hush_frame_get_layer(f, "diffuse", &dv) == HUSH_OK);
+  REQUIRE(hush_frame_get_layer(f, "specular", &sv) == HUSH_OK);
+  REQUIRE(hush_frame_get_layer(f, "color", &cv) == HUSH_OK);
+  /* written as float: the sum still holds bit for bit after the EXR */
+  int inexact = 0;
+  for (uint32_t i = 0; i < 16 * 12 * 3; i++) {
+    const float sum = ((const float *)dv.data)[i] + ((const float *)sv.data)[i];
+    if (sum != ((const float *)cv.data)[i]) inexact++;
+  }
+  CHECK_MSG(inexact == 0, "%d colours are not diffuse + specular", inexact);
+  read_file(WORK "/ref/render.json", json, sizeof json);
+  CHECK(strstr(json, "\"split_lobes\": true") != NULL);
   hush_frame_release(f);
   hush__sequence_free(&seq);
   test_bad_scenes(dev);

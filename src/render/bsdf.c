@@ -195,12 +195,17 @@ static float plastic_spec_prob(const hush_bsdf *b, float cos_o) {
 
 /* ---- evaluation ---------------------------------------------------------------------- */
 
-static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf) {
-  set3(f, 0.0f, 0.0f, 0.0f);
+/* The non-delta lobes at (wo, wi), local frame: fd the diffuse one
+ * (Lambert, or the plastic's base), fs the glossy one (GGX of the conductor
+ * or of the plastic's coat). */
+static void eval_lobes(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float fd[3], float fs[3],
+                       float *pdf) {
+  set3(fd, 0.0f, 0.0f, 0.0f);
+  set3(fs, 0.0f, 0.0f, 0.0f);
   *pdf = 0.0f;
   if (wo.z <= 0.0f || wi.z <= 0.0f) return;
   if (b->type == HUSH_MAT_DIFFUSE) {
-    for (int k = 0; k < 3; k++) f[k] = b->diffuse[k] * wi.z * INV_PI;
+    for (int k = 0; k < 3; k++) fd[k] = b->diffuse[k] * wi.z * INV_PI;
     *pdf = wi.z * INV_PI;
     return;
   }
@@ -209,7 +214,7 @@ static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3
     if (b->alpha <= 0.0f) return;
     const float dg = ggx_d(b->alpha, h) * ggx_g2(b->alpha, wo, wi) / (4.0f * wo.z);
     const float c = hush_v3_dot(wo, h);
-    for (int k = 0; k < 3; k++) f[k] = schlick(b->specular[k], c) * dg;
+    for (int k = 0; k < 3; k++) fs[k] = schlick(b->specular[k], c) * dg;
     *pdf = ggx_pdf(b->alpha, wo, h);
     return;
   }
@@ -223,14 +228,21 @@ static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3
    * asks for, and the only form Tungsten has; the linear Kd / (1 - Fdr_int)
    * made the living room's floor and panels up to twice too bright. */
   const float base = (1.0f - fi) * (1.0f - fo) / (b->eta * b->eta) * wi.z * INV_PI;
-  for (int k = 0; k < 3; k++) f[k] = b->diffuse[k] / (1.0f - b->diffuse[k] * b->fdr_int) * base;
+  for (int k = 0; k < 3; k++) fd[k] = b->diffuse[k] / (1.0f - b->diffuse[k] * b->fdr_int) * base;
   *pdf = (1.0f - ps) * wi.z * INV_PI;
   if (b->alpha > 0.0f) {
     const float fr = hush__fresnel_dielectric(hush_v3_dot(wo, h), b->eta);
     const float spec = fr * ggx_d(b->alpha, h) * ggx_g2(b->alpha, wo, wi) / (4.0f * wo.z);
-    for (int k = 0; k < 3; k++) f[k] += b->specular[k] * spec;
+    for (int k = 0; k < 3; k++) fs[k] = b->specular[k] * spec;
     *pdf += ps * ggx_pdf(b->alpha, wo, h);
   }
+}
+
+/* Both lobes together: fd + fs (a lobe that is absent adds an exact 0). */
+static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf) {
+  float fs[3];
+  eval_lobes(b, wo, wi, f, fs, pdf);
+  for (int k = 0; k < 3; k++) f[k] += fs[k];
 }
 
 void hush__bsdf_eval(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf) {
@@ -238,6 +250,15 @@ void hush__bsdf_eval(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3],
   *pdf = 0.0f;
   if (b->black || hush_v3_dot(wi, b->ng) <= 0.0f) return;
   eval_local(b, to_local(b, wo), to_local(b, wi), f, pdf);
+}
+
+void hush__bsdf_eval_lobes(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float fd[3],
+                           float fs[3], float *pdf) {
+  set3(fd, 0.0f, 0.0f, 0.0f);
+  set3(fs, 0.0f, 0.0f, 0.0f);
+  *pdf = 0.0f;
+  if (b->black || hush_v3_dot(wi, b->ng) <= 0.0f) return;
+  eval_lobes(b, to_local(b, wo), to_local(b, wi), fd, fs, pdf);
 }
 
 /* ---- sampling ---------------------------------------------------------------------------- */

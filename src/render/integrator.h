@@ -72,6 +72,7 @@ typedef struct hush_integrator {
   float clamp;             /* > 0: clamp each indirect contribution to this (max channel) */
   hush_path_vertex_fn vertex_fn;
   void *vertex_user;
+  int split_lobes;         /* also fill hush_path_result's diffuse and specular */
 } hush_integrator;
 
 void hush__integrator_defaults(hush_integrator *it, const hush_scene *scene,
@@ -98,6 +99,14 @@ typedef struct hush_first_hit {
 typedef struct hush_path_result {
   float radiance[3];
   float direct[3];         /* emission seen directly + the first hit's shadow ray */
+  /* With split_lobes (else 0): radiance by the first hit's lobe. Light seen
+   * directly is diffuse. The first hit's shadow ray is split by the BSDF's
+   * lobes evaluated towards the light (hush__bsdf_eval_lobes); everything
+   * after the first hit by the lobes' values in the sampled direction, all
+   * specular for a delta lobe (mirror, smooth coat, glass). So each layer's
+   * expectation is its lobe's integral, and diffuse + specular = radiance
+   * up to rounding. */
+  float diffuse[3], specular[3];
   uint32_t rays;           /* rays traced, primary and shadow included */
 } hush_path_result;
 

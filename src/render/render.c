@@ -42,6 +42,7 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
   ctx->it.clamp = params->clamp;
   ctx->it.vertex_fn = params->vertex_fn;
   ctx->it.vertex_user = params->vertex_user;
+  ctx->it.split_lobes = params->split_lobes;
 }
 
 /* Sample 0's primary rays are traced as packets of BLOCK x BLOCK pixels
@@ -84,6 +85,7 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
   memset(out, 0, sizeof *out);
   const hush_render_params *p = &ctx->params;
   double mean = 0.0, m2 = 0.0, sum[3] = {0, 0, 0}, dsum[3] = {0, 0, 0};
+  double diff_sum[3] = {0, 0, 0}, spec_sum[3] = {0, 0, 0};
   for (uint32_t s = 0; s < p->spp; s++) {
     hush_rand rng;
     hush__rand_init(&rng, p->sampler, p->seed, seed_frame, x, y, s, p->spp);
@@ -108,6 +110,8 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
     for (int k = 0; k < 3; k++) {
       sum[k] += r.radiance[k];
       dsum[k] += r.direct[k];
+      diff_sum[k] += r.diffuse[k];
+      spec_sum[k] += r.specular[k];
     }
     /* Welford, in double: the same numbers in the same order, any thread */
     const double l = hush_luminance(r.radiance[0], r.radiance[1], r.radiance[2]);
@@ -118,6 +122,12 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
   for (int k = 0; k < 3; k++) {
     out->color[k] = (float)(sum[k] / p->spp);
     out->direct[k] = (float)(dsum[k] / p->spp);
+    if (p->split_lobes) {
+      /* the colour is the layers' sum, so that it holds exactly */
+      out->diffuse[k] = (float)(diff_sum[k] / p->spp);
+      out->specular[k] = (float)(spec_sum[k] / p->spp);
+      out->color[k] = out->diffuse[k] + out->specular[k];
+    }
   }
   out->variance = p->spp > 1 ? (float)(m2 / (p->spp - 1)) : 0.0f;
 }
@@ -138,7 +148,7 @@ _Static_assert(TILE % BLOCK == 0, "tiles hold whole blocks");
 
 typedef struct layers {
   float *color, *albedo, *normal, *position, *depth, *dgrad, *motion, *id, *vis;
-  float *spp, *variance, *direct, *indirect;
+  float *spp, *variance, *direct, *indirect, *diffuse, *specular;
 } layers;
 
 static float view_depth(const hush_render_camera *cam, hush_vec3 p) {
@@ -215,6 +225,10 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
       L->direct[3 * i + k] = r->direct[k];
       L->indirect[3 * i + k] = r->color[k] - r->direct[k];
     }
+  if (L->diffuse) {
+    memcpy(L->diffuse + 3 * i, r->diffuse, 3 * sizeof(float));
+    memcpy(L->specular + 3 * i, r->specular, 3 * sizeof(float));
+  }
   if (L->spp) L->spp[i] = (float)ctx->params.spp;
   if (L->variance) L->variance[i] = r->variance;
   motion_of(ctx, f, L->motion + 2 * i);
@@ -287,6 +301,8 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
       {"vis", 3, &L.vis, 1},            {"spp", 1, &L.spp, p->spp > 1 || p->progressive},
       {"variance", 1, &L.variance, p->spp > 1}, {"direct", 3, &L.direct, p->split},
       {"indirect", 3, &L.indirect, p->split},
+      {"diffuse", 3, &L.diffuse, p->split_lobes},
+      {"specular", 3, &L.specular, p->split_lobes},
   };
   for (size_t k = 0; k < sizeof table / sizeof table[0] && st == HUSH_OK; k++)
     if (table[k].on) st = add_layer(out, table[k].name, table[k].channels, table[k].data);

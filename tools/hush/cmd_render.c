@@ -58,6 +58,9 @@ static const char *const help_text =
     "  --no-jitter          no subpixel jitter (default: Halton(2,3) per frame)\n"
     "  --clamp X            clamp indirect contributions to X (default: off)\n"
     "  --split              also write the layers direct and indirect\n"
+    "  --split-lobes        also write the layers diffuse and specular: the\n"
+    "                       radiance by the first hit's BSDF lobe (light seen\n"
+    "                       directly is diffuse); color is their sum\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
     "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
@@ -166,6 +169,8 @@ static void parse_options(int argc, char **argv, render_options *o) {
       o->params.clamp = cli_parse_float(a.cmd, "--clamp", v, 1e-6f, 1e30f);
     } else if (cli_switch(&a, arg, "--split")) {
       o->params.split = 1;
+    } else if (cli_switch(&a, arg, "--split-lobes")) {
+      o->params.split_lobes = 1;
     } else if (cli_option(&a, arg, "--spp-fraction", &v)) {
       parse_fraction(a.cmd, v, o);
     } else if (cli_option(&a, arg, "--export", &v)) {
@@ -306,13 +311,14 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
   fprintf(f,
           ",\n  \"width\": %u,\n  \"height\": %u,\n  \"first_frame\": %u,\n  \"frame_count\": %u,\n"
           "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
-          "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n"
+          "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n  \"split_lobes\": %s,\n"
           "  \"spp_fraction\": %.9g,\n  \"progressive_block\": [%u, %u],\n  \"export\": %s,\n"
           "  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
           "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
           r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
           p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
-          (double)p->clamp, p->split ? "true" : "false", r->o->spp_fraction,
+          (double)p->clamp, p->split ? "true" : "false", p->split_lobes ? "true" : "false",
+          r->o->spp_fraction,
           r->o->spp_fraction < 1.0 ? r->o->progressive.k : 1u,
           r->o->spp_fraction < 1.0 ? r->o->progressive.m : 1u,
           r->o->export_bmfr ? "\"bmfr\"" : "null", r->scene.triangle_count,
