@@ -412,6 +412,14 @@ static void test_determinism(void) {
     /* another frame uses other numbers */
     hush_frame d = render_at(&r, &p, HUSH_MOVE_ORBIT, 4, &c3);
     CHECK(!same_layers(a, d));
+    /* a frame rendered into the last one's layers (as hush render does)
+     * is the same as one rendered into a new frame */
+    hush_frame e = render_at(&r, &p, HUSH_MOVE_ORBIT, 3, &c2);
+    REQUIRE(hush__scene_set_frame(r.device, &r.scene, 4) == HUSH_OK);
+    hush__lights_set_frame(&r.lights, 4);
+    REQUIRE(hush__render_frame(r.device, &c3, e, NULL, NULL, NULL) == HUSH_OK);
+    CHECK(same_layers(e, d));
+    hush_frame_release(e);
     REQUIRE(hush__scene_set_frame(r.device, &r.scene, 3) == HUSH_OK);
     hush__lights_set_frame(&r.lights, 3);
 
@@ -457,6 +465,33 @@ static void test_determinism(void) {
     hush_frame_release(c);
     hush_frame_release(d);
   }
+  rig_close(&r);
+}
+
+/* Progressive frames rendered one after the other into the same
+ * hush_frame: the holes of a frame are cleared of what the last frame
+ * traced there, so each equals a frame rendered into a new hush_frame. */
+static void test_reuse_progressive(void) {
+  rig r;
+  rig_open(&r, "courtyard");
+  hush_progressive prog;
+  REQUIRE(hush__progressive_init(&prog, 0.25));
+  hush_render_params p;
+  hush__render_defaults(&p);
+  p.width = 40;
+  p.height = 30;
+  p.progressive = &prog;
+  p.split = p.split_lobes = 1;
+  hush_render_ctx c;
+  hush_frame reused = render_at(&r, &p, HUSH_MOVE_DOLLY, 0, &c);
+  for (uint32_t f = 1; f < 4; f++) {
+    hush_frame fresh = render_at(&r, &p, HUSH_MOVE_DOLLY, f, &c);
+    REQUIRE(hush__render_frame(r.device, &c, reused, NULL, NULL, NULL) == HUSH_OK);
+    CHECK_MSG(same_layers(reused, fresh), "frame %u differs when rendered into frame %u's layers",
+              f, f - 1);
+    hush_frame_release(fresh);
+  }
+  hush_frame_release(reused);
   rig_close(&r);
 }
 
@@ -721,6 +756,7 @@ int main(void) {
   test_motion("cornell-moving", HUSH_MOVE_ORBIT, 1);
   test_motion("courtyard", HUSH_MOVE_DOLLY, 1);
   test_determinism();
+  test_reuse_progressive();
   test_cornell_gbuffer();
   test_bsdf_lobes();
   test_lobe_layers();

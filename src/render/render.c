@@ -214,11 +214,37 @@ static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f, float
   out[1] = py - cy;
 }
 
+static void zero(float *layer, int channels, size_t i) {
+  if (layer)
+    for (int k = 0; k < channels; k++) layer[(size_t)channels * i + k] = 0.0f;
+}
+
+/* Pixel i of every layer set to 0: the layers may be last frame's (see
+ * hush__render_frame), so nothing is assumed zero. */
+static void clear_pixel(const layers *L, size_t i) {
+  zero(L->color, 3, i);
+  zero(L->albedo, 3, i);
+  zero(L->normal, 3, i);
+  zero(L->position, 3, i);
+  zero(L->depth, 1, i);
+  zero(L->dgrad, 2, i);
+  zero(L->motion, 2, i);
+  zero(L->id, 1, i);
+  zero(L->vis, 3, i);
+  zero(L->spp, 1, i);
+  zero(L->variance, 1, i);
+  zero(L->direct, 3, i);
+  zero(L->indirect, 3, i);
+  zero(L->diffuse, 3, i);
+  zero(L->specular, 3, i);
+}
+
 static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x, uint32_t y,
                         const hush_pixel_result *r) {
   const size_t i = (size_t)y * ctx->params.width + x;
   const hush_first_hit *f = &r->first;
   const hush_scene *sc = ctx->scene;
+  clear_pixel(L, i);
   memcpy(L->color + 3 * i, r->color, 3 * sizeof(float));
   if (L->direct)
     for (int k = 0; k < 3; k++) {
@@ -259,15 +285,25 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   depth_gradient(ctx, px, py, f->p, f->surface.ng, z, L->dgrad + 2 * i);
 }
 
-/* A pixel the progressive pattern skips this frame: the layers are zero
- * from hush_frame_add_layer, spp included; vis says "no triangle", since 0
- * would name triangle 0. */
+/* A pixel the progressive pattern skips this frame: every layer 0, spp
+ * included, but vis says "no triangle", since 0 would name triangle 0. */
 static void write_hole(const hush_render_ctx *ctx, const layers *L, uint32_t x, uint32_t y) {
   const size_t i = (size_t)y * ctx->params.width + x;
+  clear_pixel(L, i);
   L->vis[3 * i] = -1.0f;
 }
 
+/* The frame's layer `name` if it has one of `channels` channels (a
+ * sequence renders every frame into the same hush_frame: reusing its
+ * memory saves a fresh ~80 MB allocation, zeroing and page faults per
+ * 1280x720 frame, a serial ~5% of the render), else a new one. Every pixel
+ * is written, so old contents do not matter. */
 static hush_status add_layer(hush_frame out, const char *name, int channels, float **data) {
+  const hush_layer *old = hush__frame_find(out, name);
+  if (old && old->channels == channels) {
+    *data = old->pixels;
+    return HUSH_OK;
+  }
   hush_image_view v;
   const hush_status st = hush_frame_add_layer(out, name, channels, &v);
   *data = st == HUSH_OK ? (float *)v.data : NULL;
