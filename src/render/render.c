@@ -244,7 +244,8 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   const size_t i = (size_t)y * ctx->params.width + x;
   const hush_first_hit *f = &r->first;
   const hush_scene *sc = ctx->scene;
-  clear_pixel(L, i);
+  /* every value is written (the layers may hold the last frame): the
+   * G-buffer entries a sky or sphere pixel does not have are set to 0 */
   memcpy(L->color + 3 * i, r->color, 3 * sizeof(float));
   if (L->direct)
     for (int k = 0; k < 3; k++) {
@@ -260,9 +261,15 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   motion_of(ctx, f, L->motion + 2 * i);
   float *alb = L->albedo + 3 * i;
   alb[0] = alb[1] = alb[2] = 1.0f;
+  L->vis[3 * i + 1] = L->vis[3 * i + 2] = 0.0f;
   if (f->kind == HUSH_FIRST_SKY) {
     L->vis[3 * i] = -1.0f;
-    return; /* normal, position, depth, gradient and id stay 0 */
+    zero(L->normal, 3, i);
+    zero(L->position, 3, i);
+    zero(L->depth, 1, i);
+    zero(L->dgrad, 2, i);
+    zero(L->id, 1, i);
+    return;
   }
   const float px = (float)x + 0.5f + ctx->cam.jitter[0];
   const float py = (float)y + 0.5f + ctx->cam.jitter[1];
