@@ -271,18 +271,20 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
       add(it, out, vsum, beta, sc->spheres[h.sphere].radiance, w, depth, direct, share);
       return;
     }
-    hush_surface s;
-    if (depth == 0) {
-      s = first->surface;
-    } else {
+    /* the first hit's surface is read in place (copying it and reading a
+     * field back stalls on store forwarding) */
+    hush_surface later;
+    const hush_surface *sp = &first->surface;
+    if (depth > 0) {
       const float dd[3] = {d.x, d.y, d.z};
-      hush__scene_surface(sc, &h.hit, dd, &s);
+      hush__scene_surface(sc, &h.hit, dd, &later);
+      sp = &later;
     }
-    const hush_material *m = &sc->materials[s.material];
+    const hush_material *m = &sc->materials[sp->material];
     if (max3(m->emission) > 0.0f) {
       float w = 1.0f;
       if (!prev_delta) {
-        const float cos_l = fabsf(hush_v3_dot(d, s.ng));
+        const float cos_l = fabsf(hush_v3_dot(d, sp->ng));
         const float area = hush__lights_triangle_area(sc, h.hit.triangle);
         w = power_heuristic(prev_pdf, hush__lights_triangle_pdf(L, h.hit.triangle, area, h.t, cos_l));
       }
@@ -290,7 +292,7 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
     }
     const hush_vec3 wo = hush_v3_scale(d, -1.0f);
     hush_bsdf b;
-    hush__bsdf_setup(&b, m, &s, wo);
+    hush__bsdf_setup(&b, m, sp, wo);
     const int last = depth >= it->bounces;
     const uint32_t base = DIM_PATH + DIMS_PER_VERTEX * (uint32_t)depth;
     if (hush__bsdf_has_smooth(&b) && hush__lights_any(L)) {
@@ -298,13 +300,13 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
       /* at the first hit the light sample is split by lobe; later ones
        * follow the first hit's split of the path */
       const int split_here = it->split_lobes && depth == 0;
-      next_event(it, rng, base, &b, s.p, wo, last, c, split_here ? nee_share : NULL, &out->rays);
+      next_event(it, rng, base, &b, sp->p, wo, last, c, split_here ? nee_share : NULL, &out->rays);
       const float one[3] = {1.0f, 1.0f, 1.0f};
       float bc[3];
       for (int k = 0; k < 3; k++) bc[k] = beta[k] * c[k];
       add(it, out, vsum, one, bc, 1.0f, depth, direct, depth == 0 ? nee_share : share);
     }
-    call_hook(it, x, y, rng, depth, &s, h.hit.triangle, beta, vsum);
+    call_hook(it, x, y, rng, depth, sp, h.hit.triangle, beta, vsum);
     if (last) return;
 
     const float u[3] = {hush__rand(rng, base + D_BSDF_LOBE), hush__rand(rng, base + D_BSDF_UV),
@@ -332,7 +334,7 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
     }
     prev_pdf = bs.pdf;
     prev_delta = bs.delta;
-    origin = offset_origin(s.p, b.ng, bs.wi);
+    origin = offset_origin(sp->p, b.ng, bs.wi);
     d = bs.wi;
     out->rays++;
     trace_ray(it, origin, d, &h);
