@@ -33,7 +33,11 @@
  * pixel_offsets[i] = (0.5 + jitter_x, 0.5 - jitter_y): where frame i's
  * sample lies inside its pixel, x to the right and y UP from the pixel's
  * bottom edge, as the code uses it: the pixel index of a projected point is
- * uv * size - (offset.x, 1 - offset.y). No jitter gives (0.5, 0.5).
+ * uv * size - (offset.x, 1 - offset.y). No jitter gives (0.5, 0.5). The code
+ * pairs camera_matrices[i - 1] with pixel_offsets[i]; this frame's offset
+ * cancels this frame's jitter, so its history lookup lands where hush's motion
+ * vectors point. Checked by running the published code (commit 4b821c6,
+ * tools/run-bmfr-reference.sh, docs/bmfr-reference.md).
  */
 #ifndef HUSH_IO_EXPORT_BMFR_H
 #define HUSH_IO_EXPORT_BMFR_H
