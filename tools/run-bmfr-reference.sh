@@ -39,8 +39,8 @@ options:
                    pinned commit, holding opencl/) instead of cloning it
   --work DIR       build here and keep it (default: a temporary directory,
                    removed at the end)
-  --hush PATH      the hush CLI (default: $HUSH, else `hush` on the PATH,
-                   else build/hush of this checkout)
+  --hush PATH      the hush CLI (default: $HUSH, else build/hush of this
+                   checkout, else `hush` on the PATH)
   --platform I     OpenCL platform index (default 0)
   --device J       OpenCL device index (default 0)
   --no-clamp       also remove the clamp to [0, 1] of the code's tone mapping
@@ -71,9 +71,10 @@ done
 [ -n "$SEQ" ] && [ -n "$OUT" ] || { usage >&2; exit 2; }
 case $PLATFORM$DEVICE in *[!0-9]*) die "--platform and --device take integers" ;; esac
 
+# This checkout's build first: `hush` on the PATH may be BusyBox's shell.
 if [ -z "$HUSH_BIN" ]; then
-  if command -v hush > /dev/null 2>&1; then HUSH_BIN=$(command -v hush)
-  else HUSH_BIN=$(cd "$(dirname "$0")/.." && pwd)/build/hush; fi
+  HUSH_BIN=$(cd "$(dirname "$0")/.." && pwd)/build/hush
+  if [ ! -x "$HUSH_BIN" ] && command -v hush > /dev/null 2>&1; then HUSH_BIN=$(command -v hush); fi
 fi
 [ -x "$HUSH_BIN" ] || die "no hush CLI at '$HUSH_BIN' (build it, or give --hush)"
 
