@@ -2,7 +2,7 @@
  * test_export_bmfr.c — `hush render --export bmfr` (io/export_bmfr.h): the
  * files the published BMFR code opens exist, each EXR has exactly the 3 float
  * channels R, G, B; colour * albedo gives the radiance back (also where the
- * albedo is 0); camera_matrices.h parses (and compiles, when a C compiler is
+ * albedo is 0), and sky pixels have colour 1 and their radiance as albedo; camera_matrices.h parses (and compiles, when a C compiler is
  * on the PATH), its matrices are those of cameras.json with clip y negated,
  * and projecting each pixel's world position with them by the code's own
  * formula, uv * size - (offset.x, 1 - offset.y), lands on that pixel; with
@@ -80,14 +80,16 @@ static void read_text(const char *path, char *buf, size_t size) {
   fclose(f);
 }
 
+/* Pixel 0 and 1: surfaces, some albedo channels 0 (the guard); pixel 2: sky
+ * (normal 0), demodulated by its own radiance, one channel below the guard. */
 static void test_demodulation_guard(hush_device dev) {
-  hush_frame f = hush_frame_new(dev, 2, 1);
+  hush_frame f = hush_frame_new(dev, 3, 1);
   REQUIRE(f);
   const char *names[] = {"color", "albedo", "normal", "position"};
-  const float values[4][6] = {{0.5f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f},
-                              {0.5f, 0.0f, 1e-4f, 1.0f, 0.25f, 0.0f},
-                              {0, 0, 1, 0, 1, 0},
-                              {1, 2, 3, 4, 5, 6}};
+  const float values[4][9] = {{0.5f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f, 20.0f, 0.5f, 1e-5f},
+                              {0.5f, 0.0f, 1e-4f, 1.0f, 0.25f, 0.0f, 1.0f, 1.0f, 1.0f},
+                              {0, 0, 1, 0, 1, 0, 0, 0, 0},
+                              {1, 2, 3, 4, 5, 6, 0, 0, 0}};
   for (int l = 0; l < 4; l++) {
     hush_image_view v;
     REQUIRE(hush_frame_add_layer(f, names[l], 3, &v) == HUSH_OK);
@@ -99,9 +101,9 @@ static void test_demodulation_guard(hush_device dev) {
   REQUIRE(hush_frame_read_exr(dev, WORK "/guard/color7.exr", &c) == HUSH_OK);
   REQUIRE(hush_frame_read_exr(dev, WORK "/guard/albedo7.exr", &a) == HUSH_OK);
   const float *cc = layer3(c, "color"), *aa = layer3(a, "color");
-  const float expect_c[6] = {1.0f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f};
-  const float expect_a[6] = {0.5f, 1.0f, 1.0f, 1.0f, 0.25f, 1.0f};
-  for (int i = 0; i < 6; i++) {
+  const float expect_c[9] = {1.0f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f, 1.0f, 1.0f, 1e-5f};
+  const float expect_a[9] = {0.5f, 1.0f, 1.0f, 1.0f, 0.25f, 1.0f, 20.0f, 0.5f, 1.0f};
+  for (int i = 0; i < 9; i++) {
     CHECK_NEAR(cc[i], expect_c[i], 1e-6);
     CHECK_NEAR(aa[i], expect_a[i], 1e-6);
   }
