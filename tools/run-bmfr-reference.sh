@@ -22,7 +22,7 @@ set -euo pipefail
 
 # The commit of github.com/maZZZu/bmfr this script was written and checked
 # against ("Added group and university to README", the TOG supplementary code).
-BMFR_REPO=https://github.com/maZZZu/bmfr.git
+BMFR_REPO=${BMFR_REPO:-https://github.com/maZZZu/bmfr.git}  # $BMFR_REPO: a mirror
 BMFR_COMMIT=4b821c6efcf7813c774ffc0d4891b9603f1c911f
 
 usage() {
@@ -114,8 +114,11 @@ if [ -n "$SRC" ]; then
   [ -f "$SRC/opencl/bmfr.cpp" ] || die "--src: no opencl/bmfr.cpp in '$SRC'"
   mkdir -p "$CODE" && cp -R "$SRC/opencl" "$CODE/"
 else
-  git clone --quiet "$BMFR_REPO" "$CODE" || die "cannot clone $BMFR_REPO (no network? use --src)"
-  git -C "$CODE" checkout --quiet "$BMFR_COMMIT"
+  # Only opencl/ is needed (not the Windows binaries in 3rd-party/).
+  git clone --quiet --no-checkout "$BMFR_REPO" "$CODE" ||
+    die "cannot clone $BMFR_REPO (no network? use --src)"
+  git -C "$CODE" checkout --quiet "$BMFR_COMMIT" -- opencl ||
+    die "$BMFR_REPO has no opencl/ at commit $BMFR_COMMIT"
 fi
 CL=$CODE/opencl
 cp "$CL/bmfr.cpp" "$WORK/bmfr.cpp.orig"
