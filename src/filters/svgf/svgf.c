@@ -4,7 +4,8 @@
  *   import -> demodulate by albedo -> temporal accumulation of colour and
  *   luminance moments (src/temporal, shared with "accumulate") -> variance
  *   from the moments, or a 7x7 bilateral spatial estimate while the history
- *   is short -> edge-avoiding a-trous (5x5 B3 kernel, step 2^i), guided by
+ *   is short -> edge-avoiding a-trous (5x5 B3 or 3x3 kernel, steps 2^i in
+ *   increasing, decreasing or 0-then-decreasing order), guided by
  *   depth (with its screen-space gradient), normal and luminance (scaled by
  *   the 3x3-blurred variance), the variance filtered along with squared
  *   weights -> the first level fed back as the colour history -> remodulate
@@ -55,8 +56,15 @@ enum {
   P_FEEDBACK_FIRST_LEVEL,
   P_TAA,
   P_TAA_ALPHA,
+  P_KERNEL,
+  P_ORDER,
+  P_DEPTH_STEEP,
   P_COUNT
 };
+
+static const char *const svgf_kernel_names[] = {"5x5", "3x3"};
+enum { ORDER_INCREASING = 0, ORDER_DECREASING, ORDER_ZERO_THEN_DECREASING };
+static const char *const svgf_order_names[] = {"increasing", "decreasing", "0-then-decreasing"};
 
 static const hush_param_info svgf_params[P_COUNT] = {
     HUSH_PARAM_NONFINITE_ENTRY,
@@ -81,7 +89,9 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
      "with 'albedo' bound: filter color / max(albedo, 1e-3), multiply back after", NULL},
     {"iterations", HUSH_PARAM_INT, 5, 0, 10,
-     "a-trous iterations of the 5x5 B3 kernel, tap step 2^i (0: accumulation only)", NULL},
+     "a-trous levels, tap steps 1, 2, ..., 2^(iterations-1) (0: accumulation only); the thesis "
+     "uses 6 with the 3x3 kernel",
+     NULL},
     {"sigma_z", HUSH_PARAM_FLOAT, 1.0, 1e-6, 1e6,
      "depth weight exp(-|z_p - z_q| / (sigma_z |grad z . (p - q)| + eps))", NULL},
     {"sigma_n", HUSH_PARAM_FLOAT, 128.0, 0.0, 1024.0,
@@ -100,6 +110,20 @@ static const hush_param_info svgf_params[P_COUNT] = {
      NULL},
     {"taa_alpha", HUSH_PARAM_FLOAT, 0.1, 0.01, 1.0,
      "with taa: weight of the current frame in the TAA blend", NULL},
+    {"kernel", HUSH_PARAM_ENUM, 0, 0, 1,
+     "a-trous kernel: 5x5 B3 spline (1 4 6 4 1)/16 (Schied 2017) or 3x3 (1 2 1)/4 (Dundr 2018 "
+     "§4.1.4.6)",
+     svgf_kernel_names},
+    {"order", HUSH_PARAM_ENUM, 0, 0, 2,
+     "order of the tap steps: increasing (1, 2, 4, ...; Schied 2017), decreasing (largest "
+     "first) or 0-then-decreasing (1, then largest down to 2: Dundr 2018 §4.1.4.6, 'i = 0, 5, 4, "
+     "3, 2, 1'); the first level run is the one fed back (with decreasing that is the coarsest: "
+     "its bias accumulates, measured +2 % on a noisy wall after 8 frames)",
+     svgf_order_names},
+    {"depth_steep", HUSH_PARAM_FLOAT, 0.0, 0.0, 1e6,
+     "the depth weight is 1 where |grad z| > depth_steep * z (relative slope per pixel; Dundr "
+     "2018 §4.1.4.3, a scene-dependent constant without a published value); 0: never",
+     NULL},
 };
 
 enum {
@@ -209,6 +233,15 @@ static int needed_pad(const svgf_kernel *k, int levels) {
   return widest > SVGF_SPATIAL_VARIANCE_RADIUS ? widest : SVGF_SPATIAL_VARIANCE_RADIUS;
 }
 
+/* Tap step of the i-th level run out of `levels` in the given order. */
+static int level_step(int order, int i, int levels) {
+  switch (order) {
+  case ORDER_DECREASING: return 1 << (levels - 1 - i);
+  case ORDER_ZERO_THEN_DECREASING: return i == 0 ? 1 : 1 << (levels - i);
+  default: return 1 << i;
+  }
+}
+
 /* The a-trous input of the first level: colour, variance and luminance. */
 static void first_signal(const hush_planar *color, const float *var, svgf_padded *sig,
                          int threads) {
@@ -258,7 +291,8 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
   const int with_taa = hush__param_i(f, P_TAA);
   const int iterations = hush__param_i(f, P_ITERATIONS);
-  const svgf_kernel *kernel = &svgf_kernel_5x5;
+  const svgf_kernel *kernel = hush__param_i(f, P_KERNEL) ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
+  const int order = hush__param_i(f, P_ORDER);
   if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
 
   /* ---- import: nothing of the history changes until every input is read */
@@ -301,7 +335,8 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   /* ---- guide + variance */
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
   svgf_guide_import(&st->zn, gb->depth.plane[0], (const float *const *)gb->normal.plane, threads);
-  svgf_guide_gradient(&st->zn, has_dgrad, &st->grad, st->zon.plane[0], 0.0f, threads);
+  svgf_guide_gradient(&st->zn, has_dgrad, &st->grad, st->zon.plane[0],
+                      hush__param_f(f, P_DEPTH_STEEP), threads);
   svgf_guide gd;
   gd.width = W;
   gd.height = H;
@@ -343,11 +378,12 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   for (int i = 0; i < iterations; i++) {
     const svgf_level_out out =
         i == iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
-    lp.step = 1 << i;
+    lp.step = level_step(order, i, iterations);
     svgf_atrous_level(&gd, &lp, &st->signal[cur], &out, threads);
     cur = 1 - cur;
-    /* the history keeps some spatial filtering (Schied 2017 §4.4): less
-     * noise is fed back, at the cost of a little extra blur over time */
+    /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
+     * §4.1.4.6: the first level run): less noise is fed back, at the cost
+     * of a little extra blur over time */
     if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL))
       copy_color(&out, hush__accum_color(&st->acc), threads);
   }
