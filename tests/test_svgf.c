@@ -193,7 +193,7 @@ static void test_noise(hush_device dev) {
   hush_filter f = make(dev, "svgf", &s, 0);
   static float variance[N], age[N];
   hush_image_view v = view_of(variance, HUSH_FORMAT_FLOAT);
-  REQUIRE(hush_filter_set_image(f, "variance", &v) == HUSH_OK);
+  REQUIRE(hush_filter_set_image(f, "variance_estimate", &v) == HUSH_OK);
   v = view_of(age, HUSH_FORMAT_FLOAT);
   REQUIRE(hush_filter_set_image(f, "history_length", &v) == HUSH_OK);
   double in_var = 0, out_var = 0, out_mean = 0, var_first = 0, var_last = 0;
@@ -433,6 +433,65 @@ static void test_depth_steep(hush_device dev) {
   hush_filter_release(fb);
 }
 
+/* §4.3, more than 1 spp: on a striped wall (texture, no geometry edge)
+ * rendered at 64 spp with a small per-sample variance V, the 7x7 spatial
+ * estimate of the first frames sees the stripes as variance; merging the
+ * renderer's per-pixel variance gives about V / 64 instead, from frame 0. */
+static double striped_variance(hush_device dev, int merge, int frames) {
+  static scene s;
+  static float spp[N], svar[N], est[N];
+  const float V = 0.01f, n = 64.0f;
+  flat(&s, 0, 0, 0, 2.0f);
+  hush_filter f = make(dev, "svgf", &s, 0);
+  hush_image_view v = view_of(spp, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "spp", &v) == HUSH_OK);
+  v = view_of(svar, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "variance", &v) == HUSH_OK);
+  v = view_of(est, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "variance_estimate", &v) == HUSH_OK);
+  REQUIRE(hush_filter_set_bool(f, "sample_variance", merge) == HUSH_OK);
+  for (int k = 0; k < frames; k++) {
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const int i = y * W + x;
+        /* the mean of 64 samples of variance V: uniform noise of that variance */
+        const float mean = (x / 2) % 2 ? 0.8f : 0.2f;
+        const float noise = sqrtf(12.0f * V / n) * (rnd() - 0.5f);
+        for (int c = 0; c < 3; c++) s.color[3 * i + c] = mean + noise;
+        spp[i] = n;
+        svar[i] = V;
+      }
+    run(f, (uint64_t)k);
+  }
+  double m = 0;
+  for (int i = 0; i < N; i++) m += est[i];
+  hush_filter_release(f);
+  return m / N;
+}
+
+static void test_sample_variance(hush_device dev) {
+  const double want = 0.01 / 64;
+  for (int frames = 1; frames <= 6; frames += 5) {
+    const double plain = striped_variance(dev, 0, frames), merged = striped_variance(dev, 1, frames);
+    if (frames == 1)
+      CHECK_MSG(merged < plain / 10, "frame 0: merged %g, spatial %g", merged, plain);
+    CHECK_MSG(fabs(merged / want - 1.0) < 0.3, "%d frames: merged %g, want %g", frames, merged,
+              want);
+  }
+  /* 'variance' without 'spp' is refused */
+  static scene s;
+  static float svar[N];
+  flat(&s, 0.5f, 0.5f, 0.5f, 2.0f);
+  hush_filter f = make(dev, "svgf", &s, 0);
+  hush_image_view v = view_of(svar, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "variance", &v) == HUSH_OK);
+  hush_frame_info fi;
+  frame_info(&fi, 0);
+  CHECK(hush_filter_execute(f, &fi) == HUSH_ERROR_INVALID_OPERATION);
+  hush_device_get_error(dev, NULL);
+  hush_filter_release(f);
+}
+
 /* ---- taa ------------------------------------------------------------------ */
 
 static void test_taa_constant(hush_device dev, const char *cls) {
@@ -513,6 +572,7 @@ int main(void) {
   test_variants(dev);
   test_history_shrinks_noise(dev);
   test_depth_steep(dev);
+  test_sample_variance(dev);
   test_taa_constant(dev, "taa");
   test_taa_constant(dev, "svgf");
   test_taa_ghosting(dev, "clamp");

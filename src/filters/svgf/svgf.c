@@ -28,6 +28,7 @@
 #include "filters/svgf/atrous.h"
 #include "filters/svgf/guide.h"
 #include "filters/svgf/padded.h"
+#include "filters/svgf/samples.h"
 #include "filters/svgf/variance.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
@@ -59,6 +60,7 @@ enum {
   P_KERNEL,
   P_ORDER,
   P_DEPTH_STEEP,
+  P_SAMPLE_VARIANCE,
   P_COUNT
 };
 
@@ -99,7 +101,8 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"sigma_l", HUSH_PARAM_FLOAT, 4.0, 1e-6, 1e6,
      "luminance weight exp(-|l_p - l_q| / (sigma_l sqrt(g3x3(var_p)) + eps))", NULL},
     {"spatial_variance_frames", HUSH_PARAM_INT, 4, 0, 65535,
-     "below this history length the variance is a 7x7 bilateral spatial estimate (0: never)",
+     "below this history length (in samples: frames x spp) the variance is a 7x7 bilateral "
+     "spatial estimate (0: never)",
      NULL},
     {"feedback_first_level", HUSH_PARAM_BOOL, 1, 0, 1,
      "the first a-trous level becomes the next frame's colour history (else the accumulation)",
@@ -124,6 +127,10 @@ static const hush_param_info svgf_params[P_COUNT] = {
      "the depth weight is 1 where |grad z| > depth_steep * z (relative slope per pixel; Dundr "
      "2018 §4.1.4.3, a scene-dependent constant without a published value); 0: never",
      NULL},
+    {"sample_variance", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'variance' and 'spp' bound: merge the within-pixel sample variance into the moments "
+     "(Dundr 2018 §4.3)",
+     NULL},
 };
 
 enum {
@@ -135,8 +142,10 @@ enum {
   I_ID,
   I_MOTION,
   I_ALBEDO,
+  I_SPP,
+  I_SAMPLE_VARIANCE,
   I_OUTPUT,
-  I_VARIANCE,
+  I_VARIANCE_ESTIMATE,
   I_HISTORY_LENGTH,
   I_COUNT
 };
@@ -153,8 +162,14 @@ static const hush_image_info svgf_images[I_COUNT] = {
     {"motion", HUSH_IMAGE_INPUT, 0, 2,
      "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
+    {"spp", HUSH_IMAGE_INPUT, 0, 1,
+     "samples per pixel of 'color' (else 1; `hush render --spp N`): the variance of a pixel "
+     "value is the per-sample variance / spp"},
+    {"variance", HUSH_IMAGE_INPUT, 0, 1,
+     "per-sample luminance variance within the pixel (`hush render --spp N`, needs 'spp'), "
+     "merged into the moments (Dundr 2018 §4.3)"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
-    {"variance", HUSH_IMAGE_OUTPUT, 0, 1,
+    {"variance_estimate", HUSH_IMAGE_OUTPUT, 0, 1,
      "luminance variance estimate that guides the first a-trous level (demodulated)"},
     {"history_length", HUSH_IMAGE_OUTPUT, 0, 1, "frames accumulated per pixel"},
 };
@@ -177,12 +192,14 @@ typedef struct svgf_state {
   hush_planar zon;    /* 1: 1 where the depth weight applies (guide.h) */
   hush_planar var;    /* 1: variance from the moments or the spatial estimate */
   hush_planar result; /* 3: the last a-trous level */
+  hush_planar samples; /* 1: samples behind the moments, age * spp */
   svgf_padded zn;     /* depth + normal, padded for the widest tap */
   svgf_padded moments;   /* 2: the moments, padded for the spatial estimate */
   svgf_padded signal[2]; /* SVGF_SIGNAL_CHANNELS: a-trous ping-pong */
   int threads;
   /* allocated on first use: */
   hush_planar albedo;
+  hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
 } svgf_state;
@@ -202,6 +219,9 @@ static void svgf_destroy(void *state) {
   svgf_padded_free(&st->signal[0]);
   svgf_padded_free(&st->signal[1]);
   hush__planar_free(&st->albedo);
+  hush__planar_free(&st->spp);
+  hush__planar_free(&st->sample_var);
+  hush__planar_free(&st->samples);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   free(st);
@@ -303,7 +323,16 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   for (int i = 0; i < 2; i++)
     if ((s = svgf_padded_ensure(f->device, &st->signal[i], SVGF_SIGNAL_CHANNELS, W, H, pad)))
       return s;
+  const int has_spp = hush__filter_view(f, I_SPP) != NULL;
+  const int has_svar = hush__filter_view(f, I_SAMPLE_VARIANCE) != NULL;
+  if (has_svar && !has_spp)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "svgf: image 'variance' (per-sample variance) needs 'spp' bound too");
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (has_spp && ((s = hush__filter_scratch(f, &st->spp, 1)) ||
+                  (s = hush__filter_scratch(f, &st->samples, 1))))
+    return s;
+  if (has_svar && (s = hush__filter_scratch(f, &st->sample_var, 1))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
@@ -313,6 +342,8 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
+  if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- reproject + accumulate */
@@ -346,14 +377,32 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   gd.zon = st->zon.plane[0];
   gd.sigma_z = hush__param_f(f, P_SIGMA_Z);
   gd.np = svgf_normal_power_of(hush__param_f(f, P_SIGMA_N));
+  /* the history behind each pixel's moments, in samples (frames at 1 spp) */
+  const float *samples = hush__accum_age(&st->acc)->plane[0];
+  /* without the merge the moments see only the frame-to-frame spread of
+   * the pixel means, already the variance of one frame's value */
+  const int merge = has_svar && hush__param_i(f, P_SAMPLE_VARIANCE);
+  if (merge) {
+    svgf_samples sm;
+    sm.spp = st->spp.plane[0];
+    sm.variance = st->sample_var.plane[0];
+    sm.color = &st->color;
+    sm.albedo = demod ? &st->albedo : NULL;
+    sm.alpha_moments_min = ap.alpha_moments_min;
+    svgf_merge_samples(&sm, hush__accum_moments(&st->acc), samples, st->var.plane[0],
+                       st->samples.plane[0], threads);
+    samples = st->samples.plane[0];
+  }
   const int min_age = hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES);
   if (min_age > 1) {
     const hush_planar *m = hush__accum_moments(&st->acc);
     for (int c = 0; c < 2; c++) svgf_padded_import(&st->moments, c, m->plane[c], threads);
-    svgf_spatial_variance(&gd, &st->moments, hush__accum_age(&st->acc)->plane[0], (float)min_age,
-                          st->var.plane[0], threads);
+    svgf_spatial_variance(&gd, &st->moments, samples, (float)min_age, st->var.plane[0], threads);
   }
-  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE);
+  if (merge)
+    svgf_variance_per_frame(st->spp.plane[0], st->var.plane[0], hush__planar_pixels(&st->var),
+                            threads);
+  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
   if (var_view) hush__view_export(&st->var, var_view, threads);
   first_signal(hush__accum_color(&st->acc), st->var.plane[0], &st->signal[0], threads);
   hush__filter_timing_stage(f, "variance");
