@@ -492,6 +492,47 @@ static void test_sample_variance(hush_device dev) {
   hush_filter_release(f);
 }
 
+/* Direct and indirect bound: each is filtered on its own, so the output is
+ * the sum of two svgf filters run on each as 'color' (up to rounding). */
+static void test_split(hush_device dev) {
+  static scene a, b, c;
+  static float direct[N * 3], indirect[N * 3], sum[N * 3];
+  flat(&a, 0, 0, 0, 1);
+  flat(&b, 0, 0, 0, 1);
+  flat(&c, 0, 0, 0, 1);
+  hush_filter fs = make(dev, "svgf", &a, 0), fd = make(dev, "svgf", &b, 0),
+              fi = make(dev, "svgf", &c, 0);
+  hush_image_view v = view_of(direct, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(fs, "direct", &v) == HUSH_OK);
+  REQUIRE(hush_filter_set_image(fd, "color", &v) == HUSH_OK);
+  v = view_of(indirect, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(fs, "indirect", &v) == HUSH_OK);
+  REQUIRE(hush_filter_set_image(fi, "color", &v) == HUSH_OK);
+  float worst = 0.0f;
+  for (int k = 0; k < 5; k++) {
+    fill_busy(&a, k);
+    for (int i = 0; i < N; i++) {
+      for (int ch = 0; ch < 3; ch++) {
+        direct[3 * i + ch] = a.color[3 * i + ch] * (a.depth[i] > 5.0f ? 0.0f : 1.0f);
+        indirect[3 * i + ch] = 0.3f * rnd();
+      }
+      b.depth[i] = c.depth[i] = a.depth[i];
+      for (int ch = 0; ch < 3; ch++) b.normal[3 * i + ch] = c.normal[3 * i + ch] = a.normal[3 * i + ch];
+    }
+    run(fs, (uint64_t)k);
+    run(fd, (uint64_t)k);
+    run(fi, (uint64_t)k);
+    for (int i = 0; i < N * 3; i++) sum[i] = b.output[i] + c.output[i];
+    const float d = max_abs_diff(a.output, sum, N * 3);
+    worst = d > worst ? d : worst;
+  }
+  CHECK_MSG(worst < 1e-5f, "split vs two filters: %g", (double)worst);
+  CHECK(all_finite(a.output, N * 3));
+  hush_filter_release(fs);
+  hush_filter_release(fd);
+  hush_filter_release(fi);
+}
+
 /* ---- taa ------------------------------------------------------------------ */
 
 static void test_taa_constant(hush_device dev, const char *cls) {
@@ -573,6 +614,7 @@ int main(void) {
   test_history_shrinks_noise(dev);
   test_depth_steep(dev);
   test_sample_variance(dev);
+  test_split(dev);
   test_taa_constant(dev, "taa");
   test_taa_constant(dev, "svgf");
   test_taa_ghosting(dev, "clamp");

@@ -144,6 +144,8 @@ enum {
   I_ALBEDO,
   I_SPP,
   I_SAMPLE_VARIANCE,
+  I_DIRECT,
+  I_INDIRECT,
   I_OUTPUT,
   I_VARIANCE_ESTIMATE,
   I_HISTORY_LENGTH,
@@ -168,6 +170,11 @@ static const hush_image_info svgf_images[I_COUNT] = {
     {"variance", HUSH_IMAGE_INPUT, 0, 1,
      "per-sample luminance variance within the pixel (`hush render --spp N`, needs 'spp'), "
      "merged into the moments (Dundr 2018 §4.3)"},
+    {"direct", HUSH_IMAGE_INPUT, 0, 3,
+     "direct light (`hush render --split`): with 'indirect' also bound, each is filtered on its "
+     "own (own history, variance and a-trous; Schied 2017) and the output is their sum ('color' "
+     "is then not used)"},
+    {"indirect", HUSH_IMAGE_INPUT, 0, 3, "indirect light, see 'direct'"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
     {"variance_estimate", HUSH_IMAGE_OUTPUT, 0, 1,
      "luminance variance estimate that guides the first a-trous level (demodulated)"},
@@ -184,19 +191,25 @@ static const hush_filter_class_info svgf_info = {
     I_COUNT,
 };
 
+/* One filtered signal: 'color', or each of 'direct' and 'indirect'. */
+typedef struct svgf_component {
+  hush_accum acc;     /* its history */
+  hush_planar color;  /* this frame, demodulated in place */
+  hush_planar result; /* 3: its last a-trous level */
+} svgf_component;
+
 typedef struct svgf_state {
   hush_reprojector rp;
-  hush_accum acc;
-  hush_planar color;  /* this frame, demodulated in place */
-  hush_planar grad;   /* 2: depth gradient (imported or computed) */
-  hush_planar zon;    /* 1: 1 where the depth weight applies (guide.h) */
-  hush_planar var;    /* 1: variance from the moments or the spatial estimate */
-  hush_planar result; /* 3: the last a-trous level */
+  svgf_component comp[2]; /* [1] allocated when 'direct' and 'indirect' are first bound */
+  hush_planar grad;    /* 2: depth gradient (imported or computed) */
+  hush_planar zon;     /* 1: 1 where the depth weight applies (guide.h) */
+  hush_planar var;     /* 1: variance from the moments or the spatial estimate */
   hush_planar samples; /* 1: samples behind the moments, age * spp */
-  svgf_padded zn;     /* depth + normal, padded for the widest tap */
+  svgf_padded zn;        /* depth + normal, padded for the widest tap */
   svgf_padded moments;   /* 2: the moments, padded for the spatial estimate */
   svgf_padded signal[2]; /* SVGF_SIGNAL_CHANNELS: a-trous ping-pong */
   int threads;
+  int split; /* the components' histories are of direct and indirect */
   /* allocated on first use: */
   hush_planar albedo;
   hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
@@ -204,16 +217,30 @@ typedef struct svgf_state {
   hush_taa taa; /* its planes allocated when "taa" is first on */
 } svgf_state;
 
+static void component_free(svgf_component *c) {
+  hush__accum_free(&c->acc);
+  hush__planar_free(&c->color);
+  hush__planar_free(&c->result);
+}
+
+static hush_status component_init(hush_device device, svgf_component *c, uint32_t W, uint32_t H) {
+  hush_status s = hush__accum_init(device, &c->acc, 3, W, H);
+  if (!s) s = hush__planar_init(device, &c->color, 3, W, H);
+  if (!s) s = hush__planar_init(device, &c->result, 3, W, H);
+  if (s) component_free(c);
+  return s;
+}
+
 static void svgf_destroy(void *state) {
   svgf_state *st = state;
   if (!st) return;
   hush__reprojector_free(&st->rp);
-  hush__accum_free(&st->acc);
-  hush__planar_free(&st->color);
+  component_free(&st->comp[0]);
+  component_free(&st->comp[1]);
   hush__planar_free(&st->grad);
   hush__planar_free(&st->zon);
   hush__planar_free(&st->var);
-  hush__planar_free(&st->result);
+  hush__planar_free(&st->samples);
   svgf_padded_free(&st->zn);
   svgf_padded_free(&st->moments);
   svgf_padded_free(&st->signal[0]);
@@ -221,7 +248,6 @@ static void svgf_destroy(void *state) {
   hush__planar_free(&st->albedo);
   hush__planar_free(&st->spp);
   hush__planar_free(&st->sample_var);
-  hush__planar_free(&st->samples);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   free(st);
@@ -233,12 +259,11 @@ static hush_status svgf_create(hush_filter f, void **state) {
   const uint32_t W = f->width, H = f->height;
   st->threads = f->device->threads > 0 ? f->device->threads : 1;
   hush_status s = hush__reprojector_init(f->device, &st->rp, W, H);
-  if (!s) s = hush__accum_init(f->device, &st->acc, 3, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->color, 3, W, H);
+  if (!s) s = component_init(f->device, &st->comp[0], W, H);
   if (!s) s = hush__planar_init(f->device, &st->grad, 2, W, H);
   if (!s) s = hush__planar_init(f->device, &st->zon, 1, W, H);
   if (!s) s = hush__planar_init(f->device, &st->var, 1, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->result, 3, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->samples, 1, W, H);
   if (s) {
     svgf_destroy(st);
     return s;
@@ -298,7 +323,97 @@ static void copy_color(const svgf_level_out *src, hush_planar *dst, int threads)
              (size_t)W * sizeof(float));
 }
 
-/* ---- execute --------------------------------------------------------------- */
+/* Per frame: what every component's pass shares. */
+typedef struct frame_ctx {
+  hush_filter f;
+  svgf_state *st;
+  const svgf_guide *gd;
+  hush_accum_params ap;
+  int demod, merge, iterations, order, threads;
+  const svgf_kernel *kernel;
+} frame_ctx;
+
+/* Accumulation, variance and a-trous of one component: c->result. */
+static void filter_component(const frame_ctx *fc, svgf_component *c, int export_variance) {
+  hush_filter f = fc->f;
+  svgf_state *st = fc->st;
+  const int threads = fc->threads, W = (int)f->width;
+  if (fc->demod) hush__demodulate(&c->color, &st->albedo, threads);
+  hush__accum_blend(&c->acc, &st->rp.plan, (const float *const *)c->color.plane, &fc->ap,
+                    st->var.plane[0], threads);
+  hush__filter_timing_stage(f, "accumulate");
+
+  /* the history behind each pixel's moments, in samples (frames at 1 spp) */
+  const float *samples = hush__accum_age(&c->acc)->plane[0];
+  if (fc->merge) {
+    svgf_samples sm;
+    sm.spp = st->spp.plane[0];
+    sm.variance = st->sample_var.plane[0];
+    sm.color = &c->color;
+    sm.albedo = fc->demod ? &st->albedo : NULL;
+    sm.alpha_moments_min = fc->ap.alpha_moments_min;
+    svgf_merge_samples(&sm, hush__accum_moments(&c->acc), samples, st->var.plane[0],
+                       st->samples.plane[0], threads);
+    samples = st->samples.plane[0];
+  }
+  const int min_age = hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES);
+  if (min_age > 1) {
+    const hush_planar *m = hush__accum_moments(&c->acc);
+    for (int k = 0; k < 2; k++) svgf_padded_import(&st->moments, k, m->plane[k], threads);
+    svgf_spatial_variance(fc->gd, &st->moments, samples, (float)min_age, st->var.plane[0],
+                          threads);
+  }
+  /* with the merge the moments are per sample; else they see only the
+   * frame-to-frame spread of the pixel means, already per frame value */
+  if (fc->merge)
+    svgf_variance_per_frame(st->spp.plane[0], st->var.plane[0], hush__planar_pixels(&st->var),
+                            threads);
+  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
+  if (var_view && export_variance) hush__view_export(&st->var, var_view, threads);
+  first_signal(hush__accum_color(&c->acc), st->var.plane[0], &st->signal[0], threads);
+  hush__filter_timing_stage(f, "variance");
+
+  svgf_level_params lp;
+  lp.kernel = fc->kernel;
+  lp.sigma_l = hush__param_f(f, P_SIGMA_L);
+  lp.eps_l = NULL;
+  int cur = 0;
+  svgf_level_out last;
+  last.plane[SVGF_R] = c->result.plane[0];
+  last.plane[SVGF_G] = c->result.plane[1];
+  last.plane[SVGF_B] = c->result.plane[2];
+  last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = NULL;
+  last.stride = (size_t)W;
+  last.pad = 0;
+  if (fc->iterations == 0) {
+    const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
+    copy_color(&accumulated, &c->result, threads);
+  }
+  for (int i = 0; i < fc->iterations; i++) {
+    const svgf_level_out out =
+        i == fc->iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
+    lp.step = level_step(fc->order, i, fc->iterations);
+    svgf_atrous_level(fc->gd, &lp, &st->signal[cur], &out, threads);
+    cur = 1 - cur;
+    /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
+     * §4.1.4.6: the first level run): less noise is fed back, at the cost
+     * of a little extra blur over time */
+    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL))
+      copy_color(&out, hush__accum_color(&c->acc), threads);
+  }
+  hush__filter_timing_stage(f, "atrous");
+}
+
+/* a += b, 3 planes. */
+static void add_planes(hush_planar *a, const hush_planar *b, int threads) {
+  const long long n = (long long)hush__planar_pixels(a);
+  for (int c = 0; c < 3; c++) {
+    float *restrict x = a->plane[c];
+    const float *restrict y = b->plane[c];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+    for (long long i = 0; i < n; i++) x[i] += y[i];
+  }
+}
 
 static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_info *info) {
   svgf_state *st = state;
@@ -312,7 +427,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   const int with_taa = hush__param_i(f, P_TAA);
   const int iterations = hush__param_i(f, P_ITERATIONS);
   const svgf_kernel *kernel = hush__param_i(f, P_KERNEL) ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
-  const int order = hush__param_i(f, P_ORDER);
+  const int split = hush__filter_view(f, I_DIRECT) && hush__filter_view(f, I_INDIRECT);
   if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
 
   /* ---- import: nothing of the history changes until every input is read */
@@ -328,16 +443,18 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   if (has_svar && !has_spp)
     return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
                       "svgf: image 'variance' (per-sample variance) needs 'spp' bound too");
-  if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
-  if (has_spp && ((s = hush__filter_scratch(f, &st->spp, 1)) ||
-                  (s = hush__filter_scratch(f, &st->samples, 1))))
+  if (split && !st->comp[1].color.plane[0] &&
+      (s = component_init(f->device, &st->comp[1], f->width, f->height)))
     return s;
+  if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (has_spp && (s = hush__filter_scratch(f, &st->spp, 1))) return s;
   if (has_svar && (s = hush__filter_scratch(f, &st->sample_var, 1))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
-  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  if ((s = hush__filter_import(f, split ? I_DIRECT : I_COLOR, &st->comp[0].color))) return s;
+  if (split && (s = hush__filter_import(f, I_INDIRECT, &st->comp[1].color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
@@ -346,7 +463,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
   hush__filter_timing_stage(f, "import");
 
-  /* ---- reproject + accumulate */
+  /* ---- reproject */
   hush_reproject_params rp;
   rp.depth_tolerance = hush__param_f(f, P_DEPTH_TOLERANCE);
   rp.depth_gradient = hush__param_f(f, P_DEPTH_GRADIENT);
@@ -354,16 +471,14 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
-  hush_accum_params ap;
-  ap.alpha_min = hush__param_f(f, P_ALPHA);
-  ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS);
-  ap.max_age = hush__param_i(f, P_MAX_AGE);
-  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap,
-                    st->var.plane[0], threads);
-  hush__filter_timing_stage(f, "accumulate");
+  if (split != st->split) {
+    /* the first component's history was of the other signal */
+    hush__accum_reset(&st->comp[0].acc);
+    hush__accum_reset(&st->comp[1].acc);
+    st->split = split;
+  }
 
-  /* ---- guide + variance */
+  /* ---- guide */
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
   svgf_guide_import(&st->zn, gb->depth.plane[0], (const float *const *)gb->normal.plane, threads);
   svgf_guide_gradient(&st->zn, has_dgrad, &st->grad, st->zon.plane[0],
@@ -377,71 +492,33 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   gd.zon = st->zon.plane[0];
   gd.sigma_z = hush__param_f(f, P_SIGMA_Z);
   gd.np = svgf_normal_power_of(hush__param_f(f, P_SIGMA_N));
-  /* the history behind each pixel's moments, in samples (frames at 1 spp) */
-  const float *samples = hush__accum_age(&st->acc)->plane[0];
-  /* without the merge the moments see only the frame-to-frame spread of
-   * the pixel means, already the variance of one frame's value */
-  const int merge = has_svar && hush__param_i(f, P_SAMPLE_VARIANCE);
-  if (merge) {
-    svgf_samples sm;
-    sm.spp = st->spp.plane[0];
-    sm.variance = st->sample_var.plane[0];
-    sm.color = &st->color;
-    sm.albedo = demod ? &st->albedo : NULL;
-    sm.alpha_moments_min = ap.alpha_moments_min;
-    svgf_merge_samples(&sm, hush__accum_moments(&st->acc), samples, st->var.plane[0],
-                       st->samples.plane[0], threads);
-    samples = st->samples.plane[0];
-  }
-  const int min_age = hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES);
-  if (min_age > 1) {
-    const hush_planar *m = hush__accum_moments(&st->acc);
-    for (int c = 0; c < 2; c++) svgf_padded_import(&st->moments, c, m->plane[c], threads);
-    svgf_spatial_variance(&gd, &st->moments, samples, (float)min_age, st->var.plane[0], threads);
-  }
-  if (merge)
-    svgf_variance_per_frame(st->spp.plane[0], st->var.plane[0], hush__planar_pixels(&st->var),
-                            threads);
-  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
-  if (var_view) hush__view_export(&st->var, var_view, threads);
-  first_signal(hush__accum_color(&st->acc), st->var.plane[0], &st->signal[0], threads);
-  hush__filter_timing_stage(f, "variance");
+  hush__filter_timing_stage(f, "reproject");
 
-  /* ---- a-trous */
-  svgf_level_params lp;
-  lp.kernel = kernel;
-  lp.sigma_l = hush__param_f(f, P_SIGMA_L);
-  lp.eps_l = NULL;
-  int cur = 0;
-  svgf_level_out last;
-  last.plane[SVGF_R] = st->result.plane[0];
-  last.plane[SVGF_G] = st->result.plane[1];
-  last.plane[SVGF_B] = st->result.plane[2];
-  last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = NULL;
-  last.stride = (size_t)W;
-  last.pad = 0;
-  if (iterations == 0) {
-    const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
-    copy_color(&accumulated, &st->result, threads);
+  /* ---- per component: accumulate, variance, a-trous */
+  frame_ctx fc;
+  fc.f = f;
+  fc.st = st;
+  fc.gd = &gd;
+  fc.ap.alpha_min = hush__param_f(f, P_ALPHA);
+  fc.ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS);
+  fc.ap.max_age = hush__param_i(f, P_MAX_AGE);
+  fc.demod = demod;
+  /* the renderer's sample variance is of the whole radiance: not split */
+  fc.merge = has_svar && !split && hush__param_i(f, P_SAMPLE_VARIANCE);
+  fc.iterations = iterations;
+  fc.order = hush__param_i(f, P_ORDER);
+  fc.kernel = kernel;
+  fc.threads = threads;
+  filter_component(&fc, &st->comp[0], 1);
+  if (split) {
+    filter_component(&fc, &st->comp[1], 0);
+    add_planes(&st->comp[0].result, &st->comp[1].result, threads);
   }
-  for (int i = 0; i < iterations; i++) {
-    const svgf_level_out out =
-        i == iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
-    lp.step = level_step(order, i, iterations);
-    svgf_atrous_level(&gd, &lp, &st->signal[cur], &out, threads);
-    cur = 1 - cur;
-    /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
-     * §4.1.4.6: the first level run): less noise is fed back, at the cost
-     * of a little extra blur over time */
-    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL))
-      copy_color(&out, hush__accum_color(&st->acc), threads);
-  }
-  hush__filter_timing_stage(f, "atrous");
 
   /* ---- export */
-  const hush_planar *result = &st->result;
+  const hush_planar *result = &st->comp[0].result;
   if (demod) {
-    hush__remodulate(&st->albedo, &st->result, threads);
+    hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
   }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
@@ -457,7 +534,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
-  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
+  if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
 }
