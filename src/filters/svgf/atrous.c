@@ -43,7 +43,7 @@ static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? 
 
 /* Row pointers of one pixel row (or tap row) of the signal and the guide. */
 typedef struct rows {
-  const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v;
+  const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
 } rows;
 
 static inline rows rows_at(const svgf_guide *g, const svgf_padded *in, int y, int x) {
@@ -58,6 +58,7 @@ static inline rows rows_at(const svgf_guide *g, const svgf_padded *in, int y, in
   r.c1 = in->plane[SVGF_G] + si;
   r.c2 = in->plane[SVGF_B] + si;
   r.v = in->plane[SVGF_VAR] + si;
+  r.ok = in->plane[SVGF_VALID] + si;
   return r;
 }
 
@@ -131,7 +132,8 @@ static HUSH_ALWAYS_INLINE void block_p_side(const svgf_guide *g, const svgf_padd
  * pixels [x0, x0 + n) of row y; rdd is its pair's depth denominator. */
 static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded *in, int dx,
                                          int dy, float h, const float *rdd_pair, int y, int x0,
-                                         int n, const int squarings, block_acc *acc) {
+                                         int n, const int squarings, const int validity,
+                                         block_acc *acc) {
   const rows q = rows_at(g, in, clampi(y + dy, 0, g->height - 1), x0 + dx);
   const float sigma_n = g->np.sigma_n, dot_floor = g->np.dot_floor;
   const float *restrict rdd = rdd_pair;
@@ -139,7 +141,8 @@ static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded 
   for (int x = 0; x < n; x++) {
     const float e = -fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
     const float dot = fmaf(acc->n0[x], q.n0[x], fmaf(acc->n1[x], q.n1[x], acc->n2[x] * q.n2[x]));
-    const float w = h * svgf_weight(e, dot, squarings, sigma_n, dot_floor);
+    float w = h * svgf_weight(e, dot, squarings, sigma_n, dot_floor);
+    if (validity) w *= q.ok[x]; /* a constant: resolved at compile time */
     acc->sw[x] += w;
     acc->s0[x] = fmaf(w, q.c0[x], acc->s0[x]);
     acc->s1[x] = fmaf(w, q.c1[x], acc->s1[x]);
@@ -154,34 +157,53 @@ static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded 
 static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_params *lp,
                                          const svgf_padded *in, const svgf_level_out *out,
                                          const tap_pair *pairs, int npairs, int y,
-                                         const int squarings, block_acc *acc) {
+                                         const int squarings, const int validity,
+                                         block_acc *acc) {
   const int W = g->width;
   const float hc = lp->kernel->h[lp->kernel->radius];
   const float h0 = hc * hc;
   for (int x0 = 0; x0 < W; x0 += BLOCK) {
     const int n = W - x0 < BLOCK ? W - x0 : BLOCK;
     block_inv_l(in, y, x0, n, lp->sigma_l, lp->eps_l, acc);
+    if (validity) {
+      /* a pixel without data has no luminance to compare: weight 1 */
+      const float *restrict ok = svgf_padded_row(in, SVGF_VALID, y) + x0;
+#pragma omp simd
+      for (int x = 0; x < n; x++) acc->inv_l[x] *= ok[x];
+    }
     {
       const rows p = rows_at(g, in, y, x0);
       /* the centre tap: every edge-stopping weight is 1 */
 #pragma omp simd
       for (int x = 0; x < n; x++) {
-        acc->sw[x] = h0;
-        acc->s0[x] = h0 * p.c0[x];
-        acc->s1[x] = h0 * p.c1[x];
-        acc->s2[x] = h0 * p.c2[x];
-        acc->sv[x] = h0 * h0 * p.v[x];
+        const float hp = validity ? h0 * p.ok[x] : h0;
+        acc->sw[x] = hp;
+        acc->s0[x] = hp * p.c0[x];
+        acc->s1[x] = hp * p.c1[x];
+        acc->s2[x] = hp * p.c2[x];
+        acc->sv[x] = hp * hp * p.v[x];
       }
     }
     block_p_side(g, in, pairs, npairs, y, x0, n, acc);
     for (int k = 0; k < npairs; k++) {
       const tap_pair *t = &pairs[k];
-      block_tap(g, in, t->dx, t->dy, t->h, acc->rdd[k], y, x0, n, squarings, acc);
-      block_tap(g, in, -t->dx, -t->dy, t->h, acc->rdd[k], y, x0, n, squarings, acc);
+      block_tap(g, in, t->dx, t->dy, t->h, acc->rdd[k], y, x0, n, squarings, validity, acc);
+      block_tap(g, in, -t->dx, -t->dy, t->h, acc->rdd[k], y, x0, n, squarings, validity, acc);
     }
     const size_t o = (size_t)y * out->stride + (size_t)x0;
     float *restrict r = out->plane[SVGF_R] + o, *restrict gr = out->plane[SVGF_G] + o,
                     *restrict bl = out->plane[SVGF_B] + o;
+    if (validity) {
+      /* nothing valid in reach: stays a hole (0, not valid) */
+      float *restrict ok = out->plane[SVGF_VALID] ? out->plane[SVGF_VALID] + o : acc->inv_l;
+#pragma omp simd
+      for (int x = 0; x < n; x++) {
+        const int some = acc->sw[x] > 0.0f;
+        ok[x] = hush__select_bits(some, 1.0f, 0.0f);
+        acc->sw[x] = hush__select_bits(some, acc->sw[x], 1.0f);
+        acc->sv[x] = hush__select_bits(some, acc->sv[x], 0.0f);
+      }
+    }
 #pragma omp simd
     for (int x = 0; x < n; x++) {
       const float inv = 1.0f / acc->sw[x];
@@ -208,7 +230,7 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
       if (out->plane[c]) svgf_pad_row(out->plane[c] + (size_t)y * out->stride, W, out->pad);
 }
 
-#define LEVEL_ROWS(NAME, SQUARINGS)                                                           \
+#define LEVEL_ROWS(NAME, SQUARINGS, VALIDITY)                                                           \
   static void NAME(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,  \
                    const svgf_level_out *out, int threads) {                                 \
     tap_pair pairs[MAX_PAIRS];                                                                \
@@ -216,16 +238,25 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
     _Pragma("omp parallel num_threads(threads)") {                                           \
       block_acc acc __attribute__((aligned(64)));                                             \
       _Pragma("omp for schedule(static)") for (int y = 0; y < g->height; y++)                 \
-          level_row(g, lp, in, out, pairs, npairs, y, SQUARINGS, &acc);                       \
+          level_row(g, lp, in, out, pairs, npairs, y, SQUARINGS, VALIDITY, &acc);             \
     }                                                                                         \
   }
-LEVEL_ROWS(level_rows_pow64, 6)
-LEVEL_ROWS(level_rows_pow128, 7)
-LEVEL_ROWS(level_rows_pow256, 8)
-LEVEL_ROWS(level_rows_any, -1)
+LEVEL_ROWS(level_rows_pow64, 6, 0)
+LEVEL_ROWS(level_rows_pow128, 7, 0)
+LEVEL_ROWS(level_rows_pow256, 8, 0)
+LEVEL_ROWS(level_rows_any, -1, 0)
+LEVEL_ROWS(level_rows_pow128_valid, 7, 1)
+LEVEL_ROWS(level_rows_any_valid, -1, 1)
 
 void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,
                        const svgf_level_out *out, int threads) {
+  if (lp->validity) {
+    if (g->np.squarings == 7)
+      level_rows_pow128_valid(g, lp, in, out, threads);
+    else
+      level_rows_any_valid(g, lp, in, out, threads);
+    return;
+  }
   /* the normal weight's power as straight-line code for the usual sigma_n */
   switch (g->np.squarings) {
   case 6: level_rows_pow64(g, lp, in, out, threads); break;

@@ -29,7 +29,9 @@ extern const svgf_kernel svgf_kernel_5x5; /* B3 spline (1, 4, 6, 4, 1) / 16 (Sch
 extern const svgf_kernel svgf_kernel_3x3; /* (1, 2, 1) / 4 (Dundr 2018 §4.1.4.6) */
 
 /* Channels of the a-trous signal planes. */
-enum { SVGF_R = 0, SVGF_G, SVGF_B, SVGF_VAR, SVGF_LUM, SVGF_SIGNAL_CHANNELS };
+/* VALID: 1 where the pixel holds data, 0 for a hole nothing reached yet
+ * (read only with svgf_level_params.validity). */
+enum { SVGF_R = 0, SVGF_G, SVGF_B, SVGF_VAR, SVGF_LUM, SVGF_VALID, SVGF_SIGNAL_CHANNELS };
 
 /* Where a level writes: SVGF_SIGNAL_CHANNELS planes at pixel (0, 0) with a
  * row stride; var and lum may be NULL (the last level needs neither); with
@@ -53,6 +55,7 @@ typedef struct svgf_level_params {
   int step;       /* tap spacing in pixels; kernel radius * step <= the pads */
   float sigma_l;
   const float *eps_l; /* per-pixel luminance epsilon (unpadded), or NULL: SVGF_EPS_L */
+  int validity;       /* taps and centre weighted by VALID (progressive, Dundr §4.2) */
 } svgf_level_params;
 
 /* in (padded, SVGF_SIGNAL_CHANNELS planes) -> out. in and out must not

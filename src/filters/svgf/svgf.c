@@ -28,6 +28,7 @@
 #include "filters/svgf/atrous.h"
 #include "filters/svgf/guide.h"
 #include "filters/svgf/padded.h"
+#include "filters/svgf/progressive.h"
 #include "filters/svgf/samples.h"
 #include "filters/svgf/variance.h"
 #include "temporal/accumulation.h"
@@ -61,6 +62,8 @@ enum {
   P_ORDER,
   P_DEPTH_STEEP,
   P_SAMPLE_VARIANCE,
+  P_PROGRESSIVE,
+  P_PROGRESSIVE_EPSILON,
   P_COUNT
 };
 
@@ -130,6 +133,15 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"sample_variance", HUSH_PARAM_BOOL, 1, 0, 1,
      "with 'variance' and 'spp' bound: merge the within-pixel sample variance into the moments "
      "(Dundr 2018 §4.3)",
+     NULL},
+    {"progressive", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'spp' bound and holes (spp 0, `hush render --spp-fraction`): fewer than 1 spp "
+     "(Dundr 2018 §4.2): G-buffer holes filled by a pyramid, forward reprojection by scatter "
+     "with a depth test, near/far rejection, holes without data weightless; needs 'position'",
+     NULL},
+    {"progressive_epsilon", HUSH_PARAM_FLOAT, 0.05, 0.0, 1e6,
+     "progressive: the luminance weight's epsilon is 1e-4 + this / samples below 4 samples "
+     "(Dundr 2018 §4.2.3: typically 0.01 to 0.1)",
      NULL},
 };
 
@@ -210,6 +222,8 @@ typedef struct svgf_state {
   svgf_padded signal[2]; /* SVGF_SIGNAL_CHANNELS: a-trous ping-pong */
   int threads;
   int split; /* the components' histories are of direct and indirect */
+  svgf_progressive prog; /* allocated on the first frame with holes */
+  hush_planar eps;       /* 1: progressive luminance epsilon */
   /* allocated on first use: */
   hush_planar albedo;
   hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
@@ -250,6 +264,8 @@ static void svgf_destroy(void *state) {
   hush__planar_free(&st->sample_var);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
+  svgf_progressive_free(&st->prog);
+  hush__planar_free(&st->eps);
   free(st);
 }
 
@@ -288,8 +304,8 @@ static int level_step(int order, int i, int levels) {
 }
 
 /* The a-trous input of the first level: colour, variance and luminance. */
-static void first_signal(const hush_planar *color, const float *var, svgf_padded *sig,
-                         int threads) {
+static void first_signal(const hush_planar *color, const float *var, const float *age,
+                         svgf_padded *sig, int threads) {
   const int W = sig->width, H = sig->height;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
@@ -299,9 +315,12 @@ static void first_signal(const hush_planar *color, const float *var, svgf_padded
     float *restrict sr = svgf_padded_row(sig, SVGF_R, y), *restrict sg = svgf_padded_row(sig, SVGF_G, y),
                     *restrict sb = svgf_padded_row(sig, SVGF_B, y),
                     *restrict sv = svgf_padded_row(sig, SVGF_VAR, y),
-                    *restrict sl = svgf_padded_row(sig, SVGF_LUM, y);
+                    *restrict sl = svgf_padded_row(sig, SVGF_LUM, y),
+                    *restrict ok = svgf_padded_row(sig, SVGF_VALID, y);
+    const float *restrict a = age + o;
 #pragma omp simd
     for (int x = 0; x < W; x++) {
+      ok[x] = hush__select_bits(a[x] > 0.0f, 1.0f, 0.0f);
       sr[x] = r[x];
       sg[x] = g[x];
       sb[x] = b[x];
@@ -311,6 +330,26 @@ static void first_signal(const hush_planar *color, const float *var, svgf_padded
     for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
       svgf_pad_row(svgf_padded_row(sig, c, y), W, sig->pad);
   }
+}
+
+/* dst <- the colour of a level's output where age >= 1 (Dundr §4.2.2:
+ * fed back only once a full sample was accumulated; a hole's state averaged
+ * from its neighbours can hold a fraction) or age 0 (no data: the spatial
+ * estimate is a placeholder, so that backward reprojection taps there do
+ * not mix in black; its age stays 0). */
+static void copy_color_where(const svgf_level_out *src, hush_planar *dst, const float *age,
+                             int threads) {
+  const int W = (int)dst->width, H = (int)dst->height;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++)
+    for (int c = 0; c < 3; c++) {
+      float *restrict d = dst->plane[c] + (size_t)y * W;
+      const float *restrict sp = src->plane[c] + (size_t)y * src->stride;
+      const float *restrict a = age + (size_t)y * W;
+#pragma omp simd
+      for (int x = 0; x < W; x++)
+        d[x] = hush__select_bits((a[x] >= 1.0f) | (a[x] == 0.0f), sp[x], d[x]);
+    }
 }
 
 /* dst (3 unpadded planes) <- the colour of a level's output. */
@@ -330,6 +369,7 @@ typedef struct frame_ctx {
   const svgf_guide *gd;
   hush_accum_params ap;
   int demod, merge, iterations, order, threads;
+  int holes; /* progressive: this frame has untraced pixels */
   const svgf_kernel *kernel;
 } frame_ctx;
 
@@ -339,8 +379,32 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   svgf_state *st = fc->st;
   const int threads = fc->threads, W = (int)f->width;
   if (fc->demod) hush__demodulate(&c->color, &st->albedo, threads);
+  /* the history before the blend writes the other buffer set */
+  const float *prev[6] = {NULL};
+  const int had_history = c->acc.has_history;
+  if (fc->holes && had_history) {
+    for (int k = 0; k < 3; k++) prev[k] = hush__accum_color(&c->acc)->plane[k];
+    for (int k = 0; k < 2; k++) prev[3 + k] = hush__accum_moments(&c->acc)->plane[k];
+    prev[5] = hush__accum_age(&c->acc)->plane[0];
+  }
   hush__accum_blend(&c->acc, &st->rp.plan, (const float *const *)c->color.plane, &fc->ap,
                     st->var.plane[0], threads);
+  if (fc->holes) {
+    float *const cur[6] = {
+        hush__accum_color(&c->acc)->plane[0],   hush__accum_color(&c->acc)->plane[1],
+        hush__accum_color(&c->acc)->plane[2],   hush__accum_moments(&c->acc)->plane[0],
+        hush__accum_moments(&c->acc)->plane[1], hush__accum_age(&c->acc)->plane[0]};
+    svgf_forward_state(&st->prog, st->spp.plane[0], had_history ? prev : NULL, cur,
+                       fc->ap.alpha_min, fc->ap.alpha_moments_min, threads);
+    /* the variance of the state as it now is */
+    const long long n = (long long)hush__planar_pixels(&st->var);
+    float *restrict v = st->var.plane[0];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+    for (long long i = 0; i < n; i++) {
+      const float d = cur[4][i] - cur[3][i] * cur[3][i];
+      v[i] = d > 0.0f ? d : 0.0f;
+    }
+  }
   hush__filter_timing_stage(f, "accumulate");
 
   /* the history behind each pixel's moments, in samples (frames at 1 spp) */
@@ -370,19 +434,26 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
                             threads);
   const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
   if (var_view && export_variance) hush__view_export(&st->var, var_view, threads);
-  first_signal(hush__accum_color(&c->acc), st->var.plane[0], &st->signal[0], threads);
+  const float *age = hush__accum_age(&c->acc)->plane[0];
+  first_signal(hush__accum_color(&c->acc), st->var.plane[0], age, &st->signal[0], threads);
   hush__filter_timing_stage(f, "variance");
 
   svgf_level_params lp;
   lp.kernel = fc->kernel;
   lp.sigma_l = hush__param_f(f, P_SIGMA_L);
   lp.eps_l = NULL;
+  lp.validity = fc->holes;
+  if (fc->holes) {
+    svgf_progressive_epsilon(samples, hush__param_f(f, P_PROGRESSIVE_EPSILON), st->eps.plane[0],
+                             hush__planar_pixels(&st->eps), threads);
+    lp.eps_l = st->eps.plane[0];
+  }
   int cur = 0;
   svgf_level_out last;
   last.plane[SVGF_R] = c->result.plane[0];
   last.plane[SVGF_G] = c->result.plane[1];
   last.plane[SVGF_B] = c->result.plane[2];
-  last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = NULL;
+  last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = last.plane[SVGF_VALID] = NULL;
   last.stride = (size_t)W;
   last.pad = 0;
   if (fc->iterations == 0) {
@@ -398,8 +469,12 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
      * §4.1.4.6: the first level run): less noise is fed back, at the cost
      * of a little extra blur over time */
-    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL))
-      copy_color(&out, hush__accum_color(&c->acc), threads);
+    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL)) {
+      if (fc->holes)
+        copy_color_where(&out, hush__accum_color(&c->acc), age, threads);
+      else
+        copy_color(&out, hush__accum_color(&c->acc), threads);
+    }
   }
   hush__filter_timing_stage(f, "atrous");
 }
@@ -461,7 +536,36 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
   if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
   if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
+  const size_t npix = (size_t)W * H;
+  const int holes = has_spp && hush__param_i(f, P_PROGRESSIVE) &&
+                    svgf_has_holes(st->spp.plane[0], npix, threads);
+  if (holes && !st->gin.has_position)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "svgf: frames with holes (spp 0) need 'position' (progressive mode; or set "
+                      "progressive=false)");
+  if (holes && !st->prog.src &&
+      ((s = svgf_progressive_init(f->device, &st->prog, f->width, f->height)) ||
+       (s = hush__filter_scratch(f, &st->eps, 1))))
+    return s;
   hush__filter_timing_stage(f, "import");
+
+  /* ---- progressive: the G-buffer holes filled (Dundr §4.2.1) */
+  hush_gbuffer_store *next = hush__reprojector_next(&st->rp);
+  if (holes) {
+    memcpy(st->prog.depth.plane[0], next->depth.plane[0], npix * sizeof(float));
+    float *planes[SVGF_PYRAMID_MAX_PLANES];
+    int count = 0;
+    planes[count++] = next->depth.plane[0];
+    for (int k = 0; k < 3; k++) planes[count++] = next->normal.plane[k];
+    for (int k = 0; k < 3; k++) planes[count++] = st->gin.position.plane[k];
+    if (demod)
+      for (int k = 0; k < 3; k++) planes[count++] = st->albedo.plane[k];
+    svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
+    svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
+                         threads);
+  } else {
+    st->prog.has_pos = 0; /* a frame without holes: no positions carried */
+  }
 
   /* ---- reproject */
   hush_reproject_params rp;
@@ -481,7 +585,8 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   /* ---- guide */
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
   svgf_guide_import(&st->zn, gb->depth.plane[0], (const float *const *)gb->normal.plane, threads);
-  svgf_guide_gradient(&st->zn, has_dgrad, &st->grad, st->zon.plane[0],
+  /* with holes the imported gradient is 0 there: take the filled depth's */
+  svgf_guide_gradient(&st->zn, has_dgrad && !holes, &st->grad, st->zon.plane[0],
                       hush__param_f(f, P_DEPTH_STEEP), threads);
   svgf_guide gd;
   gd.width = W;
@@ -492,6 +597,12 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   gd.zon = st->zon.plane[0];
   gd.sigma_z = hush__param_f(f, P_SIGMA_Z);
   gd.np = svgf_normal_power_of(hush__param_f(f, P_SIGMA_N));
+  /* progressive: the previous state scattered forwards (Dundr §4.2.4-4.2.5) */
+  if (holes)
+    svgf_forward_scatter(&st->prog, st->spp.plane[0],
+                         st->comp[0].acc.has_history ? hush__accum_age(&st->comp[0].acc)->plane[0]
+                                                     : NULL,
+                         info, threads);
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- per component: accumulate, variance, a-trous */
@@ -509,11 +620,16 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   fc.order = hush__param_i(f, P_ORDER);
   fc.kernel = kernel;
   fc.threads = threads;
+  fc.holes = holes;
   filter_component(&fc, &st->comp[0], 1);
   if (split) {
     filter_component(&fc, &st->comp[1], 0);
     add_planes(&st->comp[0].result, &st->comp[1].result, threads);
   }
+  if (holes)
+    svgf_carry_positions(&st->prog, st->spp.plane[0],
+                         (const float *const *)st->gin.position.plane, gb->depth.plane[0],
+                         threads);
 
   /* ---- export */
   const hush_planar *result = &st->comp[0].result;
