@@ -563,9 +563,9 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
     svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
                          threads);
-  } else {
-    st->prog.has_pos = 0; /* a frame without holes: no positions carried */
   }
+  /* a frame without holes carries no positions; a reset forgets them */
+  if (!holes || info->history == HUSH_HISTORY_RESET) st->prog.has_pos = 0;
 
   /* ---- reproject */
   hush_reproject_params rp;
