@@ -13,14 +13,19 @@
  *   the "taa" filter can also follow svgf).
  *
  * Follows Dundr 2018 §4.1.4-4.1.5 (a-trous, weights, variance propagation)
- * and §4.4 (spatial variance while history < 4 frames), with the published
- * defaults of Schied et al. 2017 given in papers/NOTES.md ("SVGF").
+ * and §4.4 (spatial variance while history < 4 samples), with the published
+ * defaults of Schied et al. 2017 given in papers/NOTES.md ("SVGF"); §4.3
+ * (more than 1 spp: 'spp' and 'variance' merged into the moments) and §4.2
+ * (fewer than 1 spp: holes with spp 0) when those images are bound; direct
+ * and indirect light filtered separately when both are bound (Schied 2017).
  *
  * Files: guide.c (padded depth/normal, depth gradient), variance.c (7x7
  * spatial estimate), atrous.c (one fused pass per level: Gaussian of the
  * variance, weights, colour and variance), weights.h (one exp per tap),
- * padded.c (row padding so every inner loop is branch-free). Every pixel is
- * computed on its own: the result does not depend on the thread count.
+ * padded.c (row padding so every inner loop is branch-free), samples.c
+ * (§4.3), progressive.c (§4.2). Every pixel is computed on its own (the
+ * progressive scatter breaks depth ties by source index): the result does
+ * not depend on the thread count.
  */
 #include "filters/albedo.h"
 #include "filters/filter.h"
