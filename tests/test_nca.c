@@ -148,6 +148,20 @@ static void test_sigmoid(void) {
   }
   CHECK_MSG(worst < 2e-6, "sigmoid relative error %g", worst);
   CHECK(hush__nca_sigmoid(0.0f) == 0.5f);
+  /* the colour transform and its inverse */
+  double worst_log = 0.0, worst_exp = 0.0;
+  for (int i = 0; i <= 4000; i++) {
+    const float v = (float)(pow(10.0, (i - 2000) * 0.005)); /* 1e-10 .. 1e10 */
+    const double exact = log1p((double)v);
+    /* 1 + v rounds to float first: absolute error ~6e-8 near 0, relative above */
+    worst_log = fmax(worst_log, fabs(hush__nca_log1p(v) - exact) / (exact + 0.05));
+    const float s = (float)(i - 2000) * 0.015f; /* -30 .. 30 */
+    worst_exp = fmax(worst_exp, fabs(hush__nca_exp(s) - exp((double)s)) / exp((double)s));
+  }
+  CHECK_MSG(worst_log < 2e-6, "log1p error / (value + 0.05) %g", worst_log);
+  CHECK_MSG(worst_exp < 2e-6, "exp relative error %g", worst_exp);
+  CHECK(hush__nca_log1p(0.0f) == 0.0f);
+  CHECK(isfinite(hush__nca_log1p(3.4e38f)));
   CHECK(hush__nca_sigmoid(1e30f) == 1.0f);
   CHECK(hush__nca_sigmoid(-1e30f) >= 0.0f && hush__nca_sigmoid(-1e30f) < 1e-30f);
 }

@@ -76,13 +76,13 @@ void hush__nca_step(const hush_nca_weights *wt, const float *const src[HUSH_NCA_
                     float *const dst[HUSH_NCA_CHANNELS], uint32_t width, uint32_t height,
                     float *scratch, int threads);
 
-/* The logistic function, vectorisable: exp(-x) = 2^t as 2^round(t) (built in
- * the exponent bits; the rounding adds 1.5 * 2^23, so no float-to-int
- * conversion stops the vectoriser) times 2^f, f in [-0.5, 0.5], by its
- * Taylor polynomial of degree 6 (relative error about 1e-7). Saturates
- * cleanly: |t| is clamped to 126. */
-static inline float hush__nca_sigmoid(float x) {
-  float t = -x * 1.44269504f;
+/* exp(x) for x in [-87, 87] (clamped), vectorisable: 2^t, t = x log2(e),
+ * as 2^round(t) built in the exponent bits (the rounding adds 1.5 * 2^23,
+ * so no float-to-int conversion stops the vectoriser) times 2^f, f in
+ * [-0.5, 0.5], by its Taylor polynomial of degree 6 (relative error about
+ * 1e-7). */
+static inline float hush__nca_exp(float x) {
+  float t = x * 1.44269504f;
   t = t < -126.0f ? -126.0f : t;
   t = t > 126.0f ? 126.0f : t;
   const float magic = 12582912.0f; /* 1.5 * 2^23 */
@@ -100,7 +100,36 @@ static inline float hush__nca_sigmoid(float x) {
   const int32_t bits = (i - 0x4B400000 + 127) * (1 << 23); /* 2^round(t) */
   float scale;
   __builtin_memcpy(&scale, &bits, sizeof scale);
-  return 1.0f / (1.0f + p * scale);
+  return p * scale;
+}
+
+/* The logistic function 1 / (1 + exp(-x)); saturates cleanly to 0 and 1. */
+static inline float hush__nca_sigmoid(float x) { return 1.0f / (1.0f + hush__nca_exp(-x)); }
+
+/* log(1 + v) for finite v >= 0, vectorisable: 1 + v = m 2^e with m in
+ * [sqrt(1/2), sqrt(2)), log m = 2 atanh(z), z = (m - 1) / (m + 1), |z| <
+ * 0.172, by its series to z^9 (error below 1e-8 before rounding). The
+ * colour transform of the state (model.h); for v < 6e-8, 1 + v rounds to 1
+ * and the result is 0. */
+static inline float hush__nca_log1p(float v) {
+  const float x = 1.0f + v;
+  int32_t bits;
+  __builtin_memcpy(&bits, &x, sizeof bits);
+  int32_t e = (bits >> 23) - 127;
+  int32_t mbits = (bits & 0x007FFFFF) | 0x3F800000; /* m in [1, 2) */
+  /* m >= sqrt(2): use m / 2 and e + 1 */
+  const int32_t high = mbits >= 0x3FB504F3;
+  mbits -= high * (1 << 23);
+  e += high;
+  float m;
+  __builtin_memcpy(&m, &mbits, sizeof m);
+  const float z = (m - 1.0f) / (m + 1.0f), z2 = z * z;
+  float p = 1.0f / 9;
+  p = p * z2 + 1.0f / 7;
+  p = p * z2 + 1.0f / 5;
+  p = p * z2 + 1.0f / 3;
+  p = p * z2 + 1.0f;
+  return (float)e * 0.693147181f + 2.0f * z * p;
 }
 
 #endif
