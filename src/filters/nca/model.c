@@ -82,24 +82,30 @@ static void perceive_chunk(const float *const row[HUSH_NCA_CHANNELS], const floa
   }
 }
 
-/* 8 floats: GCC/Clang vector extension, one AVX register (two SSE ones). */
-typedef float v8f __attribute__((vector_size(32)));
+/* One vector register of floats (GCC/Clang vector extension): 16 with
+ * AVX-512, else 8 (one AVX register, or two SSE ones). */
+#ifdef __AVX512F__
+#define LANES 16
+#else
+#define LANES 8
+#endif
+typedef float vf __attribute__((vector_size(LANES * 4)));
 
 /* dst = src + sigmoid(p W) + bias for n pixels of a chunk. The 39 x 9
- * product is register-blocked: for 8 pixels at a time the 9 sums stay in
+ * product is register-blocked: for LANES pixels at a time the 9 sums stay in
  * registers while the 39 perception values stream past, so each load feeds
  * 9 multiply-adds (a plain loop per output channel reloads and stores its
  * sum for every k and is bound by L1 traffic). p is padded to a multiple
- * of 8 pixels (the tail lanes are computed and dropped). */
+ * of LANES pixels (the tail lanes are computed and dropped). */
 static void update_chunk(const hush_nca_weights *wt, const float *restrict p,
                          const float *const row[HUSH_NCA_CHANNELS],
                          float *const out[HUSH_NCA_CHANNELS], uint32_t x0, uint32_t n,
                          float *restrict z) {
-  for (uint32_t i0 = 0; i0 < n; i0 += 8) {
-    v8f acc[HUSH_NCA_CHANNELS];
-    for (int j = 0; j < HUSH_NCA_CHANNELS; j++) acc[j] = (v8f){0};
+  for (uint32_t i0 = 0; i0 < n; i0 += LANES) {
+    vf acc[HUSH_NCA_CHANNELS];
+    for (int j = 0; j < HUSH_NCA_CHANNELS; j++) acc[j] = (vf){0};
     for (int k = 0; k < HUSH_NCA_PERCEPTION; k++) {
-      v8f pk;
+      vf pk;
       __builtin_memcpy(&pk, p + (size_t)k * CHUNK + i0, sizeof pk);
       const float *wk = wt->w + k * HUSH_NCA_CHANNELS;
       for (int j = 0; j < HUSH_NCA_CHANNELS; j++) acc[j] += wk[j] * pk;

@@ -79,7 +79,7 @@ static hush_status nca_create(hush_filter f, void **state) {
     st->scratch_threads = threads;
     if (!st->odd[0] || !st->scratch)
       s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "nca: out of memory");
-    else /* the padding lanes of the last 8 pixels of a row read it */
+    else /* the padding lanes after the last pixel of a row read it */
       memset(st->scratch, 0, hush__nca_scratch_floats(f->width, threads) * sizeof(float));
   }
   if (s) {
