@@ -94,7 +94,7 @@ static int import_layer(const char *cmd, hush_device dev, hush_frame frame, cons
   for (int c = 0; c < 3; c++)
     for (size_t i = 0; i < n; i++) {
       const float x = p.plane[c][i];
-      planes[(size_t)c * n + i] = log_color ? hush__nca_log1p(x > 0.0f ? x : 0.0f) : x;
+      planes[(size_t)c * n + i] = log_color ? log1pf(x > 0.0f ? x : 0.0f) : x;
     }
   hush__planar_free(&p);
   return 0;
