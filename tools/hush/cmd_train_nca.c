@@ -205,8 +205,7 @@ static double validation_loss(const options *o, const view_data *views, int coun
   return n ? sum / n : 0.0;
 }
 
-static int write_c_source(const char *cmd, const char *path, const hush_nca_weights *w,
-                          const options *o) {
+static int write_c_source(const char *cmd, const char *path, const hush_nca_weights *w) {
   FILE *f = fopen(path, "w");
   if (!f) return cli_error(cmd, "%s: cannot write", path);
   fprintf(f,
@@ -215,21 +214,21 @@ static int write_c_source(const char *cmd, const char *path, const hush_nca_weig
           " * `hush train-nca --c-out` from the run that wrote data/nca/weights-v1.bin\n"
           " * (docs/nca.md has the command); do not edit. Hexadecimal floats, so the\n"
           " * values are bit-identical to the file (tests/test_nca.c checks it).\n"
-          " * Trained for K = %d iterations, %u steps of %u crops of %u pixels.\n"
+          " * Trained for K = %u iterations. Row k of W: perception value k (model.h).\n"
           " */\n"
           "#include \"filters/nca/model.h\"\n\n"
           "const hush_nca_weights hush__nca_default_weights = {\n    {\n",
-          w->iterations ? (int)w->iterations : o->iterations, o->steps, o->batch, o->crop);
+          w->iterations);
   for (int k = 0; k < HUSH_NCA_PERCEPTION; k++) {
-    fprintf(f, "        ");
+    fprintf(f, "        /* %2d */", k);
     for (int j = 0; j < HUSH_NCA_CHANNELS; j++)
-      fprintf(f, "%a,%s", (double)w->w[k * HUSH_NCA_CHANNELS + j],
-              j + 1 < HUSH_NCA_CHANNELS ? " " : "");
+      fprintf(f, "%s%a,", j > 0 && j % 3 == 0 ? "\n               " : " ",
+              (double)w->w[k * HUSH_NCA_CHANNELS + j]);
     fprintf(f, "\n");
   }
   fprintf(f, "    },\n    {");
   for (int j = 0; j < HUSH_NCA_CHANNELS; j++)
-    fprintf(f, "%a%s", (double)w->bias[j], j + 1 < HUSH_NCA_CHANNELS ? ", " : "");
+    fprintf(f, "%s%a,", j == 0 ? "" : j % 3 == 0 ? "\n     " : " ", (double)w->bias[j]);
   fprintf(f, "},\n    %u,\n    %s,\n};\n", w->iterations,
           w->color_transform == HUSH_NCA_LOG1P ? "HUSH_NCA_LOG1P" : "HUSH_NCA_LINEAR");
   if (fclose(f) != 0) return cli_error(cmd, "%s: write error", path);
@@ -417,7 +416,7 @@ int cmd_train_nca(int argc, char **argv) {
     const hush_status s = hush__nca_weights_save(dev, o.out, &w);
     if (s) rc = cli_device_error(cmd, dev, s, o.out);
   }
-  if (!rc && o.c_out) rc = write_c_source(cmd, o.c_out, &w, &o);
+  if (!rc && o.c_out) rc = write_c_source(cmd, o.c_out, &w);
   for (int i = 0; i < count; i++) free(views[i].planes);
   free(views);
   free(bufs);
