@@ -19,6 +19,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <sys/wait.h>
 
 static uint32_t rng_state = 2463534242u;
 static double rnd(void) { /* uniform in [0, 1), xorshift32 */
@@ -414,6 +415,96 @@ static void test_default_weights_match_file(void) {
   hush_device_release(dev);
 }
 
+/* ---- hush train-nca end to end ------------------------------------------- */
+
+#define TWORK HUSH_BINARY_DIR "/test_nca_train"
+#define TS 40
+
+static int run_cli(const char *args, char *err, size_t err_size) {
+  char cmd[4096];
+  snprintf(cmd, sizeof cmd, "'%s' %s > '%s/out.txt' 2> '%s/err.txt'", HUSH_CLI, args, TWORK, TWORK);
+  const int s = system(cmd);
+  err[0] = '\0';
+  FILE *f = fopen(TWORK "/err.txt", "rb");
+  if (f) {
+    const size_t n = fread(err, 1, err_size - 1, f);
+    err[n] = '\0';
+    fclose(f);
+  }
+  return (s != -1 && WIFEXITED(s)) ? WEXITSTATUS(s) : -1;
+}
+
+/* Writes view v: a smooth reference and a noisy input with fireflies, with
+ * normals and albedo, in the layout `hush render` gives train-nca. */
+static void write_view(hush_device dev, int v) {
+  char path[1024];
+  snprintf(path, sizeof path, "mkdir -p '%s/data/v%d/noisy' '%s/data/v%d/ref'", TWORK, v, TWORK, v);
+  REQUIRE(system(path) == 0);
+  hush_frame noisy = hush_frame_new(dev, TS, TS), ref = hush_frame_new(dev, TS, TS);
+  REQUIRE(noisy && ref);
+  hush_image_view c, n, a, r;
+  REQUIRE(hush_frame_add_layer(noisy, "color", 3, &c) == HUSH_OK);
+  REQUIRE(hush_frame_add_layer(noisy, "normal", 3, &n) == HUSH_OK);
+  REQUIRE(hush_frame_add_layer(noisy, "albedo", 3, &a) == HUSH_OK);
+  REQUIRE(hush_frame_add_layer(ref, "color", 3, &r) == HUSH_OK);
+  float *cp = c.data, *np = n.data, *ap = a.data, *rp = r.data;
+  for (int i = 0; i < TS * TS; i++) {
+    const int x = i % TS, y = i / TS;
+    const float left = (float)(x < TS / 2 + v);
+    for (int k = 0; k < 3; k++) {
+      const float truth = 0.2f + 0.5f * left + 0.01f * (float)(y + k);
+      rp[3 * i + k] = truth;
+      /* 1 spp-like: mostly dark, sometimes 4x bright */
+      cp[3 * i + k] = rnd() < 0.25 ? 4.0f * truth : 0.0f;
+      np[3 * i + k] = k == 2 ? 1.0f : 0.0f;
+      ap[3 * i + k] = 0.3f + 0.5f * left;
+    }
+  }
+  snprintf(path, sizeof path, "%s/data/v%d/noisy/frame_0000.exr", TWORK, v);
+  CHECK(hush_frame_write_exr(noisy, path, HUSH_EXR_FLOAT) == HUSH_OK);
+  snprintf(path, sizeof path, "%s/data/v%d/ref/frame_0000.exr", TWORK, v);
+  CHECK(hush_frame_write_exr(ref, path, HUSH_EXR_FLOAT) == HUSH_OK);
+  hush_frame_release(noisy);
+  hush_frame_release(ref);
+}
+
+static void test_train_cli(void) {
+  REQUIRE(system("rm -rf '" TWORK "' && mkdir -p '" TWORK "'") == 0);
+  hush_device dev = hush_device_new("threads=1");
+  REQUIRE(dev);
+  for (int v = 0; v < 4; v++) write_view(dev, v);
+  char err[8192];
+  /* usage errors exit 2, runtime errors 1, each with a message */
+  CHECK(run_cli("train-nca --out x.bin", err, sizeof err) == 2 && strstr(err, "--data"));
+  CHECK(run_cli("train-nca --data '" TWORK "/none' --out x.bin", err, sizeof err) == 1 &&
+        strstr(err, "none"));
+  CHECK(run_cli("train-nca --data '" TWORK "/data' --out '" TWORK "/w.bin' --crop 64", err,
+                sizeof err) == 1 &&
+        strstr(err, "smaller than the crop"));
+  CHECK(run_cli("train-nca --data '" TWORK "/data' --out '" TWORK "/w.bin' "
+                "--min-iterations 5 --max-iterations 2",
+                err, sizeof err) == 2);
+  /* a short run learns: the held-out loss falls below the noisy input's */
+  const int rc = run_cli("train-nca --data '" TWORK "/data' --out '" TWORK "/w.bin' --c-out '" TWORK
+                         "/w.c' --iterations 3 --steps 60 --crop 32 --batch 2 --lr 0.01 "
+                         "--threads 2 --log 1000",
+                         err, sizeof err);
+  CHECK_MSG(rc == 0, "train-nca exit %d: %s", rc, err);
+  const char *a = strstr(err, "noisy input: "), *b = strstr(err, "after training, K = 3: ");
+  double before = -1.0, after = -1.0;
+  if (a) sscanf(a + strlen("noisy input: "), "%lf", &before);
+  if (b) sscanf(b + strlen("after training, K = 3: "), "%lf", &after);
+  CHECK_MSG(before > 0.0 && after >= 0.0 && after < 0.9 * before,
+            "validation loss %g before, %g after training", before, after);
+  hush_nca_weights w;
+  CHECK(hush__nca_weights_load(dev, TWORK "/w.bin", &w) == HUSH_OK);
+  CHECK(w.iterations == 3 && w.color_transform == HUSH_NCA_LOG1P);
+  FILE *f = fopen(TWORK "/w.c", "rb");
+  CHECK(f != NULL);
+  if (f) fclose(f);
+  hush_device_release(dev);
+}
+
 int main(void) {
   test_sigmoid();
   test_zero_weights_step();
@@ -423,5 +514,6 @@ int main(void) {
   test_filter_extreme_input();
   test_weights_file();
   test_default_weights_match_file();
+  test_train_cli();
   return check_summary();
 }
