@@ -58,6 +58,7 @@ enum {
   P_DISPLACE,
   P_NOISE,
   P_REFINE,
+  P_OUTLIER,
   P_NORMAL_EXP1,
   P_NORMAL_EXP2,
   P_POSITION_EXP1,
@@ -111,6 +112,11 @@ static const hush_param_info bmfr_params[P_COUNT] = {
     {"refine", HUSH_PARAM_INT, 1, 0, 4,
      "steps of iterative refinement of the block weights towards the noise-free fit, undoing "
      "the noise's errors-in-variables bias (0: the paper's plain solve)",
+     NULL},
+    {"outlier", HUSH_PARAM_FLOAT, 8.0, 0.0, 1e6,
+     "pixels brighter than this times their block's mean luminance (twice re-estimated) keep "
+     "their accumulated radiance and stay out of the fit: visible emitters and fireflies would "
+     "otherwise spread over the block (0: off, as the paper)",
      NULL},
     {"normal_exponent1", HUSH_PARAM_FLOAT, 1.0, 0.0, 16.0, EXPONENT_DOC("from the shading normal"),
      NULL},
@@ -255,6 +261,7 @@ typedef struct fit_frame {
   const float *noise;
   float *out[BMFR_CHANNELS];          /* fitted radiance */
   int refine;                         /* refinement steps of the fit */
+  float outlier;                      /* outlier ratio, 0: off */
   int n;                              /* B^2 */
   size_t ld;
 } fit_frame;
@@ -272,6 +279,39 @@ static void gather(const float *plane, int W, const int *xs, const int *ys, int 
       for (int c = 0; c < B; c++) d[c] = row[xs[c]];
     }
   }
+}
+
+/*
+ * Takes pixels whose luminance exceeds ratio times the mean luminance of the
+ * block's valid pixels out of the fit (mask 0), twice, the second time
+ * with the mean of the pixels left; returns how many stay valid. A least-
+ * squares fit spreads a few very bright samples (a light seen directly, a
+ * firefly) over its whole block (paper §8: "the radiance of fireflies is
+ * only propagated within a single block area"); kept out, they keep their
+ * own accumulated radiance, as holes do. lum: n floats of scratch.
+ */
+static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask, int n,
+                            float ratio, float *restrict lum) {
+  const float *restrict r = z[0], *restrict g = z[1], *restrict b = z[2];
+#pragma omp simd
+  for (int i = 0; i < n; i++) lum[i] = 0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i];
+  int nvalid = 0;
+  for (int pass = 0; pass < 2; pass++) {
+    double sum = 0.0;
+    int count = 0;
+    for (int i = 0; i < n; i++) {
+      sum += mask[i] * lum[i];
+      count += mask[i] > 0.0f;
+    }
+    if (count == 0) return 0;
+    const float limit = ratio * (float)(sum / count);
+    nvalid = 0;
+    for (int i = 0; i < n; i++) {
+      mask[i] = mask[i] > 0.0f && !(lum[i] > limit) ? 1.0f : 0.0f;
+      nvalid += mask[i] > 0.0f;
+    }
+  }
+  return nvalid;
 }
 
 static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
@@ -306,6 +346,7 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
     zc[c] = zb + (size_t)c * ld;
     gather(fr->z[c], W, xs, ys, B, inside_x, zc[c]);
   }
+  if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, n, fr->outlier, spare);
   for (int k = 0; k < BMFR_BASE_COUNT; k++)
     if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, inside_x, base + (size_t)k * ld);
   if (fr->set->gradients)
@@ -422,6 +463,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   hush__bmfr_grid(&fr.grid, (int)f->width, (int)f->height, B, ox, oy);
   fr.set = &set;
   fr.refine = hush__param_i(f, P_REFINE);
+  fr.outlier = hush__param_f(f, P_OUTLIER);
   fr.n = B * B;
   fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);

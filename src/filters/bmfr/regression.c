@@ -9,6 +9,13 @@
 #include <math.h>
 #include <string.h>
 
+/* Inlined, so that a constant argument (y == NULL) selects its loop. */
+#if defined(__GNUC__)
+#  define HUSH_INLINE inline __attribute__((always_inline))
+#else
+#  define HUSH_INLINE inline
+#endif
+
 /* lowbias32 (Wellons): a fast integer hash with good avalanche. */
 static inline uint32_t hash32(uint32_t x) {
   x ^= x >> 16;
@@ -38,18 +45,52 @@ void hush__bmfr_noise_table(float *table, int count, int n, size_t ld, uint64_t 
   }
 }
 
+/* Independent partial sums of a dot product: one vector accumulator would
+ * wait on the FMA latency every iteration; DOT_LANES lanes give the core
+ * several chains to overlap (a fixed order, so still deterministic). */
+#define DOT_LANES 32
+
 /* sum_{i = k}^{n-1} a[i] b[i] */
 static inline float dot_from(const float *restrict a, const float *restrict b, int k, int n) {
+  float acc[DOT_LANES] = {0};
+  int i = k;
+  for (; i + DOT_LANES <= n; i += DOT_LANES)
+    for (int l = 0; l < DOT_LANES; l++) acc[l] += a[i + l] * b[i + l];
   float s = 0.0f;
-#pragma omp simd reduction(+ : s)
-  for (int i = k; i < n; i++) s += a[i] * b[i];
-  return s;
+  for (; i < n; i++) s += a[i] * b[i];
+  for (int w = DOT_LANES / 2; w > 0; w /= 2)
+    for (int l = 0; l < w; l++) acc[l] += acc[l + w];
+  return s + acc[0];
 }
 
 /* a[i] -= c x[i] for i = k..n-1 */
 static inline void axpy_from(float *restrict a, const float *restrict x, float c, int k, int n) {
 #pragma omp simd
   for (int i = k; i < n; i++) a[i] -= c * x[i];
+}
+
+/* a[i] -= c x[i] and returns sum y[i] a[i] (after the update), over
+ * i = k..n-1: one step's update fused with the next step's dot product, so
+ * each column is streamed once per step instead of twice. y == NULL means
+ * y = a (the sum of squares). */
+static HUSH_INLINE float axpy_dot_from(float *restrict a, const float *restrict x,
+                                       const float *restrict y, float c, int k, int n) {
+  float acc[DOT_LANES] = {0};
+  int i = k;
+  for (; i + DOT_LANES <= n; i += DOT_LANES)
+    for (int l = 0; l < DOT_LANES; l++) {
+      const float t = a[i + l] - c * x[i + l];
+      a[i + l] = t;
+      acc[l] += (y ? y[i + l] : t) * t;
+    }
+  float s = 0.0f;
+  for (; i < n; i++) {
+    a[i] -= c * x[i];
+    s += (y ? y[i] : a[i]) * a[i];
+  }
+  for (int w = DOT_LANES / 2; w > 0; w /= 2)
+    for (int l = 0; l < w; l++) acc[l] += acc[l + w];
+  return s + acc[0];
 }
 
 /*
@@ -59,23 +100,43 @@ static inline void axpy_from(float *restrict a, const float *restrict x, float c
  * columns m..ncols-1). Below the diagonal, the columns keep the
  * reflection vectors' tails, which nothing reads.
  * Per step k, with x = A[k..n-1][k]: alpha = -sign(x_k) |x|, v = x - alpha
- * e_k, and every later column a gets a -= (2 v.a / v.v) v.
+ * e_k, and every later column a gets a -= (2 v.a / v.v) v. The dot
+ * products x.a below the pivot come from the previous step's update pass
+ * (dots[j]); column k + 1 is updated first so the others can use it.
  */
 static void householder_r(float *A, size_t ld, int n, int m, int ncols) {
+  float dots[BMFR_MAX_FEATURES + BMFR_CHANNELS]; /* sum_{i > k} x_i a_ij, this step */
+  int have_dots = 0;
   for (int k = 0; k < m && k < n; k++) {
     float *restrict x = A + (size_t)k * ld;
-    const float xk = x[k];
-    const float sigma = dot_from(x, x, k + 1, n);
+    if (!have_dots)
+      for (int j = k; j < ncols; j++) dots[j] = dot_from(x, A + (size_t)j * ld, k + 1, n);
+    have_dots = 0;
+    const float xk = x[k], sigma = dots[k];
     const float norm = sqrtf(xk * xk + sigma);
     if (!(norm > 0.0f)) continue; /* a zero column: R_kk = 0, nothing to reflect */
     const float alpha = xk > 0.0f ? -norm : norm;
     const float vk = xk - alpha; /* |vk| >= norm: no cancellation */
     const float scale = 2.0f / (sigma + vk * vk);
-    for (int j = k + 1; j < ncols; j++) {
-      float *restrict a = A + (size_t)j * ld;
-      const float c = (vk * a[k] + dot_from(x, a, k + 1, n)) * scale;
-      a[k] -= c * vk;
-      axpy_from(a, x, c, k + 1, n);
+    if (k + 1 < ncols && k + 2 <= n) {
+      /* column k + 1, then the others with the dots of step k + 1 */
+      float *y = A + (size_t)(k + 1) * ld;
+      for (int j = k + 1; j < ncols; j++) {
+        float *a = A + (size_t)j * ld;
+        const float c = (vk * a[k] + dots[j]) * scale;
+        a[k] -= c * vk;
+        a[k + 1] -= c * x[k + 1];
+        dots[j] = j == k + 1 ? axpy_dot_from(a, x, NULL, c, k + 2, n)
+                             : axpy_dot_from(a, x, y, c, k + 2, n);
+      }
+      have_dots = 1;
+    } else {
+      for (int j = k + 1; j < ncols; j++) {
+        float *restrict a = A + (size_t)j * ld;
+        const float c = (vk * a[k] + dots[j]) * scale;
+        a[k] -= c * vk;
+        axpy_from(a, x, c, k + 1, n);
+      }
     }
     x[k] = alpha;
   }
