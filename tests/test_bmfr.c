@@ -64,7 +64,7 @@ static void fit_refined(block *b, const bmfr_feature_set *set, uint64_t frame, f
   hush__bmfr_noise_table(b->noise, set->count, BN, BN, frame, eps);
   hush__bmfr_features_block(set, b->base, b->mask, BN, BN, b->T, b->scratch);
   hush__bmfr_fit(b->T, set->count, z, b->noise, b->mask, BN, nvalid, BN, b->A, refine,
-                 b->scratch, coef);
+                 &b->y[0][0], coef);
   hush__bmfr_synthesize(b->T, set->count, BN, BN, (const float(*)[BMFR_MAX_FEATURES])coef, y);
 }
 

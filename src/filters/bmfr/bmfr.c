@@ -364,7 +364,7 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
     float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
     hush__bmfr_features_block(fr->set, base, mask, n, ld, T, spare);
     hush__bmfr_fit(T, count, (const float *const *)zc, fr->noise, mask, n, nvalid, ld, A,
-                   fr->refine, spare, coef);
+                   fr->refine, y, coef);
     hush__bmfr_synthesize(T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   }
 

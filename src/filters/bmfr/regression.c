@@ -102,11 +102,13 @@ static HUSH_INLINE float axpy_dot_from(float *restrict a, const float *restrict 
  * Per step k, with x = A[k..n-1][k]: alpha = -sign(x_k) |x|, v = x - alpha
  * e_k, and every later column a gets a -= (2 v.a / v.v) v. The dot
  * products x.a below the pivot come from the previous step's update pass
- * (dots[j]); column k + 1 is updated first so the others can use it.
+ * (dots[j]; dots0, when not NULL, gives step 0's); column k + 1 is updated
+ * first so the others can use it.
  */
-static void householder_r(float *A, size_t ld, int n, int m, int ncols) {
+static void householder_r(float *A, size_t ld, int n, int m, int ncols, const float *dots0) {
   float dots[BMFR_MAX_FEATURES + BMFR_CHANNELS]; /* sum_{i > k} x_i a_ij, this step */
-  int have_dots = 0;
+  int have_dots = dots0 != NULL;
+  if (have_dots) memcpy(dots, dots0, (size_t)ncols * sizeof *dots);
   for (int k = 0; k < m && k < n; k++) {
     float *restrict x = A + (size_t)k * ld;
     if (!have_dots)
@@ -179,8 +181,13 @@ static void forward_substitute(const float *A, size_t ld, int count, double tol,
 void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNELS],
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
                     int refine, float *scratch, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
-  /* A = [T + N, z] (eq. 7), holes zero in every column */
+  /* A = [T + N, z] (eq. 7), holes zero in every column; while each column
+   * is written, its dot product with column 0 below row 0 (the first
+   * reflection's) is taken, which saves the QR a pass per column */
+  float dots0[BMFR_MAX_FEATURES + BMFR_CHANNELS];
+  const float *restrict x0 = T; /* column 0: the mask */
   memcpy(A, T, ld * sizeof *A);
+  dots0[0] = dot_from(x0, x0, 1, n);
   for (int m = 1; m < count; m++) {
     const float *restrict t = T + (size_t)m * ld, *restrict nz = noise + (size_t)m * ld;
     float *restrict a = A + (size_t)m * ld;
@@ -193,6 +200,7 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
     }
 #pragma omp simd
     for (size_t i = 0; i < ld; i++) a[i] = t[i] + mask[i] * (nz[i] - mean);
+    dots0[m] = dot_from(x0, a, 1, n);
   }
   for (int c = 0; c < BMFR_CHANNELS; c++) {
     const float *restrict zc = z[c];
@@ -200,9 +208,10 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
 #pragma omp simd
     for (int i = 0; i < n; i++) a[i] = zc[i] * mask[i];
     for (size_t i = (size_t)n; i < ld; i++) a[i] = 0.0f;
+    dots0[count + c] = dot_from(x0, a, 1, n);
   }
 
-  householder_r(A, ld, n, count, count + BMFR_CHANNELS);
+  householder_r(A, ld, n, count, count + BMFR_CHANNELS, dots0);
 
   /* R alpha = r per channel (eq. 5). A pivot below the cut-off is a
    * direction the block does not determine: its weight is 0 (the feature
@@ -224,21 +233,40 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * removes that to first order; in the directions the noise regularises
    * (near-collinear features), R^T R is dominated by the noise and the
    * step stays small, so the regularisation keeps its effect there. */
-  for (int it = 0; it < refine; it++)
-    for (int c = 0; c < BMFR_CHANNELS; c++) {
-      float *restrict res = scratch;
-      const float *restrict zc = z[c];
-      float a[BMFR_MAX_FEATURES];
-      for (int m = 0; m < count; m++) a[m] = (float)w[c][m];
+  for (int it = 0; it < refine; it++) {
+    /* residuals of the three channels, then their dots with each feature */
+    float *restrict r0 = scratch, *restrict r1 = scratch + ld, *restrict r2 = scratch + 2 * ld;
+    const float *restrict z0 = z[0], *restrict z1 = z[1], *restrict z2 = z[2];
 #pragma omp simd
-      for (int i = 0; i < n; i++) res[i] = zc[i] * mask[i];
-      for (int m = 0; m < count; m++) axpy_from(res, T + (size_t)m * ld, a[m], 0, n);
-      double g[BMFR_MAX_FEATURES], u[BMFR_MAX_FEATURES], d[BMFR_MAX_FEATURES];
-      for (int m = 0; m < count; m++) g[m] = dot_from(T + (size_t)m * ld, res, 0, n);
-      forward_substitute(A, ld, count, tol, g, u);
+    for (int i = 0; i < n; i++) {
+      r0[i] = z0[i] * mask[i];
+      r1[i] = z1[i] * mask[i];
+      r2[i] = z2[i] * mask[i];
+    }
+    for (int m = 0; m < count; m++) {
+      const float *restrict t = T + (size_t)m * ld;
+      const float a0 = (float)w[0][m], a1 = (float)w[1][m], a2 = (float)w[2][m];
+#pragma omp simd
+      for (int i = 0; i < n; i++) {
+        r0[i] -= a0 * t[i];
+        r1[i] -= a1 * t[i];
+        r2[i] -= a2 * t[i];
+      }
+    }
+    double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+    for (int m = 0; m < count; m++) {
+      const float *t = T + (size_t)m * ld;
+      g[0][m] = dot_from(t, r0, 0, n);
+      g[1][m] = dot_from(t, r1, 0, n);
+      g[2][m] = dot_from(t, r2, 0, n);
+    }
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      double u[BMFR_MAX_FEATURES], d[BMFR_MAX_FEATURES];
+      forward_substitute(A, ld, count, tol, g[c], u);
       back_substitute(A, ld, count, tol, u, d);
       for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[m]);
     }
+  }
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
 }

@@ -41,7 +41,7 @@ void hush__bmfr_noise_table(float *table, int count, int n, size_t ld, uint64_t 
  * is re-centred over the valid rows, and holes get none). A is the
  * (count + 3) x ld scratch the QR works in. refine: steps of iterative
  * refinement of the weights towards the noise-free least-squares solution
- * (0: the paper's plain solve), using scratch (ld floats).
+ * (0: the paper's plain solve), using scratch (3 ld floats).
  * Writes coef[c][m], the fitted weights of channel c; a feature whose pivot
  * vanished (rank deficiency that the noise did not cure, or a block with no
  * valid pixel) gets weight 0, so the result is always finite.
