@@ -616,6 +616,39 @@ static void test_misuse(hush_device dev) {
   hush_filter_release(f);
 }
 
+/* A light seen directly (a small patch 200x brighter) stays out of its
+ * block's fit: the rest of the block keeps its level and the patch its
+ * radiance. With the guard off, the fit spreads the patch over the block. */
+static void test_outliers(hush_device dev) {
+  static scene s;
+  plane(&s, 0.5f, 0.5f, 0.5f);
+  for (int y = 20; y < 23; y++)
+    for (int x = 30; x < 33; x++)
+      for (int c = 0; c < 3; c++) s.color[3 * (y * W + x) + c] = 100.0f;
+  for (int guard = 1; guard >= 0; guard--) {
+    hush_filter f = make(dev, &s, 0);
+    REQUIRE(hush_filter_set_int(f, "taa", 0) == HUSH_OK);
+    if (!guard) REQUIRE(hush_filter_set_float(f, "outlier", 0.0f) == HUSH_OK);
+    REQUIRE(run(f, 0) == HUSH_OK);
+    float far_dev = 0.0f, patch_dev = 0.0f;
+    for (int i = 0; i < N; i++) {
+      const int x = i % W, y = i / W;
+      const int in_patch = x >= 30 && x < 33 && y >= 20 && y < 23;
+      for (int c = 0; c < 3; c++) {
+        const float d = fabsf(s.fitted[3 * i + c] - s.color[3 * i + c]);
+        if (in_patch) patch_dev = d > patch_dev ? d : patch_dev;
+        else far_dev = d > far_dev ? d : far_dev;
+      }
+    }
+    if (guard)
+      CHECK_MSG(far_dev <= 1e-4f && patch_dev <= 1e-3f, "guard on: %g around, %g on the patch",
+                (double)far_dev, (double)patch_dev);
+    else
+      CHECK_MSG(far_dev > 0.1f, "guard off: the patch should spread (%g)", (double)far_dev);
+    hush_filter_release(f);
+  }
+}
+
 /* Every block size in range, odd ones included, runs and keeps a constant
  * image constant. */
 static void test_block_sizes(hush_device dev) {
@@ -646,6 +679,7 @@ int main(void) {
   test_holes_api(dev);
   test_misuse(dev);
   test_block_sizes(dev);
+  test_outliers(dev);
   hush_device_release(dev);
   return check_summary();
 }

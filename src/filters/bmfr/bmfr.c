@@ -368,17 +368,17 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
     hush__bmfr_synthesize(T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   }
 
-  /* the block's own pixels (not its mirrored margin); holes keep their
-   * accumulated radiance */
+  /* the block's own pixels (not its mirrored margin); holes and outliers
+   * keep their accumulated radiance */
   const int r0 = y0 < 0 ? -y0 : 0, r1 = y0 + B > H ? H - y0 : B;
   const int c0 = x0 < 0 ? -x0 : 0, c1 = x0 + B > W ? W - x0 : B;
   for (int r = r0; r < r1; r++) {
-    const size_t o = (size_t)(y0 + r) * W + (size_t)x0;
+    const size_t row = (size_t)(y0 + r) * W;
     const int i0 = r * B;
     for (int c = 0; c < BMFR_CHANNELS; c++) {
-      float *restrict dst = fr->out[c] + o;
+      float *restrict dst = fr->out[c] + row;
       const float *restrict src = yc[c] + i0, *restrict zz = zc[c] + i0, *restrict mk = mask + i0;
-      for (int k = c0; k < c1; k++) dst[k] = mk[k] > 0.0f ? src[k] : zz[k];
+      for (int k = c0; k < c1; k++) dst[x0 + k] = mk[k] > 0.0f ? src[k] : zz[k];
     }
   }
 }
