@@ -294,22 +294,38 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
                             float ratio, float *restrict lum) {
   const float *restrict r = z[0], *restrict g = z[1], *restrict b = z[2];
 #pragma omp simd
-  for (int i = 0; i < n; i++) lum[i] = 0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i];
+  for (int i = 0; i < n; i++) lum[i] = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
   int nvalid = 0;
   for (int pass = 0; pass < 2; pass++) {
-    double sum = 0.0;
-    int count = 0;
-    for (int i = 0; i < n; i++) {
-      sum += mask[i] * lum[i];
-      count += mask[i] > 0.0f;
+    /* lane sums in a fixed order: vectorised and deterministic */
+    enum { LANES = 16 };
+    float sum[LANES] = {0}, cnt[LANES] = {0};
+    int i = 0;
+    for (; i + LANES <= n; i += LANES)
+      for (int l = 0; l < LANES; l++) {
+        sum[l] += lum[i + l];
+        cnt[l] += mask[i + l];
+      }
+    for (; i < n; i++) {
+      sum[0] += lum[i];
+      cnt[0] += mask[i];
     }
-    if (count == 0) return 0;
-    const float limit = ratio * (float)(sum / count);
+    float total = 0.0f, count = 0.0f;
+    for (int l = 0; l < LANES; l++) {
+      total += sum[l];
+      count += cnt[l];
+    }
+    if (!(count > 0.0f)) return 0;
+    const float limit = ratio * total / count;
+#pragma omp simd
+    for (int k = 0; k < n; k++) {
+      const float keep = lum[k] > limit ? 0.0f : mask[k];
+      mask[k] = keep;
+      lum[k] *= keep;
+    }
     nvalid = 0;
-    for (int i = 0; i < n; i++) {
-      mask[i] = mask[i] > 0.0f && !(lum[i] > limit) ? 1.0f : 0.0f;
-      nvalid += mask[i] > 0.0f;
-    }
+#pragma omp simd reduction(+ : nvalid)
+    for (int k = 0; k < n; k++) nvalid += mask[k] > 0.0f;
   }
   return nvalid;
 }
