@@ -649,6 +649,29 @@ static void test_outliers(hush_device dev) {
   }
 }
 
+/* An isolated firefly stays in the fit: on a flat wall with the grid
+ * aligned, its block's fit is the block mean, firefly included (its energy
+ * is spread, not kept in one pixel nor lost). */
+static void test_firefly(hush_device dev) {
+  static scene s;
+  plane(&s, 0.5f, 0.5f, 0.5f);
+  for (int i = 0; i < N; i++) s.position[3 * i + 0] = s.position[3 * i + 1] = 1.0f;
+  for (int c = 0; c < 3; c++) s.color[3 * (10 * W + 10) + c] = 100.0f;
+  hush_filter f = make(dev, &s, 0);
+  REQUIRE(hush_filter_set_int(f, "displace", 0) == HUSH_OK);
+  REQUIRE(run(f, 0) == HUSH_OK);
+  const float mean = 0.5f + 99.5f / 1024.0f; /* block (0, 0) is inside the image */
+  float worst = 0.0f;
+  for (int y = 0; y < 32; y++)
+    for (int x = 0; x < 32; x++)
+      for (int c = 0; c < 3; c++) {
+        const float d = fabsf(s.fitted[3 * (y * W + x) + c] - mean);
+        worst = d > worst ? d : worst;
+      }
+  CHECK_MSG(worst <= 1e-4f, "firefly block: worst distance to the mean %g", (double)worst);
+  hush_filter_release(f);
+}
+
 /* Every block size in range, odd ones included, runs and keeps a constant
  * image constant. */
 static void test_block_sizes(hush_device dev) {
@@ -680,6 +703,7 @@ int main(void) {
   test_misuse(dev);
   test_block_sizes(dev);
   test_outliers(dev);
+  test_firefly(dev);
   hush_device_release(dev);
   return check_summary();
 }

@@ -114,9 +114,9 @@ static const hush_param_info bmfr_params[P_COUNT] = {
      "the noise's errors-in-variables bias (0: the paper's plain solve)",
      NULL},
     {"outlier", HUSH_PARAM_FLOAT, 8.0, 0.0, 1e6,
-     "pixels brighter than this times their block's mean luminance (twice re-estimated) keep "
-     "their accumulated radiance and stay out of the fit: visible emitters and fireflies would "
-     "otherwise spread over the block (0: off, as the paper)",
+     "bright patches (pixels above this times their block's mean luminance, with 3 such "
+     "neighbours) keep their accumulated radiance and stay out of the fit, which would spread a "
+     "visible light over the block; isolated fireflies stay in (0: off, as the paper)",
      NULL},
     {"normal_exponent1", HUSH_PARAM_FLOAT, 1.0, 0.0, 16.0, EXPONENT_DOC("from the shading normal"),
      NULL},
@@ -185,10 +185,11 @@ static const hush_filter_class_info bmfr_info = {
 
 /* Per-thread block scratch, in floats, for blocks of ld rows (ld = B^2
  * rounded up to 16): base channels, features, augmented matrix, radiance,
- * mask, fit, one spare column. */
+ * mask, fit, a spare column and the outlier test's padded grid ((B + 2)^2
+ * <= 2 ld). */
 #define SCRATCH_COLUMNS                                                                  \
   (BMFR_BASE_COUNT + BMFR_MAX_FEATURES + (BMFR_MAX_FEATURES + BMFR_CHANNELS) + BMFR_CHANNELS + \
-   1 + BMFR_CHANNELS + 1)
+   1 + BMFR_CHANNELS + 3)
 #define MAX_LD (64 * 64)
 
 typedef struct bmfr_state {
@@ -282,19 +283,24 @@ static void gather(const float *plane, int W, const int *xs, const int *ys, int 
 }
 
 /*
- * Takes pixels whose luminance exceeds ratio times the mean luminance of the
- * block's valid pixels out of the fit (mask 0), twice, the second time
- * with the mean of the pixels left; returns how many stay valid. A least-
- * squares fit spreads a few very bright samples (a light seen directly, a
- * firefly) over its whole block (paper §8: "the radiance of fireflies is
- * only propagated within a single block area"); kept out, they keep their
- * own accumulated radiance, as holes do. lum: n floats of scratch.
+ * Takes bright *patches* out of the fit (mask 0): a pixel whose luminance
+ * exceeds ratio times the mean luminance of the block's valid pixels and
+ * that has at least 3 such neighbours (of 8, inside the block), twice, the
+ * second time with the mean of the pixels left; returns how many stay
+ * valid. A least-squares fit spreads a light seen directly over its whole
+ * block (paper §8); kept out, such pixels keep their own accumulated
+ * radiance, as holes do. An isolated firefly stays in: spreading its
+ * energy over the block is the fit's best estimate (it keeps the block's
+ * mean), while keeping it raw would keep the error where it is.
+ * lum: B^2 floats, pad: (B + 2)^2 floats of scratch.
  */
-static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask, int n,
-                            float ratio, float *restrict lum) {
+static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask, int B,
+                            float ratio, float *restrict lum, float *restrict pad) {
+  const int n = B * B, P = B + 2;
   const float *restrict r = z[0], *restrict g = z[1], *restrict b = z[2];
 #pragma omp simd
   for (int i = 0; i < n; i++) lum[i] = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
+  memset(pad, 0, (size_t)P * P * sizeof *pad);
   int nvalid = 0;
   for (int pass = 0; pass < 2; pass++) {
     /* lane sums in a fixed order: vectorised and deterministic */
@@ -317,11 +323,25 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
     }
     if (!(count > 0.0f)) return 0;
     const float limit = ratio * total / count;
+    /* bright flags on a grid with a zero border, then the neighbour count */
+    for (int y = 0; y < B; y++) {
+      float *restrict row = pad + (size_t)(y + 1) * P + 1;
+      const float *restrict l = lum + (size_t)y * B;
 #pragma omp simd
-    for (int k = 0; k < n; k++) {
-      const float keep = lum[k] > limit ? 0.0f : mask[k];
-      mask[k] = keep;
-      lum[k] *= keep;
+      for (int x = 0; x < B; x++) row[x] = l[x] > limit ? 1.0f : 0.0f;
+    }
+    for (int y = 0; y < B; y++) {
+      const float *restrict up = pad + (size_t)y * P + 1, *restrict mid = up + P,
+                            *restrict dn = mid + P;
+      float *restrict m = mask + (size_t)y * B, *restrict l = lum + (size_t)y * B;
+#pragma omp simd
+      for (int x = 0; x < B; x++) {
+        const float around = up[x - 1] + up[x] + up[x + 1] + mid[x - 1] + mid[x + 1] +
+                             dn[x - 1] + dn[x] + dn[x + 1];
+        const float keep = mid[x] > 0.0f && around >= 3.0f ? 0.0f : m[x];
+        m[x] = keep;
+        l[x] *= keep;
+      }
     }
     nvalid = 0;
 #pragma omp simd reduction(+ : nvalid)
@@ -362,7 +382,7 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
     zc[c] = zb + (size_t)c * ld;
     gather(fr->z[c], W, xs, ys, B, inside_x, zc[c]);
   }
-  if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, n, fr->outlier, spare);
+  if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, B, fr->outlier, spare, spare + ld);
   for (int k = 0; k < BMFR_BASE_COUNT; k++)
     if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, inside_x, base + (size_t)k * ld);
   if (fr->set->gradients)
