@@ -1,0 +1,565 @@
+/*
+ * bmfr.c — the "bmfr" filter: blockwise multi-order feature regression
+ * (bmfr-koskela-2019.md, Fig. 2; the published code's choices from
+ * papers/NOTES.md "BMFR reference implementation").
+ *
+ *   I   import -> demodulate by albedo (§3.1) -> reproject (world position
+ *       / depth and normal discard tests per bilinear tap, §3.2) -> temporal
+ *       accumulation, cumulative then exponential at alpha = 0.2, with a
+ *       per-pixel sample count (src/temporal, shared with "accumulate");
+ *   II  per block of the displaced grid (blocks.h), in parallel: gather the
+ *       G-buffer channels into a block-contiguous buffer, build the
+ *       multi-order features scaled to [-1, 1] (features.h), fit them to
+ *       the accumulated radiance with stochastic regularisation and an R-only
+ *       Householder QR, and take the weighted sum with the noise-free
+ *       features (regression.h) — the block never leaves the core's cache;
+ *   III second accumulation of the fitted result, cumulative then
+ *       exponential at 0.1, through phase I's reprojection plan and sample
+ *       counts (§3.5) -> remodulate -> TAA (src/temporal/taa.h, as svgf).
+ *
+ * Holes (depth <= 0: no surface) take no part in a fit and keep their
+ * accumulated radiance.
+ *
+ * Adaptive temporal weights (A-SVGF, issue 7) fit in as a per-pixel alpha:
+ * both blends take max(alpha_min, 1 / age) per pixel, so a per-pixel alpha
+ * plane a(p) can be applied by lowering the age planes to min(age, 1 / a(p))
+ * before each blend (and that also shortens the kept history, as A-SVGF's
+ * history-length reduction does); see docs/bmfr.md.
+ *
+ * Deterministic and independent of the thread count: every block is fitted
+ * on its own and the noise depends on the frame index only.
+ */
+#include "filters/albedo.h"
+#include "filters/bmfr/blocks.h"
+#include "filters/bmfr/features.h"
+#include "filters/bmfr/regression.h"
+#include "filters/filter.h"
+#include "filters/gbuffer.h"
+#include "temporal/accumulation.h"
+#include "temporal/reproject.h"
+#include "temporal/taa.h"
+
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+enum {
+  P_NONFINITE = 0,
+  P_ALPHA,
+  P_ALPHA_FITTED,
+  P_MAX_AGE,
+  P_DEPTH_TOLERANCE,
+  P_DEPTH_GRADIENT,
+  P_NORMAL_THRESHOLD,
+  P_USE_ID,
+  P_FALLBACK_3X3,
+  P_DEMODULATE,
+  P_BLOCK_SIZE,
+  P_DISPLACE,
+  P_NOISE,
+  P_REFINE,
+  P_OUTLIER,
+  P_NORMAL_EXP1,
+  P_NORMAL_EXP2,
+  P_POSITION_EXP1,
+  P_POSITION_EXP2,
+  P_DEPTH_EXP1,
+  P_DEPTH_EXP2,
+  P_ALBEDO_EXP1,
+  P_ALBEDO_EXP2,
+  P_GRADIENTS,
+  P_TAA,
+  P_TAA_ALPHA,
+  P_COUNT
+};
+
+#define EXPONENT_DOC(what)                                                                 \
+  "features " what ": each channel, scaled to [-1, 1] per block, raised to this exponent " \
+  "(non-integer allowed; 0: none)"
+
+static const hush_param_info bmfr_params[P_COUNT] = {
+    HUSH_PARAM_NONFINITE_ENTRY,
+    {"alpha", HUSH_PARAM_FLOAT, 0.2, 0.0, 1.0,
+     "phase I: minimum weight of the new 1 spp frame, alpha = max(alpha, 1/sample_count)", NULL},
+    {"alpha_fitted", HUSH_PARAM_FLOAT, 0.1, 0.0, 1.0,
+     "phase III: minimum weight of the new fitted frame, max(alpha_fitted, 1/sample_count)",
+     NULL},
+    {"max_age", HUSH_PARAM_INT, 255, 1, 65535,
+     "sample count cap (the published code keeps an 8-bit count)", NULL},
+    {"depth_tolerance", HUSH_PARAM_FLOAT, 0.1, 0.0, 1e6,
+     "reprojection: a history tap is kept when its depth is within this fraction (plus the "
+     "gradient term)",
+     NULL},
+    {"depth_gradient", HUSH_PARAM_FLOAT, 1.0, 0.0, 1e3,
+     "reprojection: weight of the screen-space depth gradient in the depth test", NULL},
+    {"normal_threshold", HUSH_PARAM_FLOAT, 0.9, -1.0, 1.0,
+     "reprojection: a history tap is kept when dot(normal, previous normal) >= this (-1: off)",
+     NULL},
+    {"use_id", HUSH_PARAM_BOOL, 1, 0, 1,
+     "reject history from a pixel with another id (when 'id' is bound)", NULL},
+    {"fallback_3x3", HUSH_PARAM_BOOL, 0, 0, 1,
+     "search the 3x3 neighbourhood when no bilinear tap is consistent (the paper: off)", NULL},
+    {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'albedo' bound: filter color / max(albedo, 1e-3), multiply back after", NULL},
+    {"block_size", HUSH_PARAM_INT, 32, 16, 64, "side of the square fitting blocks in pixels",
+     NULL},
+    {"displace", HUSH_PARAM_BOOL, 1, 0, 1,
+     "move the block grid every frame by one of 16 offsets (period 16 frames)", NULL},
+    {"noise", HUSH_PARAM_FLOAT, 0.01, 0.0, 1.0,
+     "stochastic regularisation: features get zero-mean uniform noise in [-noise, noise] for "
+     "the factorisation",
+     NULL},
+    {"refine", HUSH_PARAM_INT, 1, 0, 4,
+     "steps of iterative refinement of the block weights towards the noise-free fit, undoing "
+     "the noise's errors-in-variables bias (0: the paper's plain solve)",
+     NULL},
+    {"outlier", HUSH_PARAM_FLOAT, 8.0, 0.0, 1e6,
+     "bright patches (pixels above this times their block's mean luminance, with 3 such "
+     "neighbours) keep their accumulated radiance and stay out of the fit, which would spread a "
+     "visible light over the block; isolated fireflies stay in (0: off, as the paper)",
+     NULL},
+    {"normal_exponent1", HUSH_PARAM_FLOAT, 1.0, 0.0, 16.0, EXPONENT_DOC("from the shading normal"),
+     NULL},
+    {"normal_exponent2", HUSH_PARAM_FLOAT, 0.0, 0.0, 16.0,
+     "a second shading normal feature set (0: none)", NULL},
+    {"position_exponent1", HUSH_PARAM_FLOAT, 1.0, 0.0, 16.0,
+     EXPONENT_DOC("from the world position (needs 'position')"), NULL},
+    {"position_exponent2", HUSH_PARAM_FLOAT, 2.0, 0.0, 16.0,
+     "a second world position feature set (0: none)", NULL},
+    {"depth_exponent1", HUSH_PARAM_FLOAT, 0.0, 0.0, 16.0, EXPONENT_DOC("from the view depth"), NULL},
+    {"depth_exponent2", HUSH_PARAM_FLOAT, 0.0, 0.0, 16.0, "a second view depth feature (0: none)",
+     NULL},
+    {"albedo_exponent1", HUSH_PARAM_FLOAT, 0.0, 0.0, 16.0, EXPONENT_DOC("from the albedo (needs 'albedo')"),
+     NULL},
+    {"albedo_exponent2", HUSH_PARAM_FLOAT, 0.0, 0.0, 16.0,
+     "a second albedo feature set (0: none)", NULL},
+    {"gradients", HUSH_PARAM_BOOL, 0, 0, 1,
+     "add the block-local horizontal and vertical gradient features (paper §5)", NULL},
+    {"taa", HUSH_PARAM_BOOL, 1, 0, 1,
+     "finish with temporal anti-aliasing (3x3 YCoCg clamp, tone-mapped), as the paper", NULL},
+    {"taa_alpha", HUSH_PARAM_FLOAT, 0.2, 0.01, 1.0,
+     "with taa: weight of the current frame in the TAA blend", NULL},
+};
+
+enum {
+  I_COLOR = 0,
+  I_DEPTH,
+  I_NORMAL,
+  I_POSITION,
+  I_ID,
+  I_MOTION,
+  I_ALBEDO,
+  I_OUTPUT,
+  I_FITTED,
+  I_HISTORY_LENGTH,
+  I_COUNT
+};
+
+static const hush_image_info bmfr_images[I_COUNT] = {
+    {"color", HUSH_IMAGE_INPUT, 1, 3, "noisy radiance of this frame"},
+    {"depth", HUSH_IMAGE_INPUT, 1, 1, "linear view depth (<= 0: no surface)"},
+    {"normal", HUSH_IMAGE_INPUT, 1, 3, "world-space shading normal"},
+    {"position", HUSH_IMAGE_INPUT, 0, 3,
+     "world-space position: a feature (required while a position exponent is set) and the "
+     "camera reprojection"},
+    {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"},
+    {"motion", HUSH_IMAGE_INPUT, 0, 2,
+     "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
+    {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
+    {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
+    {"fitted", HUSH_IMAGE_OUTPUT, 0, 3,
+     "phase II result: this frame's block fit of the accumulated (demodulated) radiance"},
+    {"history_length", HUSH_IMAGE_OUTPUT, 0, 1, "accumulated samples per pixel (phase I)"},
+};
+
+static const hush_filter_class_info bmfr_info = {
+    "bmfr",
+    "blockwise multi-order feature regression: accumulation, per-block feature fit, "
+    "accumulation, TAA",
+    "bmfr-koskela-2019.md §3 (Fig. 2); papers/NOTES.md (published code)",
+    bmfr_params,
+    P_COUNT,
+    bmfr_images,
+    I_COUNT,
+};
+
+/* Per-thread block scratch, in floats, for blocks of ld rows (ld = B^2
+ * rounded up to 16): base channels, features, augmented matrix, radiance,
+ * mask, fit, a spare column and the outlier test's padded grid ((B + 2)^2
+ * <= 2 ld). */
+#define SCRATCH_COLUMNS                                                                  \
+  (BMFR_BASE_COUNT + BMFR_MAX_FEATURES + (BMFR_MAX_FEATURES + BMFR_CHANNELS) + BMFR_CHANNELS + \
+   1 + BMFR_CHANNELS + 3)
+#define MAX_LD (64 * 64)
+
+typedef struct bmfr_state {
+  hush_reprojector rp;
+  hush_accum acc;      /* phase I */
+  hush_planar color;   /* this frame, demodulated in place */
+  hush_planar fitted;  /* phase II result */
+  hush_planar fhist[2]; /* phase III results (ping-pong: the blend reads one, writes the other) */
+  int flatest;
+  float *noise;        /* BMFR_MAX_FEATURES columns of MAX_LD */
+  float *scratch;      /* per thread: SCRATCH_COLUMNS columns of MAX_LD */
+  int threads;
+  /* allocated on first use: */
+  hush_planar albedo;
+  hush_gbuffer_inputs gin;
+  hush_taa taa;
+} bmfr_state;
+
+static void bmfr_destroy(void *state) {
+  bmfr_state *st = state;
+  if (!st) return;
+  hush__reprojector_free(&st->rp);
+  hush__accum_free(&st->acc);
+  hush__planar_free(&st->color);
+  hush__planar_free(&st->fitted);
+  hush__planar_free(&st->fhist[0]);
+  hush__planar_free(&st->fhist[1]);
+  hush__free_floats(st->noise);
+  hush__free_floats(st->scratch);
+  hush__planar_free(&st->albedo);
+  hush__gbuffer_inputs_free(&st->gin);
+  hush__taa_free(&st->taa);
+  free(st);
+}
+
+static hush_status bmfr_create(hush_filter f, void **state) {
+  bmfr_state *st = calloc(1, sizeof *st);
+  if (!st) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
+  const uint32_t W = f->width, H = f->height;
+  st->threads = f->device->threads > 0 ? f->device->threads : 1;
+  hush_status s = hush__reprojector_init(f->device, &st->rp, W, H);
+  if (!s) s = hush__accum_init(f->device, &st->acc, 3, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->color, 3, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->fitted, 3, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->fhist[0], 3, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->fhist[1], 3, W, H);
+  if (!s) {
+    st->noise = hush__alloc_floats((size_t)BMFR_MAX_FEATURES * MAX_LD);
+    st->scratch = hush__alloc_floats((size_t)st->threads * SCRATCH_COLUMNS * MAX_LD);
+    if (!st->noise || !st->scratch)
+      s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
+  }
+  if (s) {
+    bmfr_destroy(st);
+    return s;
+  }
+  *state = st;
+  return HUSH_OK;
+}
+
+/* ---- phase II: the block fit ------------------------------------------------ */
+
+/* What every block of a frame reads. */
+typedef struct fit_frame {
+  bmfr_grid grid;
+  const bmfr_feature_set *set;
+  const float *depth;
+  const float *base[BMFR_BASE_COUNT]; /* image planes of the gathered channels, NULL: unused */
+  const float *z[BMFR_CHANNELS];      /* accumulated radiance */
+  const float *noise;
+  float *out[BMFR_CHANNELS];          /* fitted radiance */
+  int refine;                         /* refinement steps of the fit */
+  float outlier;                      /* outlier ratio, 0: off */
+  int n;                              /* B^2 */
+  size_t ld;
+} fit_frame;
+
+/* dst[r B + c] = plane[ys[r] W + xs[c]]: the block's pixels, mirrored at
+ * the image edges; whole rows are copied where the block is inside in x. */
+static void gather(const float *plane, int W, const int *xs, const int *ys, int B, int inside_x,
+                   float *restrict dst) {
+  for (int r = 0; r < B; r++) {
+    const float *row = plane + (size_t)ys[r] * W;
+    float *d = dst + (size_t)r * B;
+    if (inside_x) {
+      memcpy(d, row + xs[0], (size_t)B * sizeof *d);
+    } else {
+      for (int c = 0; c < B; c++) d[c] = row[xs[c]];
+    }
+  }
+}
+
+/*
+ * Takes bright *patches* out of the fit (mask 0): a pixel whose luminance
+ * exceeds ratio times the mean luminance of the block's valid pixels and
+ * that has at least 3 such neighbours (of 8, inside the block), twice, the
+ * second time with the mean of the pixels left; returns how many stay
+ * valid. A least-squares fit spreads a light seen directly over its whole
+ * block (paper §8); kept out, such pixels keep their own accumulated
+ * radiance, as holes do. An isolated firefly stays in: spreading its
+ * energy over the block is the fit's best estimate (it keeps the block's
+ * mean), while keeping it raw would keep the error where it is.
+ * lum: B^2 floats, pad: (B + 2)^2 floats of scratch.
+ */
+static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask, int B,
+                            float ratio, float *restrict lum, float *restrict pad) {
+  const int n = B * B, P = B + 2;
+  const float *restrict r = z[0], *restrict g = z[1], *restrict b = z[2];
+#pragma omp simd
+  for (int i = 0; i < n; i++) lum[i] = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
+  memset(pad, 0, (size_t)P * P * sizeof *pad);
+  int nvalid = 0;
+  for (int pass = 0; pass < 2; pass++) {
+    /* lane sums in a fixed order: vectorised and deterministic */
+    enum { LANES = 16 };
+    float sum[LANES] = {0}, cnt[LANES] = {0};
+    int i = 0;
+    for (; i + LANES <= n; i += LANES)
+      for (int l = 0; l < LANES; l++) {
+        sum[l] += lum[i + l];
+        cnt[l] += mask[i + l];
+      }
+    for (; i < n; i++) {
+      sum[0] += lum[i];
+      cnt[0] += mask[i];
+    }
+    float total = 0.0f, count = 0.0f;
+    for (int l = 0; l < LANES; l++) {
+      total += sum[l];
+      count += cnt[l];
+    }
+    if (!(count > 0.0f)) return 0;
+    const float limit = ratio * total / count;
+    /* bright flags on a grid with a zero border, then the neighbour count */
+    for (int y = 0; y < B; y++) {
+      float *restrict row = pad + (size_t)(y + 1) * P + 1;
+      const float *restrict l = lum + (size_t)y * B;
+#pragma omp simd
+      for (int x = 0; x < B; x++) row[x] = l[x] > limit ? 1.0f : 0.0f;
+    }
+    for (int y = 0; y < B; y++) {
+      const float *restrict up = pad + (size_t)y * P + 1, *restrict mid = up + P,
+                            *restrict dn = mid + P;
+      float *restrict m = mask + (size_t)y * B, *restrict l = lum + (size_t)y * B;
+#pragma omp simd
+      for (int x = 0; x < B; x++) {
+        const float around = up[x - 1] + up[x] + up[x + 1] + mid[x - 1] + mid[x + 1] +
+                             dn[x - 1] + dn[x] + dn[x + 1];
+        const float keep = mid[x] > 0.0f && around >= 3.0f ? 0.0f : m[x];
+        m[x] = keep;
+        l[x] *= keep;
+      }
+    }
+    nvalid = 0;
+#pragma omp simd reduction(+ : nvalid)
+    for (int k = 0; k < n; k++) nvalid += mask[k] > 0.0f;
+  }
+  return nvalid;
+}
+
+static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
+  const int B = fr->grid.block, n = fr->n, W = fr->grid.width, H = fr->grid.height;
+  const size_t ld = fr->ld;
+  float *base = scratch;
+  float *T = base + (size_t)BMFR_BASE_COUNT * ld;
+  float *A = T + (size_t)BMFR_MAX_FEATURES * ld;
+  float *zb = A + (size_t)(BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld;
+  float *mask = zb + (size_t)BMFR_CHANNELS * ld;
+  float *y = mask + ld;
+  float *spare = y + (size_t)BMFR_CHANNELS * ld;
+
+  const int x0 = fr->grid.x0 + bx * B, y0 = fr->grid.y0 + by * B;
+  int xs[64], ys[64];
+  for (int i = 0; i < B; i++) {
+    xs[i] = hush__bmfr_mirror(x0 + i, W);
+    ys[i] = hush__bmfr_mirror(y0 + i, H);
+  }
+  const int inside_x = x0 >= 0 && x0 + B <= W;
+
+  /* gather: validity, radiance, the channels the features use */
+  gather(fr->depth, W, xs, ys, B, inside_x, spare);
+  int nvalid = 0;
+  for (int i = 0; i < n; i++) {
+    mask[i] = spare[i] > 0.0f ? 1.0f : 0.0f;
+    nvalid += spare[i] > 0.0f;
+  }
+  for (size_t i = (size_t)n; i < ld; i++) mask[i] = 0.0f;
+  float *zc[BMFR_CHANNELS];
+  for (int c = 0; c < BMFR_CHANNELS; c++) {
+    zc[c] = zb + (size_t)c * ld;
+    gather(fr->z[c], W, xs, ys, B, inside_x, zc[c]);
+  }
+  if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, B, fr->outlier, spare, spare + ld);
+  for (int k = 0; k < BMFR_BASE_COUNT; k++)
+    if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, inside_x, base + (size_t)k * ld);
+  if (fr->set->gradients)
+    for (int r = 0; r < B; r++)
+      for (int c = 0; c < B; c++) {
+        base[(size_t)BMFR_BASE_GRADIENT * ld + (size_t)r * B + c] = (float)c;
+        base[(size_t)(BMFR_BASE_GRADIENT + 1) * ld + (size_t)r * B + c] = (float)r;
+      }
+
+  /* features, fit, weighted sum */
+  float *yc[BMFR_CHANNELS];
+  for (int c = 0; c < BMFR_CHANNELS; c++) yc[c] = y + (size_t)c * ld;
+  if (nvalid > 0) {
+    const int count = fr->set->count;
+    float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+    hush__bmfr_features_block(fr->set, base, mask, n, ld, T, spare);
+    hush__bmfr_fit(T, count, (const float *const *)zc, fr->noise, mask, n, nvalid, ld, A,
+                   fr->refine, y, coef);
+    hush__bmfr_synthesize(T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
+  }
+
+  /* the block's own pixels (not its mirrored margin); holes and outliers
+   * keep their accumulated radiance */
+  const int r0 = y0 < 0 ? -y0 : 0, r1 = y0 + B > H ? H - y0 : B;
+  const int c0 = x0 < 0 ? -x0 : 0, c1 = x0 + B > W ? W - x0 : B;
+  for (int r = r0; r < r1; r++) {
+    const size_t row = (size_t)(y0 + r) * W;
+    const int i0 = r * B;
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      float *restrict dst = fr->out[c] + row;
+      const float *restrict src = yc[c] + i0, *restrict zz = zc[c] + i0, *restrict mk = mask + i0;
+      for (int k = c0; k < c1; k++) dst[x0 + k] = mk[k] > 0.0f ? src[k] : zz[k];
+    }
+  }
+}
+
+static void fit_frame_blocks(const fit_frame *fr, float *scratch, int threads) {
+  const int nblocks = fr->grid.nx * fr->grid.ny;
+  const size_t per_thread = (size_t)SCRATCH_COLUMNS * fr->ld;
+#pragma omp parallel num_threads(threads)
+  {
+    float *mine = scratch + (size_t)omp_get_thread_num() * per_thread;
+#pragma omp for schedule(dynamic, 4)
+    for (int b = 0; b < nblocks; b++) fit_block(fr, b % fr->grid.nx, b / fr->grid.nx, mine);
+  }
+}
+
+/* ---- execute ------------------------------------------------------------------ */
+
+static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_info *info) {
+  bmfr_state *st = state;
+  const int threads = st->threads;
+  hush_status s;
+  hush__filter_timing_begin(f);
+
+  const int has_albedo = hush__filter_view(f, I_ALBEDO) != NULL;
+  const int demod = hush__param_i(f, P_DEMODULATE) && has_albedo;
+  const int with_taa = hush__param_i(f, P_TAA);
+  if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
+
+  bmfr_feature_set set;
+  const float exps[BMFR_SRC_COUNT][2] = {
+      {hush__param_f(f, P_NORMAL_EXP1), hush__param_f(f, P_NORMAL_EXP2)},
+      {hush__param_f(f, P_POSITION_EXP1), hush__param_f(f, P_POSITION_EXP2)},
+      {hush__param_f(f, P_DEPTH_EXP1), hush__param_f(f, P_DEPTH_EXP2)},
+      {hush__param_f(f, P_ALBEDO_EXP1), hush__param_f(f, P_ALBEDO_EXP2)},
+  };
+  hush__bmfr_features_build(&set, exps, hush__param_i(f, P_GRADIENTS));
+  if ((set.needs & (1u << BMFR_SRC_POSITION)) && !hush__filter_view(f, I_POSITION))
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "bmfr: the features use the world position but the 'position' image is "
+                      "not bound (set position_exponent1 and position_exponent2 to 0 to fit "
+                      "without it)");
+  if ((set.needs & (1u << BMFR_SRC_ALBEDO)) && !has_albedo)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "bmfr: the features use the albedo but the 'albedo' image is not bound");
+
+  /* ---- import: nothing of the history changes until every input is read */
+  const int need_albedo = demod || (set.needs & (1u << BMFR_SRC_ALBEDO));
+  if (need_albedo && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (with_taa && !st->taa.current.plane[0] &&
+      (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
+    return s;
+  static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
+  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
+    return s;
+  if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  hush__filter_timing_stage(f, "import");
+
+  /* ---- phase I: reproject + accumulate the demodulated 1 spp radiance */
+  hush_reproject_params rp;
+  rp.depth_tolerance = hush__param_f(f, P_DEPTH_TOLERANCE);
+  rp.depth_gradient = hush__param_f(f, P_DEPTH_GRADIENT);
+  rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
+  rp.use_id = hush__param_i(f, P_USE_ID);
+  rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
+  if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
+  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
+  hush_accum_params ap;
+  ap.alpha_min = hush__param_f(f, P_ALPHA);
+  ap.alpha_moments_min = ap.alpha_min;
+  ap.max_age = hush__param_i(f, P_MAX_AGE);
+  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap, NULL,
+                    threads);
+  hush__filter_timing_stage(f, "accumulate");
+
+  /* ---- phase II: features, fit, weighted sum, per block */
+  const int B = hush__param_i(f, P_BLOCK_SIZE);
+  fit_frame fr;
+  memset(&fr, 0, sizeof fr);
+  int ox, oy;
+  hush__bmfr_block_offset(info->frame_index, B, hush__param_i(f, P_DISPLACE), &ox, &oy);
+  hush__bmfr_grid(&fr.grid, (int)f->width, (int)f->height, B, ox, oy);
+  fr.set = &set;
+  fr.refine = hush__param_i(f, P_REFINE);
+  fr.outlier = hush__param_f(f, P_OUTLIER);
+  fr.n = B * B;
+  fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
+  const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
+  fr.depth = gb->depth.plane[0];
+  for (int c = 0; c < 3; c++) {
+    if (set.needs & (1u << BMFR_SRC_NORMAL)) fr.base[BMFR_BASE_NORMAL + c] = gb->normal.plane[c];
+    if (set.needs & (1u << BMFR_SRC_POSITION))
+      fr.base[BMFR_BASE_POSITION + c] = st->gin.position.plane[c];
+    if (set.needs & (1u << BMFR_SRC_ALBEDO)) fr.base[BMFR_BASE_ALBEDO + c] = st->albedo.plane[c];
+  }
+  if (set.needs & (1u << BMFR_SRC_DEPTH)) fr.base[BMFR_BASE_DEPTH] = gb->depth.plane[0];
+  const hush_planar *z = hush__accum_color(&st->acc);
+  for (int c = 0; c < BMFR_CHANNELS; c++) {
+    fr.z[c] = z->plane[c];
+    fr.out[c] = st->fitted.plane[c];
+  }
+  hush__bmfr_noise_table(st->noise, set.count, fr.n, fr.ld, info->frame_index,
+                         hush__param_f(f, P_NOISE));
+  fr.noise = st->noise;
+  fit_frame_blocks(&fr, st->scratch, threads);
+  hush__filter_timing_stage(f, "fit");
+
+  /* ---- phase III: accumulate the fit with phase I's plan and counts */
+  const int prev = st->flatest, cur = 1 - prev;
+  hush__temporal_blend(&st->rp.plan, (const float *const *)st->fhist[prev].plane,
+                       (const float *const *)st->fitted.plane, BMFR_CHANNELS,
+                       hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
+                       st->fhist[cur].plane, threads);
+  st->flatest = cur;
+  hush__filter_timing_stage(f, "accumulate_fitted");
+
+  /* ---- remodulate, TAA, export */
+  const hush_planar *result = &st->fhist[cur];
+  if (demod) {
+    hush__remodulate(&st->albedo, result, threads);
+    result = &st->albedo;
+  }
+  hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
+                     f->height};
+  if (with_taa) {
+    hush_taa_params tp;
+    tp.alpha = hush__param_f(f, P_TAA_ALPHA);
+    tp.box = HUSH_TAA_CLAMP;
+    tp.tonemap = 1;
+    hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
+    rgb = *hush__taa_output(&st->taa);
+  }
+  hush__filter_timing_stage(f, "taa");
+  hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
+  const hush_image_view *fit_view = hush__filter_view(f, I_FITTED);
+  if (fit_view) hush__view_export(&st->fitted, fit_view, threads);
+  const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
+  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
+  hush__filter_timing_stage(f, "export");
+  return HUSH_OK;
+}
+
+const hush_filter_class hush__filter_bmfr = {
+    &bmfr_info,
+    bmfr_create,
+    bmfr_destroy,
+    bmfr_execute,
+};

@@ -1,0 +1,108 @@
+/*
+ * features.c — BMFR's multi-order feature set and its per-block columns
+ * (see features.h; bmfr-koskela-2019.md §3.3, §3.4 and §5).
+ */
+#include "filters/bmfr/features.h"
+
+#include <float.h>
+#include <math.h>
+#include <string.h>
+
+void hush__bmfr_features_build(bmfr_feature_set *set, const float exponents[BMFR_SRC_COUNT][2],
+                               int gradients) {
+  static const int first[BMFR_SRC_COUNT] = {BMFR_BASE_NORMAL, BMFR_BASE_POSITION,
+                                            BMFR_BASE_DEPTH, BMFR_BASE_ALBEDO};
+  static const int channels[BMFR_SRC_COUNT] = {3, 3, 1, 3};
+  memset(set, 0, sizeof *set);
+  set->f[0].base = -1;
+  set->f[0].exponent = 0.0f;
+  set->count = 1;
+  for (int s = 0; s < BMFR_SRC_COUNT; s++)
+    for (int e = 0; e < 2; e++) {
+      const float g = exponents[s][e];
+      if (!(g > 0.0f)) continue;
+      set->needs |= 1u << s;
+      for (int c = 0; c < channels[s]; c++) {
+        set->f[set->count].base = first[s] + c;
+        set->f[set->count].exponent = g;
+        set->count++;
+      }
+    }
+  set->gradients = gradients != 0;
+  if (gradients)
+    for (int c = 0; c < 2; c++) {
+      set->f[set->count].base = BMFR_BASE_GRADIENT + c;
+      set->f[set->count].exponent = 1.0f;
+      set->count++;
+    }
+}
+
+/* Min and max of x over the valid rows; lo > hi when there is none. */
+static void valid_range(const float *restrict x, const float *restrict mask, int n, float *lo,
+                        float *hi) {
+  float l = FLT_MAX, h = -FLT_MAX;
+#pragma omp simd reduction(min : l) reduction(max : h)
+  for (int i = 0; i < n; i++) {
+    const int v = mask[i] > 0.5f;
+    const float a = v ? x[i] : FLT_MAX, b = v ? x[i] : -FLT_MAX;
+    l = a < l ? a : l;
+    h = b > h ? b : h;
+  }
+  *lo = l;
+  *hi = h;
+}
+
+/* out = x scaled from its valid range to [-1, 1], clamped there, 0 on
+ * holes. A channel that varies by less than 1e-5 of its magnitude over the
+ * block is float rounding, not signal: it becomes 0 (the constant feature
+ * already covers it) rather than rounding noise stretched to [-1, 1]. */
+static void scale_unit(const float *restrict x, const float *restrict mask, int n,
+                       float *restrict out) {
+  float lo, hi;
+  valid_range(x, mask, n, &lo, &hi);
+  const float mid = 0.5f * (lo + hi), half = 0.5f * (hi - lo);
+  const int flat = !(half > 1e-5f * fabsf(mid)) || !(half > 1e-30f);
+  const float inv = flat ? 0.0f : 1.0f / half;
+  const float centre = flat ? 0.0f : mid;
+#pragma omp simd
+  for (int i = 0; i < n; i++) {
+    float s = (x[i] - centre) * inv;
+    s = s < -1.0f ? -1.0f : s;
+    s = s > 1.0f ? 1.0f : s;
+    out[i] = s * mask[i];
+  }
+}
+
+/* t = s^g in place for s in [-1, 1]: repeated products for small integer
+ * exponents (vectorised), sign-preserving powf otherwise. */
+static void power(float *restrict t, const float *restrict s, int n, float g) {
+  const float r = roundf(g);
+  if (r == g && g >= 1.0f && g <= 16.0f) {
+    memcpy(t, s, (size_t)n * sizeof *t);
+    for (int k = 1; k < (int)g; k++) {
+#pragma omp simd
+      for (int i = 0; i < n; i++) t[i] *= s[i];
+    }
+    return;
+  }
+  for (int i = 0; i < n; i++) t[i] = copysignf(powf(fabsf(s[i]), g), s[i]);
+}
+
+void hush__bmfr_features_block(const bmfr_feature_set *set, const float *base, const float *mask,
+                               int n, size_t ld, float *T, float *scratch) {
+  for (int m = 0; m < set->count; m++) {
+    float *col = T + (size_t)m * ld;
+    const bmfr_feature *f = &set->f[m];
+    if (f->base < 0) {
+      memcpy(col, mask, (size_t)n * sizeof *col);
+    } else if (f->exponent == 1.0f) {
+      scale_unit(base + (size_t)f->base * ld, mask, n, col);
+    } else {
+      scale_unit(base + (size_t)f->base * ld, mask, n, scratch);
+      power(col, scratch, n, f->exponent);
+      memcpy(scratch, col, (size_t)n * sizeof *col);
+      scale_unit(scratch, mask, n, col);
+    }
+    for (size_t i = (size_t)n; i < ld; i++) col[i] = 0.0f;
+  }
+}

@@ -1,0 +1,709 @@
+/*
+ * test_bmfr.c — the "bmfr" filter (bmfr-koskela-2019.md): the block fit on
+ * its own (src/filters/bmfr/regression.h, features.h, blocks.h) and the
+ * whole pipeline through the public API, on synthetic G-buffers seen by a
+ * static camera.
+ */
+#include "hush.h"
+
+#include "check.h"
+#include "core/hmath.h"
+#include "core/image.h"
+#include "filters/bmfr/blocks.h"
+#include "filters/bmfr/features.h"
+#include "filters/bmfr/regression.h"
+
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Not multiples of 32: the grid has partial, mirrored blocks. */
+#define W 80
+#define H 56
+#define N (W * H)
+
+static uint32_t rng_state = 12345u;
+static float rnd(void) { /* uniform in [0, 1), xorshift32 */
+  rng_state ^= rng_state << 13;
+  rng_state ^= rng_state >> 17;
+  rng_state ^= rng_state << 5;
+  return (float)(rng_state >> 8) / 16777216.0f;
+}
+
+/* ---- the block fit on its own ------------------------------------------------ */
+
+#define BS 32
+#define BN (BS * BS)
+
+typedef struct block {
+  float base[BMFR_BASE_COUNT * BN];
+  float mask[BN];
+  float T[BMFR_MAX_FEATURES * BN];
+  float A[(BMFR_MAX_FEATURES + BMFR_CHANNELS) * BN];
+  float noise[BMFR_MAX_FEATURES * BN];
+  float z[BMFR_CHANNELS][BN];
+  float y[BMFR_CHANNELS][BN];
+  float scratch[BN];
+} block;
+
+static void default_set(bmfr_feature_set *set) {
+  const float e[BMFR_SRC_COUNT][2] = {{1, 0}, {1, 2}, {0, 0}, {0, 0}};
+  hush__bmfr_features_build(set, e, 0);
+}
+
+/* Fits b->z with the set (the noise table of `frame`, amplitude eps) into b->y. */
+static void fit_refined(block *b, const bmfr_feature_set *set, uint64_t frame, float eps,
+                        int refine) {
+  int nvalid = 0;
+  for (int i = 0; i < BN; i++) nvalid += b->mask[i] > 0.5f;
+  float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+  const float *z[BMFR_CHANNELS] = {b->z[0], b->z[1], b->z[2]};
+  float *y[BMFR_CHANNELS] = {b->y[0], b->y[1], b->y[2]};
+  hush__bmfr_noise_table(b->noise, set->count, BN, BN, frame, eps);
+  hush__bmfr_features_block(set, b->base, b->mask, BN, BN, b->T, b->scratch);
+  hush__bmfr_fit(b->T, set->count, z, b->noise, b->mask, BN, nvalid, BN, b->A, refine,
+                 &b->y[0][0], coef);
+  hush__bmfr_synthesize(b->T, set->count, BN, BN, (const float(*)[BMFR_MAX_FEATURES])coef, y);
+}
+
+/* With the filter's default refinement. */
+static void fit(block *b, const bmfr_feature_set *set, uint64_t frame, float eps) {
+  fit_refined(b, set, frame, eps, 1);
+}
+
+/* A curved surface in world units far from the origin (positions of about
+ * 100, so w^2 would be nearly collinear with w unless scaled first), with a
+ * bumpy normal map. The normals vary independently of the positions: a
+ * feature that is, within a block, a combination of the others up to the
+ * noise level (say a normal that is a quadratic in the position) is
+ * regularised by design (§3.4) and not reproduced exactly. */
+static void busy_block(block *b) {
+  rng_state = 31337u;
+  for (int i = 0; i < BN; i++) {
+    const float u = (float)(i % BS) / BS, v = (float)(i / BS) / BS;
+    hush_vec3 n = hush_v3_normalize(hush_v3(0.4f * (rnd() - 0.5f), 0.4f * (rnd() - 0.5f), 1.0f));
+    b->base[(BMFR_BASE_NORMAL + 0) * BN + i] = n.x;
+    b->base[(BMFR_BASE_NORMAL + 1) * BN + i] = n.y;
+    b->base[(BMFR_BASE_NORMAL + 2) * BN + i] = n.z;
+    b->base[(BMFR_BASE_POSITION + 0) * BN + i] = 100.0f + 2.0f * u + 0.1f * v * v;
+    b->base[(BMFR_BASE_POSITION + 1) * BN + i] = -50.0f + 1.5f * v;
+    b->base[(BMFR_BASE_POSITION + 2) * BN + i] = 20.0f + 0.3f * sinf(4 * u + v);
+    b->mask[i] = 1.0f;
+  }
+}
+
+/* The radiance an exact linear combination of [1, n, w, w^2]. */
+static float exact_radiance(const block *b, int c, int i) {
+  const float *nb = b->base + BMFR_BASE_NORMAL * BN, *wb = b->base + BMFR_BASE_POSITION * BN;
+  const float nx = nb[i], ny = nb[BN + i], nz = nb[2 * BN + i];
+  const float wx = wb[i] - 100.0f, wy = wb[BN + i] + 50.0f, wz = wb[2 * BN + i] - 20.0f;
+  const float k = 1.0f + 0.5f * (float)c;
+  return 1.0f + k * (0.3f * nx - 0.2f * ny + 0.1f * nz + 0.4f * wx + 0.1f * wy - 0.2f * wz +
+                     0.05f * wx * wx + 0.1f * wy * wy + 0.3f * wz * wz);
+}
+
+static void test_exact_block(void) {
+  static block b;
+  bmfr_feature_set set;
+  default_set(&set);
+  CHECK(set.count == 10);
+  busy_block(&b);
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) b.z[c][i] = exact_radiance(&b, c, i);
+  fit(&b, &set, 7, 0.01f);
+  double worst = 0.0;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) {
+      const double e = fabs(b.y[c][i] - b.z[c][i]) / fabs(b.z[c][i]);
+      worst = e > worst ? e : worst;
+    }
+  CHECK_MSG(worst <= 1e-3, "exact fit: worst relative error %g", worst);
+}
+
+/* Constant normal and position: every feature but the constant is flat, so
+ * the fit is the block mean (the noise columns are zero-mean). */
+static void test_rank_deficient_block(void) {
+  static block b;
+  bmfr_feature_set set;
+  default_set(&set);
+  busy_block(&b);
+  for (int k = 0; k < 6; k++)
+    for (int i = 0; i < BN; i++) b.base[k * BN + i] = k == 2 ? 1.0f : 3.0f + (float)k;
+  rng_state = 99u;
+  double mean[3] = {0, 0, 0};
+  for (int c = 0; c < 3; c++) {
+    for (int i = 0; i < BN; i++) {
+      b.z[c][i] = (float)(c + 1) * rnd();
+      mean[c] += b.z[c][i];
+    }
+    mean[c] /= BN;
+  }
+  fit(&b, &set, 3, 0.01f);
+  double worst = 0.0;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) {
+      const double e = fabs(b.y[c][i] - mean[c]) / mean[c];
+      worst = e > worst ? e : worst;
+    }
+  CHECK_MSG(worst <= 1e-4, "rank-deficient block: worst relative distance to the mean %g", worst);
+
+  /* without the noise the flat features have zero pivots: the same */
+  fit(&b, &set, 3, 0.0f);
+  worst = 0.0;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) {
+      const double e = fabs(b.y[c][i] - mean[c]) / mean[c];
+      worst = e > worst ? e : worst;
+    }
+  CHECK_MSG(worst <= 1e-4, "no noise: worst relative distance to the mean %g", worst);
+
+  /* two identical features (normal x == position x up to scale): rank
+   * deficient, cured by the noise, and the fit stays finite and close */
+  busy_block(&b);
+  for (int i = 0; i < BN; i++)
+    b.base[(BMFR_BASE_POSITION + 0) * BN + i] = 5.0f * b.base[BMFR_BASE_NORMAL * BN + i];
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) b.z[c][i] = exact_radiance(&b, c, i);
+  fit(&b, &set, 4, 0.01f);
+  int finite = 1;
+  double worst_abs = 0.0;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) {
+      finite &= isfinite(b.y[c][i]);
+      const double e = fabs(b.y[c][i] - b.z[c][i]);
+      worst_abs = e > worst_abs ? e : worst_abs;
+    }
+  CHECK(finite);
+  CHECK_MSG(worst_abs <= 1e-2, "collinear features: worst error %g", worst_abs);
+}
+
+/* Holes: an all-hole block fits nothing (all zero, finite); a block with a
+ * few valid pixels stays finite; black radiance gives black. */
+static void test_holes_block(void) {
+  static block b;
+  bmfr_feature_set set;
+  default_set(&set);
+  busy_block(&b);
+  for (int i = 0; i < BN; i++) b.mask[i] = 0.0f;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) b.z[c][i] = 1.0f;
+  fit(&b, &set, 1, 0.01f);
+  int ok = 1;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) ok &= b.y[c][i] == 0.0f;
+  CHECK(ok);
+
+  for (int valid = 1; valid <= 12; valid++) {
+    for (int i = 0; i < BN; i++) b.mask[i] = i % 97 == 0 && i / 97 < valid ? 1.0f : 0.0f;
+    fit(&b, &set, (uint64_t)valid, 0.01f);
+    ok = 1;
+    for (int c = 0; c < 3; c++)
+      for (int i = 0; i < BN; i++) ok &= isfinite(b.y[c][i]) && b.y[c][i] >= 0.0f;
+    CHECK_MSG(ok, "%d valid pixels", valid);
+  }
+
+  busy_block(&b);
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) b.z[c][i] = 0.0f;
+  fit(&b, &set, 2, 0.01f);
+  ok = 1;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) ok &= b.y[c][i] == 0.0f;
+  CHECK(ok);
+}
+
+/* A non-integer exponent and the optional sources build and fit finitely. */
+static void test_feature_sets(void) {
+  bmfr_feature_set set;
+  const float e[BMFR_SRC_COUNT][2] = {{1, 0.5f}, {1, 2}, {1.5f, 0}, {1, 0}};
+  hush__bmfr_features_build(&set, e, 1);
+  CHECK(set.count == 1 + 6 + 6 + 1 + 3 + 2);
+  CHECK(set.needs == 15u && set.gradients);
+  static block b;
+  busy_block(&b);
+  for (int i = 0; i < BN; i++) {
+    b.base[BMFR_BASE_DEPTH * BN + i] = 4.0f + (float)(i % 7);
+    for (int c = 0; c < 3; c++) b.base[(BMFR_BASE_ALBEDO + c) * BN + i] = 0.2f * (float)c;
+    b.base[BMFR_BASE_GRADIENT * BN + i] = (float)(i % BS);
+    b.base[(BMFR_BASE_GRADIENT + 1) * BN + i] = (float)(i / BS);
+  }
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) b.z[c][i] = exact_radiance(&b, c, i);
+  fit(&b, &set, 5, 0.01f);
+  int ok = 1;
+  for (int m = 0; m < set.count; m++)
+    for (int i = 0; i < BN; i++) ok &= b.T[m * BN + i] >= -1.0f && b.T[m * BN + i] <= 1.0f;
+  CHECK(ok); /* every feature scaled to [-1, 1] */
+  double worst = 0.0;
+  for (int c = 0; c < 3; c++)
+    for (int i = 0; i < BN; i++) {
+      const double err = fabs(b.y[c][i] - b.z[c][i]) / fabs(b.z[c][i]);
+      worst = err > worst ? err : worst;
+    }
+  CHECK_MSG(worst <= 1e-3, "larger set: worst relative error %g", worst);
+}
+
+/* 16 distinct offsets in [0, B)^2, period 16, for every block size. */
+static void test_offsets(void) {
+  for (int B = 16; B <= 64; B += 8) {
+    int seen[64][64];
+    memset(seen, 0, sizeof seen);
+    int distinct = 0, in_range = 1, periodic = 1;
+    for (uint64_t f = 0; f < 16; f++) {
+      int ox, oy, px, py;
+      hush__bmfr_block_offset(f, B, 1, &ox, &oy);
+      hush__bmfr_block_offset(f + 16 * 1000003ull, B, 1, &px, &py);
+      periodic &= ox == px && oy == py;
+      in_range &= ox >= 0 && ox < B && oy >= 0 && oy < B;
+      if (in_range && !seen[oy][ox]++) distinct++;
+    }
+    CHECK_MSG(distinct == 16 && in_range && periodic, "B = %d: %d distinct offsets", B, distinct);
+    /* consecutive frames are at least a quarter block apart in x or y */
+    int ox0, oy0, ox1, oy1;
+    hush__bmfr_block_offset(0, B, 1, &ox0, &oy0);
+    hush__bmfr_block_offset(1, B, 1, &ox1, &oy1);
+    CHECK(abs(ox1 - ox0) >= B / 4 || abs(oy1 - oy0) >= B / 4);
+  }
+  int ox, oy;
+  hush__bmfr_block_offset(5, 32, 0, &ox, &oy);
+  CHECK(ox == 0 && oy == 0);
+  /* the grid covers the image, and mirroring stays inside it */
+  bmfr_grid g;
+  hush__bmfr_grid(&g, W, H, 32, 12, 28);
+  CHECK(g.x0 <= 0 && g.x0 + g.nx * 32 >= W && g.x0 + 32 > 0 && g.x0 + (g.nx - 1) * 32 < W);
+  CHECK(g.y0 <= 0 && g.y0 + g.ny * 32 >= H && g.y0 + 32 > 0 && g.y0 + (g.ny - 1) * 32 < H);
+  int ok = 1;
+  for (int x = -200; x < 200; x++) {
+    const int m = hush__bmfr_mirror(x, 7);
+    ok &= m >= 0 && m < 7;
+  }
+  CHECK(ok && hush__bmfr_mirror(-1, 7) == 0 && hush__bmfr_mirror(7, 7) == 6);
+}
+
+/* ---- the filter through the API ---------------------------------------------- */
+
+typedef struct scene {
+  float color[N * 3];
+  float depth[N];
+  float normal[N * 3];
+  float position[N * 3];
+  float albedo[N * 3];
+  float output[N * 3];
+  float fitted[N * 3];
+} scene;
+
+/* The camera: at (0, 0, 5) looking down -z at the plane z = 0. */
+static void frame_info(hush_frame_info *fi, uint64_t index) {
+  hush_frame_info_init(fi);
+  fi->frame_index = index;
+  float w2v[16], v2c[16];
+  hush_m4_look_at(w2v, hush_v3(0, 0, 5), hush_v3(0, 0, 0), hush_v3(0, 1, 0));
+  hush_m4_perspective(v2c, 60.0f, (float)W / H, 0.1f, 100.0f);
+  memcpy(fi->world_to_view, w2v, sizeof w2v);
+  memcpy(fi->prev_world_to_view, w2v, sizeof w2v);
+  memcpy(fi->view_to_clip, v2c, sizeof v2c);
+  memcpy(fi->prev_view_to_clip, v2c, sizeof v2c);
+}
+
+/* The plane z = 0 as the camera sees it (consistent position and depth, so
+ * the history is reused), constant colour and albedo 1. */
+static void plane(scene *s, float r, float g, float b) {
+  const float t = tanf(30.0f * 3.14159265f / 180.0f) * 5.0f;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const int i = y * W + x;
+      const float nx = 2.0f * ((float)x + 0.5f) / W - 1.0f, ny = 1.0f - 2.0f * ((float)y + 0.5f) / H;
+      s->position[3 * i + 0] = nx * t * (float)W / H;
+      s->position[3 * i + 1] = ny * t;
+      s->position[3 * i + 2] = 0.0f;
+      s->depth[i] = 5.0f;
+      s->normal[3 * i + 0] = 0.0f;
+      s->normal[3 * i + 1] = 0.0f;
+      s->normal[3 * i + 2] = 1.0f;
+      s->color[3 * i + 0] = r;
+      s->color[3 * i + 1] = g;
+      s->color[3 * i + 2] = b;
+      for (int c = 0; c < 3; c++) s->albedo[3 * i + c] = 1.0f;
+    }
+}
+
+static hush_image_view view_of(void *data, hush_format format) {
+  hush_image_view v;
+  memset(&v, 0, sizeof v);
+  v.data = data;
+  v.format = format;
+  v.width = W;
+  v.height = H;
+  return v;
+}
+
+static void bind(hush_filter f, const char *name, void *data, hush_format format) {
+  hush_image_view v = view_of(data, format);
+  REQUIRE(hush_filter_set_image(f, name, &v) == HUSH_OK);
+}
+
+static hush_filter make(hush_device dev, scene *s, int with_albedo) {
+  hush_filter f = hush_filter_new(dev, "bmfr");
+  REQUIRE(f);
+  bind(f, "color", s->color, HUSH_FORMAT_FLOAT3);
+  bind(f, "depth", s->depth, HUSH_FORMAT_FLOAT);
+  bind(f, "normal", s->normal, HUSH_FORMAT_FLOAT3);
+  bind(f, "position", s->position, HUSH_FORMAT_FLOAT3);
+  if (with_albedo) bind(f, "albedo", s->albedo, HUSH_FORMAT_FLOAT3);
+  bind(f, "output", s->output, HUSH_FORMAT_FLOAT3);
+  bind(f, "fitted", s->fitted, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+  return f;
+}
+
+static hush_status run(hush_filter f, uint64_t index) {
+  hush_frame_info fi;
+  frame_info(&fi, index);
+  return hush_filter_execute(f, &fi);
+}
+
+static float max_abs_diff(const float *a, const float *b, int n) {
+  float m = 0.0f;
+  for (int i = 0; i < n; i++) {
+    const float d = fabsf(a[i] - b[i]);
+    m = d > m ? d : m;
+  }
+  return m;
+}
+
+static int all_finite(const float *a, int n) {
+  for (int i = 0; i < n; i++)
+    if (!isfinite(a[i])) return 0;
+  return 1;
+}
+
+/* A textured wall under constant light stays exactly that, every frame
+ * (different grid offsets), with demodulation, both accumulations and TAA. */
+static void test_constant(hush_device dev) {
+  static scene s;
+  plane(&s, 0, 0, 0);
+  for (int i = 0; i < N; i++)
+    for (int c = 0; c < 3; c++) {
+      s.albedo[3 * i + c] = 0.2f + 0.6f * (float)(((i % W) / 3 + (i / W) / 5 + c) % 4) / 3.0f;
+      s.color[3 * i + c] = 0.7f * s.albedo[3 * i + c];
+    }
+  hush_filter f = make(dev, &s, 1);
+  float worst = 0.0f;
+  for (uint64_t k = 0; k < 20; k++) {
+    REQUIRE(run(f, k) == HUSH_OK);
+    const float d = max_abs_diff(s.output, s.color, N * 3);
+    worst = d > worst ? d : worst;
+  }
+  CHECK_MSG(worst <= 1e-4f, "constant image: worst deviation %g", (double)worst);
+  hush_filter_release(f);
+}
+
+/* Through the API: radiance an exact combination of [1, n, w, w^2] over the
+ * whole frame (so in every block, whatever the offset, mirrored margins
+ * included) is reproduced by the fit to 1e-3 relative. Bumpy normals, as
+ * in busy_block. */
+static void test_exact_api(hush_device dev) {
+  static scene s;
+  plane(&s, 0, 0, 0);
+  rng_state = 2024u;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const int i = y * W + x;
+      const float u = (float)x / W, v = (float)y / H;
+      hush_vec3 n = hush_v3_normalize(hush_v3(0.5f * (rnd() - 0.5f), 0.5f * (rnd() - 0.5f), 1.0f));
+      s.normal[3 * i + 0] = n.x;
+      s.normal[3 * i + 1] = n.y;
+      s.normal[3 * i + 2] = n.z;
+      /* a bumpy surface, depth and position consistent so that the
+       * history is gathered from the same pixel */
+      const float h = 0.2f * sinf(3 * u + 2 * v);
+      s.depth[i] = 5.0f - h;
+      s.position[3 * i + 0] *= s.depth[i] / 5.0f;
+      s.position[3 * i + 1] *= s.depth[i] / 5.0f;
+      s.position[3 * i + 2] = h;
+      const float *w = s.position + 3 * i;
+      for (int c = 0; c < 3; c++)
+        s.color[3 * i + c] = 2.0f + (float)(c + 1) * (0.3f * n.x - 0.2f * n.y + 0.1f * w[0] -
+                                                      0.2f * w[1] + 0.5f * w[2] +
+                                                      0.02f * w[0] * w[0] + 0.03f * w[1] * w[1] +
+                                                      0.4f * w[2] * w[2]);
+    }
+  hush_filter f = make(dev, &s, 0);
+  REQUIRE(hush_filter_set_int(f, "taa", 0) == HUSH_OK);
+  for (uint64_t k = 0; k < 3; k++) {
+    REQUIRE(run(f, k * 5) == HUSH_OK);
+    double worst = 0.0;
+    for (int i = 0; i < N * 3; i++) {
+      const double e = fabs(s.fitted[i] - s.color[i]) / fabs(s.color[i]);
+      worst = e > worst ? e : worst;
+    }
+    CHECK_MSG(worst <= 1e-3, "frame %d: worst relative error %g", (int)k * 5, worst);
+  }
+  hush_filter_release(f);
+}
+
+/* Without displacement the grid is aligned: on a flat wall (all features
+ * flat) each 32x32 block's fit is that block's mean of the input. */
+static void test_block_mean_api(hush_device dev) {
+  static scene s;
+  plane(&s, 0, 0, 0);
+  /* flatten the position too */
+  for (int i = 0; i < N; i++) s.position[3 * i + 0] = s.position[3 * i + 1] = 1.0f;
+  rng_state = 4242u;
+  for (int i = 0; i < N * 3; i++) s.color[i] = rnd();
+  hush_filter f = make(dev, &s, 0);
+  REQUIRE(hush_filter_set_int(f, "displace", 0) == HUSH_OK);
+  REQUIRE(run(f, 3) == HUSH_OK);
+  double worst = 0.0;
+  for (int by = 0; by * 32 < H; by++)
+    for (int bx = 0; bx * 32 < W; bx++)
+      for (int c = 0; c < 3; c++) {
+        /* the block with mirrored margins, as the filter reads it */
+        double mean = 0.0;
+        for (int r = 0; r < 32; r++)
+          for (int q = 0; q < 32; q++) {
+            const int x = hush__bmfr_mirror(bx * 32 + q, W), y = hush__bmfr_mirror(by * 32 + r, H);
+            mean += s.color[3 * (y * W + x) + c];
+          }
+        mean /= 1024.0;
+        for (int r = 0; r < 32 && by * 32 + r < H; r++)
+          for (int q = 0; q < 32 && bx * 32 + q < W; q++) {
+            const int i = (by * 32 + r) * W + bx * 32 + q;
+            const double e = fabs(s.fitted[3 * i + c] - mean);
+            worst = e > worst ? e : worst;
+          }
+      }
+  CHECK_MSG(worst <= 1e-4, "flat blocks: worst distance to the block mean %g", worst);
+  hush_filter_release(f);
+}
+
+/* A noisy plane lit by a smooth gradient: bmfr's output is much closer to
+ * the truth than the input after a few frames. */
+static void test_denoises(hush_device dev) {
+  static scene s;
+  static float truth[N * 3];
+  plane(&s, 0, 0, 0);
+  for (int i = 0; i < N; i++)
+    for (int c = 0; c < 3; c++) truth[3 * i + c] = 0.5f + 0.1f * s.position[3 * i] + 0.1f * (float)c;
+  hush_filter f = make(dev, &s, 0);
+  rng_state = 5u;
+  double in_err = 0.0, out_err = 0.0;
+  for (uint64_t k = 0; k < 8; k++) {
+    for (int i = 0; i < N * 3; i++) s.color[i] = truth[i] * 2.0f * rnd();
+    REQUIRE(run(f, k) == HUSH_OK);
+    if (k == 7)
+      for (int i = 0; i < N * 3; i++) {
+        in_err += (s.color[i] - truth[i]) * (s.color[i] - truth[i]);
+        out_err += (s.output[i] - truth[i]) * (s.output[i] - truth[i]);
+      }
+  }
+  CHECK_MSG(out_err < 0.01 * in_err, "rmse in %g, out %g", sqrt(in_err / (N * 3)),
+            sqrt(out_err / (N * 3)));
+  hush_filter_release(f);
+}
+
+static void busy(scene *s, int k) {
+  plane(s, 0, 0, 0);
+  rng_state = 777u + (uint32_t)k;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const int i = y * W + x;
+      for (int c = 0; c < 3; c++) s->color[3 * i + c] = (x < W / 3 ? 2.0f : 0.3f) * rnd();
+      s->depth[i] = y < H / 2 ? 5.0f : 0.0f; /* sky in the lower half */
+      s->normal[3 * i + 1] = x > 2 * W / 3 ? 1.0f : 0.0f;
+      s->normal[3 * i + 2] = x > 2 * W / 3 ? 0.0f : 1.0f;
+    }
+}
+
+static void test_determinism(void) {
+  static scene a, b;
+  hush_device d1 = hush_device_new("threads=1"), d2 = hush_device_new("threads=2");
+  REQUIRE(d1 && d2);
+  busy(&a, 0);
+  busy(&b, 0);
+  hush_filter fa = make(d1, &a, 1), fb = make(d2, &b, 1);
+  for (int k = 0; k < 5; k++) {
+    busy(&a, k);
+    busy(&b, k);
+    REQUIRE(run(fa, (uint64_t)k) == HUSH_OK);
+    REQUIRE(run(fb, (uint64_t)k) == HUSH_OK);
+    CHECK_MSG(memcmp(a.output, b.output, sizeof a.output) == 0, "frame %d differs", k);
+    CHECK(all_finite(a.output, N * 3));
+  }
+  hush_filter_release(fa);
+  hush_filter_release(fb);
+  /* a second run of the same frames gives the same bits */
+  static float first[N * 3];
+  memcpy(first, a.output, sizeof first);
+  fa = make(d1, &a, 1);
+  for (int k = 0; k < 5; k++) {
+    busy(&a, k);
+    REQUIRE(run(fa, (uint64_t)k) == HUSH_OK);
+  }
+  CHECK(memcmp(first, a.output, sizeof first) == 0);
+  hush_filter_release(fa);
+  hush_device_release(d1);
+  hush_device_release(d2);
+}
+
+/* All holes (sky everywhere) and black inputs: finite, and the sky keeps
+ * its (accumulated) radiance. */
+static void test_holes_api(hush_device dev) {
+  static scene s;
+  plane(&s, 0.25f, 0.5f, 1.0f);
+  for (int i = 0; i < N; i++) s.depth[i] = 0.0f;
+  hush_filter f = make(dev, &s, 1);
+  for (uint64_t k = 0; k < 4; k++) REQUIRE(run(f, k) == HUSH_OK);
+  CHECK(all_finite(s.output, N * 3));
+  CHECK(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f);
+  hush_filter_release(f);
+
+  plane(&s, 0, 0, 0);
+  for (int i = 0; i < N * 3; i++) s.albedo[i] = 0.0f;
+  f = make(dev, &s, 1);
+  for (uint64_t k = 0; k < 4; k++) REQUIRE(run(f, k) == HUSH_OK);
+  CHECK(all_finite(s.output, N * 3) && all_finite(s.fitted, N * 3));
+  float m = 0.0f;
+  for (int i = 0; i < N * 3; i++) m = fabsf(s.output[i]) > m ? fabsf(s.output[i]) : m;
+  CHECK(m == 0.0f);
+  hush_filter_release(f);
+}
+
+static void test_misuse(hush_device dev) {
+  static scene s;
+  plane(&s, 1, 1, 1);
+  hush_filter f = hush_filter_new(dev, "bmfr");
+  REQUIRE(f);
+  bind(f, "color", s.color, HUSH_FORMAT_FLOAT3);
+  bind(f, "output", s.output, HUSH_FORMAT_FLOAT3);
+  CHECK(hush_filter_commit(f) != HUSH_OK); /* no depth, no normal */
+  hush_device_get_error(dev, NULL);
+  bind(f, "depth", s.depth, HUSH_FORMAT_FLOAT);
+  bind(f, "normal", s.normal, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+  /* the default features need the world position */
+  CHECK(run(f, 0) == HUSH_ERROR_INVALID_OPERATION);
+  const char *msg = NULL;
+  hush_device_get_error(dev, &msg);
+  CHECK(msg && strstr(msg, "position"));
+  REQUIRE(hush_filter_set_float(f, "position_exponent1", 0.0f) == HUSH_OK);
+  REQUIRE(hush_filter_set_float(f, "position_exponent2", 0.0f) == HUSH_OK);
+  CHECK(run(f, 0) == HUSH_OK); /* [1, n] only */
+  REQUIRE(hush_filter_set_float(f, "albedo_exponent1", 1.0f) == HUSH_OK);
+  CHECK(run(f, 1) == HUSH_ERROR_INVALID_OPERATION); /* albedo features, no albedo */
+  hush_device_get_error(dev, NULL);
+  CHECK(hush_filter_set_int(f, "block_size", 8) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(hush_filter_set_int(f, "block_size", 65) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(hush_filter_set_float(f, "noise", -0.1f) == HUSH_ERROR_OUT_OF_RANGE);
+  CHECK(hush_filter_set_float(f, "normal_exponent1", -1.0f) == HUSH_ERROR_OUT_OF_RANGE);
+  hush_device_get_error(dev, NULL);
+  hush_filter_release(f);
+
+  f = make(dev, &s, 0);
+  hush_frame_info fi;
+  frame_info(&fi, 0);
+  fi.motion = HUSH_MOTION_VECTORS; /* without a 'motion' image */
+  CHECK(hush_filter_execute(f, &fi) == HUSH_ERROR_INVALID_OPERATION);
+  hush_device_get_error(dev, NULL);
+  s.color[5] = NAN;
+  CHECK(run(f, 1) == HUSH_ERROR_NONFINITE);
+  hush_device_get_error(dev, NULL);
+  REQUIRE(hush_filter_set_int(f, "nonfinite", 1) == HUSH_OK); /* replace */
+  CHECK(run(f, 2) == HUSH_OK);
+  CHECK(all_finite(s.output, N * 3));
+  hush_filter_release(f);
+}
+
+/* A light seen directly (a small patch 200x brighter) stays out of its
+ * block's fit: the rest of the block keeps its level and the patch its
+ * radiance. With the guard off, the fit spreads the patch over the block. */
+static void test_outliers(hush_device dev) {
+  static scene s;
+  plane(&s, 0.5f, 0.5f, 0.5f);
+  for (int y = 20; y < 23; y++)
+    for (int x = 30; x < 33; x++)
+      for (int c = 0; c < 3; c++) s.color[3 * (y * W + x) + c] = 100.0f;
+  for (int guard = 1; guard >= 0; guard--) {
+    hush_filter f = make(dev, &s, 0);
+    REQUIRE(hush_filter_set_int(f, "taa", 0) == HUSH_OK);
+    if (!guard) REQUIRE(hush_filter_set_float(f, "outlier", 0.0f) == HUSH_OK);
+    REQUIRE(run(f, 0) == HUSH_OK);
+    float far_dev = 0.0f, patch_dev = 0.0f;
+    for (int i = 0; i < N; i++) {
+      const int x = i % W, y = i / W;
+      const int in_patch = x >= 30 && x < 33 && y >= 20 && y < 23;
+      for (int c = 0; c < 3; c++) {
+        const float d = fabsf(s.fitted[3 * i + c] - s.color[3 * i + c]);
+        if (in_patch) patch_dev = d > patch_dev ? d : patch_dev;
+        else far_dev = d > far_dev ? d : far_dev;
+      }
+    }
+    if (guard)
+      CHECK_MSG(far_dev <= 1e-4f && patch_dev <= 1e-3f, "guard on: %g around, %g on the patch",
+                (double)far_dev, (double)patch_dev);
+    else
+      CHECK_MSG(far_dev > 0.1f, "guard off: the patch should spread (%g)", (double)far_dev);
+    hush_filter_release(f);
+  }
+}
+
+/* An isolated firefly stays in the fit: on a flat wall with the grid
+ * aligned, its block's fit is the block mean, firefly included (its energy
+ * is spread, not kept in one pixel nor lost). */
+static void test_firefly(hush_device dev) {
+  static scene s;
+  plane(&s, 0.5f, 0.5f, 0.5f);
+  for (int i = 0; i < N; i++) s.position[3 * i + 0] = s.position[3 * i + 1] = 1.0f;
+  for (int c = 0; c < 3; c++) s.color[3 * (10 * W + 10) + c] = 100.0f;
+  hush_filter f = make(dev, &s, 0);
+  REQUIRE(hush_filter_set_int(f, "displace", 0) == HUSH_OK);
+  REQUIRE(run(f, 0) == HUSH_OK);
+  const float mean = 0.5f + 99.5f / 1024.0f; /* block (0, 0) is inside the image */
+  float worst = 0.0f;
+  for (int y = 0; y < 32; y++)
+    for (int x = 0; x < 32; x++)
+      for (int c = 0; c < 3; c++) {
+        const float d = fabsf(s.fitted[3 * (y * W + x) + c] - mean);
+        worst = d > worst ? d : worst;
+      }
+  CHECK_MSG(worst <= 1e-4f, "firefly block: worst distance to the mean %g", (double)worst);
+  hush_filter_release(f);
+}
+
+/* Every block size in range, odd ones included, runs and keeps a constant
+ * image constant. */
+static void test_block_sizes(hush_device dev) {
+  static scene s;
+  plane(&s, 0.3f, 0.6f, 0.9f);
+  for (int B = 16; B <= 64; B += 7) {
+    hush_filter f = make(dev, &s, 0);
+    REQUIRE(hush_filter_set_int(f, "block_size", B) == HUSH_OK);
+    for (uint64_t k = 0; k < 3; k++) REQUIRE(run(f, k) == HUSH_OK);
+    CHECK_MSG(max_abs_diff(s.output, s.color, N * 3) <= 1e-4f, "block_size %d", B);
+    hush_filter_release(f);
+  }
+}
+
+int main(void) {
+  test_exact_block();
+  test_rank_deficient_block();
+  test_holes_block();
+  test_feature_sets();
+  test_offsets();
+  hush_device dev = hush_device_new("threads=2");
+  REQUIRE(dev);
+  test_constant(dev);
+  test_exact_api(dev);
+  test_block_mean_api(dev);
+  test_denoises(dev);
+  test_determinism();
+  test_holes_api(dev);
+  test_misuse(dev);
+  test_block_sizes(dev);
+  test_outliers(dev);
+  test_firefly(dev);
+  hush_device_release(dev);
+  return check_summary();
+}
