@@ -27,7 +27,7 @@
 /* The captured result of one command. */
 typedef struct result {
   int status; /* exit status, or -1 if it did not exit normally */
-  char out[16384];
+  char out[65536];
   char err[4096];
 } result;
 
