@@ -74,13 +74,18 @@ part_scenes() {
     echo "seed), then evaluated: $frames frames at $size, means over the frames. The filters' acceptance"
     echo "runs (60+ frames, 1024-spp references) use this script with SCENE_FRAMES and SCENE_REF_SPP raised."
     echo
-    for entry in classroom:path living-room:path sponza-dabrovic:orbit cornell-box:orbit; do
-      local name=${entry%%:*} move=${entry##*:}
-      "$hush" eval --scene "../shared/scenes/$name" --path "$move" --size "$size" --frames "$frames" \
+    for entry in classroom:path living-room:path sponza-dabrovic:orbit cornell-box:orbit \
+                 builtin+moving-light:static builtin+light-off:static; do
+      local name=${entry%%:*} move=${entry##*:} scene
+      case $name in
+        builtin+*) name=${name#builtin+}; scene=builtin:$name ;;
+        *) scene=../shared/scenes/$name ;;
+      esac
+      "$hush" eval --scene "$scene" --path "$move" --size "$size" --frames "$frames" \
         --ref-spp "$spp" --filters "$filters" --no-video --quiet --out "$work/scene-$name" >/dev/null
       echo "### $name"
       echo
-      echo "\`hush eval --scene ../shared/scenes/$name --path $move --size $size --frames $frames --ref-spp $spp --filters $filters\`"
+      echo "\`hush eval --scene $scene --path $move --size $size --frames $frames --ref-spp $spp --filters $filters\`"
       echo
       summary_table "$work/scene-$name/summary.md"
     done
