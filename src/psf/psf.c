@@ -29,7 +29,7 @@ enum {
 };
 
 static const hush_param_info params[P_COUNT] = {
-    {"scale", HUSH_PARAM_FLOAT, 8.0, 0.01, 1024.0,
+    {"scale", HUSH_PARAM_FLOAT, 4.0, 0.01, 1024.0,
      "cell size in projected pixels at the vertex's distance (s of Algorithm 1)", NULL},
     {"table_size", HUSH_PARAM_FLOAT, 2.0, 0.001, 64.0,
      "slots per pixel of the frame (rounded up to 64-byte lines of 16 slots)", NULL},
@@ -268,6 +268,7 @@ hush_status hush_psf_lookup(hush_psf psf, const hush_psf_vertex *vertices, const
   const hush_psf_cell *cells = psf->table.cells;
   const uint32_t slots = psf->table.slots;
   for (uint32_t j = 0; j < count; j++) {
+    if (j + 8 < count && tickets[j + 8] < slots) __builtin_prefetch(&cells[tickets[j + 8]]);
     const float *src = tickets[j] < slots ? cells[tickets[j]].mean : vertices[j].radiance;
     memcpy(rgb + 3 * j, src, 3 * sizeof(float));
   }

@@ -27,6 +27,7 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 /* Bits of a key: the verification hash below, the age (priority, §3.4) above. */
 #define HUSH_PSF_AGE_SHIFT 26u
@@ -46,16 +47,26 @@ typedef struct hush_psf_key {
   uint32_t v;              /* verification hash, 1 .. HUSH_PSF_VMASK */
 } hush_psf_key;
 
-/* floor(log2(d)) for d > 0 (frexp: d = m 2^e, m in [0.5, 1)); small and
- * non-positive distances share the lowest level. */
+/* floor(log2(d)) for d > 0, from the float's exponent bits (d is clamped
+ * to the normal range, so tiny and non-positive distances share the lowest
+ * level); frexpf would be a library call per vertex. */
 static inline int hush__psf_level(float d) {
-  int e;
-  frexpf(d > 1e-20f ? d : 1e-20f, &e);
-  return e - 1;
+  d = d > 1e-30f ? (d < 1e30f ? d : 1e30f) : 1e-30f;
+  uint32_t bits;
+  memcpy(&bits, &d, sizeof bits);
+  return (int)((bits >> 23) & 0xffu) - 127;
+}
+
+/* 2^level as a float (|level| < 127). */
+static inline float hush__psf_exp2i(int level) {
+  const uint32_t bits = (uint32_t)(level + 127) << 23;
+  float f;
+  memcpy(&f, &bits, sizeof f);
+  return f;
 }
 
 static inline float hush__psf_cell(const hush_psf_key_params *k, int level) {
-  return k->scale * k->pixel_angle * ldexpf(1.0f, level);
+  return k->scale * k->pixel_angle * hush__psf_exp2i(level);
 }
 
 /* Murmur3's finaliser: the verification hash must not be a function of the
@@ -92,8 +103,10 @@ static inline int hush__psf_key_of(const hush_psf_key_params *k, const hush_psf_
   const float a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
   const float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]};
   const float bt[3] = {b, sign + n[1] * n[1] * a, -n[1]};
-  const float u1 = hush_rng_float(v->seed, k->frame, 0x9e3779b9u) - 0.5f;
-  const float u2 = hush_rng_float(v->seed, k->frame, 0x7f4a7c15u) - 0.5f;
+  /* one 32-bit hash gives both 16-bit jitter coordinates */
+  const uint32_t r = hush_pcg_hash(hush_pcg_hash(v->seed) ^ k->frame);
+  const float u1 = (float)(r & 0xffffu) * (1.0f / 65536.0f) - 0.5f;
+  const float u2 = (float)(r >> 16) * (1.0f / 65536.0f) - 0.5f;
   const float j = k->jitter * cell;
   float xj[3];
   for (int c = 0; c < 3; c++) xj[c] = x[c] + (t[c] * u1 + bt[c] * u2) * j;

@@ -37,9 +37,12 @@ struct hush_psf_renderer {
   sample_record *records;
   hush_psf_vertex *vertices;
   uint32_t *tickets;
+  float *filtered;         /* 3 per sample: the cell average (lookup) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
   uint32_t epoch;          /* 1 + frames begun */
+  uint64_t frame;          /* of the last begin */
+  float pixel_angle;
 };
 
 /* Albedo floor of the demodulation: dark channels would amplify noise. */
@@ -65,7 +68,8 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->records = calloc(r->samples, sizeof *r->records);
   r->vertices = calloc(r->samples, sizeof *r->vertices);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
-  if (!r->psf || !r->records || !r->vertices || !r->tickets) {
+  r->filtered = calloc(r->samples * 3, sizeof *r->filtered);
+  if (!r->psf || !r->records || !r->vertices || !r->tickets || !r->filtered) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
@@ -81,6 +85,7 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   free(r->records);
   free(r->vertices);
   free(r->tickets);
+  free(r->filtered);
   free(r);
 }
 
@@ -192,36 +197,41 @@ hush_status hush__psf_renderer_begin(hush_psf_renderer *r, const hush_render_ctx
   r->eye[1] = ctx->cam.eye.y;
   r->eye[2] = ctx->cam.eye.z;
   r->epoch++;
-  const float pixel_angle = 2.0f * ctx->cam.tan_half_y / (float)r->height;
-  return hush_psf_begin_frame(r->psf, ctx->frame, pixel_angle, history);
+  r->frame = ctx->frame;
+  r->pixel_angle = 2.0f * ctx->cam.tan_half_y / (float)r->height;
+  return hush_psf_begin_frame(r->psf, r->frame, r->pixel_angle, history);
+}
+
+hush_status hush__psf_renderer_repeat(hush_psf_renderer *r) {
+  return hush_psf_begin_frame(r->psf, r->frame, r->pixel_angle, HUSH_HISTORY_CONTINUE);
 }
 
 /* ---- after the frame ---------------------------------------------------------------- */
 
-#define GATHER 256u
+static int has_vertex(const hush_psf_renderer *r, size_t i) {
+  return r->records[i].epoch == r->epoch && r->records[i].selected;
+}
 
-/* Adds the selected vertices of rows [y0, y1) in screen order, in batches. */
-static void add_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1) {
-  hush_psf_vertex batch[GATHER];
-  uint32_t tickets[GATHER];
-  size_t where[GATHER];
-  uint32_t n = 0;
+/* Adds (lookup 0) or looks up (1) the selected vertices of rows [y0, y1)
+ * in screen order: each run of consecutive samples with a vertex goes in
+ * place, without a copy. */
+static void vertex_runs(hush_psf_renderer *r, uint32_t y0, uint32_t y1, int lookup) {
   const size_t end = (size_t)y1 * r->width * r->spp;
-  for (size_t i = (size_t)y0 * r->width * r->spp; i <= end; i++) {
-    if (i < end && r->records[i].epoch == r->epoch && r->records[i].selected) {
-      batch[n] = r->vertices[i];
-      where[n++] = i;
-    }
-    if (n == GATHER || (i == end && n)) {
-      hush_psf_add_vertices(r->psf, batch, n, tickets);
-      for (uint32_t k = 0; k < n; k++) r->tickets[where[k]] = tickets[k];
-      n = 0;
-    }
+  size_t i = (size_t)y0 * r->width * r->spp;
+  while (i < end) {
+    while (i < end && !has_vertex(r, i)) i++;
+    const size_t start = i;
+    while (i < end && has_vertex(r, i)) i++;
+    const uint32_t n = (uint32_t)(i - start);
+    if (n && !lookup) hush_psf_add_vertices(r->psf, r->vertices + start, n, r->tickets + start);
+    if (n && lookup)
+      hush_psf_lookup(r->psf, r->vertices + start, r->tickets + start, n, r->filtered + 3 * start);
   }
 }
 
 /* The "psf" layer of rows [y0, y1). */
 static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *out) {
+  vertex_runs(r, y0, y1, 1);
   for (uint32_t y = y0; y < y1; y++)
     for (uint32_t x = 0; x < r->width; x++) {
       float sum[3] = {0.0f, 0.0f, 0.0f};
@@ -233,8 +243,7 @@ static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *
           for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
           continue;
         }
-        float f[3];
-        hush_psf_lookup(r->psf, &r->vertices[i], &r->tickets[i], 1, f);
+        const float *f = r->filtered + 3 * i;
         for (int c = 0; c < 3; c++) {
           const float v = rec->prefix[c] + rec->throughput[c] * f[c];
           sum[c] += isfinite(v) ? v : rec->total[c];
@@ -255,11 +264,11 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   if (st != HUSH_OK) return st;
   const int threads = hush_device_threads(r->device);
   const int64_t bands = (r->height + BAND - 1) / BAND;
-  const double t0 = hush__now_ms();
+  const double t0 = hush__now_ms(), cpu0 = hush__cpu_seconds();
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int64_t b = 0; b < bands; b++) {
     const uint32_t y0 = (uint32_t)b * BAND;
-    add_rows(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height);
+    vertex_runs(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, 0);
   }
   const double t1 = hush__now_ms();
   st = hush_psf_resolve(r->psf);
@@ -273,6 +282,7 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   }
   const double t3 = hush__now_ms();
   if (timings) {
+    timings->cpu = (hush__cpu_seconds() - cpu0) * 1e3;
     timings->add = t1 - t0;
     timings->resolve = t2 - t1;
     timings->lookup = t3 - t2;

@@ -34,6 +34,7 @@ typedef struct hush_psf_timings {
   double add;              /* keys + atomic accumulation */
   double resolve;          /* averages, temporal blend, ageing */
   double lookup;           /* per-sample cell average + compose the layer */
+  double cpu;              /* CPU time of the three, all threads (process CPU time) */
 } hush_psf_timings;
 
 /* A renderer for frames of width x height at spp samples per pixel,
@@ -54,6 +55,10 @@ void hush__psf_renderer_hook(hush_psf_renderer *r, hush_render_params *params);
 /* Starts a frame rendered with ctx (whose params came through _hook). */
 hush_status hush__psf_renderer_begin(hush_psf_renderer *r, const hush_render_ctx *ctx,
                                      hush_history_mode history);
+
+/* Starts the same frame again (for benchmarks: the next finish filters the
+ * same vertices once more, and blends them into the history once more). */
+hush_status hush__psf_renderer_repeat(hush_psf_renderer *r);
 
 /* Filters the frame just rendered and writes the "psf" layer of frame. */
 hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,

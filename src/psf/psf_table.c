@@ -26,10 +26,9 @@ int hush__psf_table_init(hush_psf_table *t, uint64_t min_slots) {
   t->lines = (uint32_t)lines;
   t->slots = t->lines * HUSH_PSF_LINE;
   t->keys = alloc_lines((size_t)t->slots * sizeof *t->keys);
-  t->accum = alloc_lines((size_t)t->slots * sizeof *t->accum);
   t->cells = alloc_lines((size_t)t->slots * sizeof *t->cells);
   t->used = alloc_lines((size_t)t->slots * sizeof *t->used);
-  if (!t->keys || !t->accum || !t->cells || !t->used) {
+  if (!t->keys || !t->cells || !t->used) {
     hush__psf_table_free(t);
     return 0;
   }
@@ -38,10 +37,19 @@ int hush__psf_table_init(hush_psf_table *t, uint64_t min_slots) {
 
 void hush__psf_table_free(hush_psf_table *t) {
   free(t->keys);
-  free(t->accum);
   free(t->cells);
   free(t->used);
   memset(t, 0, sizeof *t);
+}
+
+/* Zero sums, count and history. */
+static void reset_cell(hush_psf_cell *c) {
+  for (int k = 0; k < 3; k++) {
+    atomic_store_explicit(&c->sum[k], 0u, memory_order_relaxed);
+    c->mean[k] = 0.0f;
+  }
+  atomic_store_explicit(&c->count, 0u, memory_order_relaxed);
+  c->samples = 0.0f;
 }
 
 void hush__psf_table_clear(hush_psf_table *t, int threads) {
@@ -49,9 +57,7 @@ void hush__psf_table_clear(hush_psf_table *t, int threads) {
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int64_t s = 0; s < n; s++) {
     atomic_store_explicit(&t->keys[s], 0u, memory_order_relaxed);
-    for (int c = 0; c < 3; c++) atomic_store_explicit(&t->accum[s].sum[c], 0u, memory_order_relaxed);
-    atomic_store_explicit(&t->accum[s].count, 0u, memory_order_relaxed);
-    memset(&t->cells[s], 0, sizeof t->cells[s]);
+    reset_cell(&t->cells[s]);
   }
   atomic_store(&t->used_count, 0u);
 }
@@ -138,7 +144,9 @@ static int evict(hush_psf_table *t, uint32_t base, uint32_t start, uint32_t prob
     return 0;
   /* only this thread owns the new cell's history this frame: sums are 0
    * (the old cell was not used this frame), the history starts over */
-  memset(&t->cells[best], 0, sizeof t->cells[best]);
+  hush_psf_cell *c = &t->cells[best];
+  c->mean[0] = c->mean[1] = c->mean[2] = 0.0f;
+  c->samples = 0.0f;
   r->slot = best;
   r->collided = 1;
   r->evicted = 1;
@@ -178,7 +186,7 @@ static inline void atomic_add_float(_Atomic uint32_t *a, float v) {
 
 static void flush(hush_psf_table *t, uint32_t slot, const float sum[3], uint32_t count) {
   if (slot == HUSH_PSF_NO_CELL || count == 0) return;
-  hush_psf_accum *a = &t->accum[slot];
+  hush_psf_cell *a = &t->cells[slot];
   for (int c = 0; c < 3; c++) atomic_add_float(&a->sum[c], sum[c]);
   if (atomic_fetch_add_explicit(&a->count, count, memory_order_relaxed) == 0) {
     const uint32_t at = atomic_fetch_add_explicit(&t->used_count, 1u, memory_order_relaxed);
@@ -186,14 +194,29 @@ static void flush(hush_psf_table *t, uint32_t slot, const float sum[3], uint32_t
   }
 }
 
+/* How many vertices ahead the key line and the likely cell are prefetched:
+ * the table is far larger than the caches and its accesses are random, so
+ * the loop is bound by memory latency unless several misses overlap. */
+#define PREFETCH_AHEAD 8u
+
+static inline void prefetch_slot(const hush_psf_table *t, hush_psf_key k) {
+  const uint32_t slot = line_of(t, k.i) * HUSH_PSF_LINE + (k.i & (HUSH_PSF_LINE - 1));
+  __builtin_prefetch(&t->keys[slot], 1);
+  __builtin_prefetch(&t->cells[slot], 1);
+}
+
 void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, const hush_psf_key *keys,
                          const float *radiance, const int *valid, uint32_t n, uint32_t *tickets) {
+  for (uint32_t j = 0; j < n && j < PREFETCH_AHEAD; j++)
+    if (valid[j]) prefetch_slot(t, keys[j]);
   uint64_t collisions = 0, failed = 0, evictions = 0;
   hush_psf_key prev = {0, 0}; /* v == 0 never occurs: no match at first */
   probe_result cur = {HUSH_PSF_NO_CELL, 0, 0};
   float sum[3] = {0.0f, 0.0f, 0.0f};
   uint32_t count = 0;
   for (uint32_t j = 0; j < n; j++) {
+    if (j + PREFETCH_AHEAD < n && valid[j + PREFETCH_AHEAD])
+      prefetch_slot(t, keys[j + PREFETCH_AHEAD]);
     if (!valid[j]) {
       tickets[j] = HUSH_PSF_NO_CELL;
       failed++;
@@ -227,18 +250,17 @@ void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, const hush_
 /* ---- resolve ----------------------------------------------------------------- */
 
 static void blend(hush_psf_table *t, uint32_t slot, const hush_psf_resolve_params *p) {
-  hush_psf_accum *a = &t->accum[slot];
-  const uint32_t count = atomic_load_explicit(&a->count, memory_order_relaxed);
+  hush_psf_cell *cell = &t->cells[slot];
+  const uint32_t count = atomic_load_explicit(&cell->count, memory_order_relaxed);
   float avg[3];
   for (int c = 0; c < 3; c++) {
-    const uint32_t bits = atomic_load_explicit(&a->sum[c], memory_order_relaxed);
+    const uint32_t bits = atomic_load_explicit(&cell->sum[c], memory_order_relaxed);
     float s;
     memcpy(&s, &bits, sizeof s);
     avg[c] = s / (float)count;
-    atomic_store_explicit(&a->sum[c], 0u, memory_order_relaxed);
+    atomic_store_explicit(&cell->sum[c], 0u, memory_order_relaxed);
   }
-  atomic_store_explicit(&a->count, 0u, memory_order_relaxed);
-  hush_psf_cell *cell = &t->cells[slot];
+  atomic_store_explicit(&cell->count, 0u, memory_order_relaxed);
   const float n_new = (float)count;
   if (!(isfinite(avg[0]) && isfinite(avg[1]) && isfinite(avg[2]))) return; /* keep the history */
   if (!p->temporal || cell->samples <= 0.0f) {
@@ -255,7 +277,10 @@ static void blend(hush_psf_table *t, uint32_t slot, const hush_psf_resolve_param
 uint64_t hush__psf_table_resolve(hush_psf_table *t, const hush_psf_resolve_params *p) {
   const int64_t used = atomic_load(&t->used_count);
 #pragma omp parallel for schedule(static) num_threads(p->threads)
-  for (int64_t k = 0; k < used; k++) blend(t, t->used[k], p);
+  for (int64_t k = 0; k < used; k++) {
+    if (k + PREFETCH_AHEAD < used) __builtin_prefetch(&t->cells[t->used[k + PREFETCH_AHEAD]], 1);
+    blend(t, t->used[k], p);
+  }
   atomic_store(&t->used_count, 0u);
 
   /* age every key by one frame (the cells just used go from 0 to 1) and
@@ -271,7 +296,7 @@ uint64_t hush__psf_table_resolve(hush_psf_table *t, const hush_psf_resolve_param
       const uint32_t age = age_of(key) + 1;
       if (age > max_age) {
         atomic_store_explicit(&t->keys[s], 0u, memory_order_relaxed);
-        memset(&t->cells[s], 0, sizeof t->cells[s]);
+        reset_cell(&t->cells[s]);
         freed++;
         continue;
       }

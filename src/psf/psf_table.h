@@ -39,14 +39,13 @@
 
 #define HUSH_PSF_LINE 16u
 
-/* What the vertices of one frame add to a slot (float bits in uint32). */
-typedef struct hush_psf_accum {
+/* A slot's data, 32 bytes (two per cache line): what the vertices of this
+ * frame add (float bits in uint32, for the atomics), and the cell's filtered
+ * radiance with the vertex count behind it. Together so that resolve and
+ * lookup touch one line per cell. */
+typedef struct hush_psf_cell {
   _Atomic uint32_t sum[3];
   _Atomic uint32_t count;
-} hush_psf_accum;
-
-/* A cell's filtered radiance and the vertices behind it. */
-typedef struct hush_psf_cell {
   float mean[3];
   float samples;
 } hush_psf_cell;
@@ -55,8 +54,7 @@ typedef struct hush_psf_table {
   uint32_t lines;
   uint32_t slots;          /* lines * HUSH_PSF_LINE */
   _Atomic uint32_t *keys;  /* slots, 64-byte aligned; 0 = empty */
-  hush_psf_accum *accum;   /* slots */
-  hush_psf_cell *cells;    /* slots */
+  hush_psf_cell *cells;    /* slots, 64-byte aligned */
   uint32_t *used;          /* slots used this frame, used_count of them */
   _Atomic uint32_t used_count;
   _Atomic uint64_t vertices, collisions, failed, evictions;

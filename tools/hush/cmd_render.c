@@ -68,11 +68,14 @@ static const char *const help_text =
     "                       each frame gets a layer psf (the filtered radiance; color\n"
     "                       stays the unfiltered one), DIR/psf.csv the per-frame\n"
     "                       statistics, and with --png DIR/frame_NNNN_psf.png\n"
-    "  --psf-scale S        cell size in projected pixels (default 8)\n"
+    "  --psf-scale S        cell size in projected pixels (default 4)\n"
     "  --psf-vertex 1|2     filter at the first or second diffuse vertex (default 1)\n"
     "  --psf-table-size T   hash table slots per pixel (default 2)\n"
     "  --psf-jitter J, --psf-probes N, --psf-max-samples N\n"
     "  --psf-set KEY=VALUE  any psf parameter (docs/psf.md); each implies --psf\n"
+    "  --psf-bench N        filter each frame N times more and report the median\n"
+    "                       times (a benchmark: each repetition also enters the\n"
+    "                       history, so the output differs)\n"
     "  --threads N          worker threads, 0 = one per core (default 0)\n"
     "  --quiet              print only warnings and errors (default: progress per\n"
     "                       frame on stderr: time, Mrays/s, time left)\n"
@@ -91,6 +94,7 @@ typedef struct render_options {
   hush_exr_type exr_type;
   uint32_t threads;
   psf_cli psf;
+  uint32_t psf_bench;      /* --psf-bench N */
 } render_options;
 
 static void list_builtins(void) {
@@ -191,6 +195,9 @@ static void parse_options(int argc, char **argv, render_options *o) {
       o->threads = cli_parse_uint(a.cmd, "--threads", v, 0, 1024);
     } else if (cli_switch(&a, arg, "--quiet")) {
       o->quiet = 1;
+    } else if (cli_option(&a, arg, "--psf-bench", &v)) {
+      o->psf_bench = cli_parse_uint(a.cmd, "--psf-bench", v, 1, 10000);
+      o->psf.on = 1;
     } else if (psf_cli_option(&a, arg, &o->psf)) {
       continue;
     } else if (cli_is_positional(&a, arg)) {
@@ -353,6 +360,38 @@ static void psf_report(render_run *r, uint32_t f, const hush_psf_timings *t) {
   fprintf(stderr, "frame %u %s\n", f, line);
 }
 
+static int compare_ms(const void *a, const void *b) {
+  const double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* --psf-bench N: filters the frame N more times; *t receives the median of
+ * each stage over them. */
+static hush_status psf_bench(render_run *r, hush_frame frame, hush_psf_timings *t) {
+  const uint32_t n = r->o->psf_bench;
+  double *ms = malloc((size_t)n * 4 * sizeof *ms);
+  if (!ms) return HUSH_ERROR_OUT_OF_MEMORY;
+  hush_status st = HUSH_OK;
+  for (uint32_t k = 0; k < n && st == HUSH_OK; k++) {
+    st = hush__psf_renderer_repeat(r->psf.renderer);
+    hush_psf_timings one;
+    if (st == HUSH_OK) st = hush__psf_renderer_finish(r->psf.renderer, frame, &one);
+    ms[k] = one.add;
+    ms[n + k] = one.resolve;
+    ms[2 * n + k] = one.lookup;
+    ms[3 * n + k] = one.cpu;
+  }
+  if (st == HUSH_OK) {
+    double *out[4] = {&t->add, &t->resolve, &t->lookup, &t->cpu};
+    for (int c = 0; c < 4; c++) {
+      qsort(ms + (size_t)c * n, n, sizeof *ms, compare_ms);
+      *out[c] = ms[(size_t)c * n + n / 2];
+    }
+  }
+  free(ms);
+  return st;
+}
+
 /* --psf --png: frame_NNNN_psf.png next to frame_NNNN.png (png_path). */
 static hush_status write_psf_png(render_run *r, hush_frame frame, const char *png_path) {
   char path[HUSH_PATH_MAX];
@@ -446,6 +485,7 @@ static int render_frames(render_run *r, int argc, char **argv) {
     hush_psf_timings psf_t;
     if (st == HUSH_OK && r->psf.on) {
       st = hush__psf_renderer_finish(r->psf.renderer, frame, &psf_t);
+      if (st == HUSH_OK && o->psf_bench) st = psf_bench(r, frame, &psf_t);
       if (st == HUSH_OK) psf_report(r, f, &psf_t);
     }
     char path[HUSH_PATH_MAX];

@@ -79,19 +79,19 @@ void psf_cli_close(psf_cli *o) {
 
 void psf_cli_csv_header(FILE *f) {
   fputs("frame,vertices,collisions,failed,cells_used,cells_occupied,evictions,table_size,"
-        "occupancy,add_ms,resolve_ms,lookup_ms,filter_ms\n",
+        "occupancy,add_ms,resolve_ms,lookup_ms,filter_ms,cpu_ms\n",
         f);
 }
 
 void psf_cli_csv_row(FILE *f, const psf_cli *o, uint32_t frame, const hush_psf_timings *t) {
   hush_psf_stats s;
   hush_psf_get_stats(hush__psf_renderer_psf(o->renderer), &s);
-  fprintf(f, "%u,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.6f,%.3f,%.3f,%.3f,%.3f\n", frame,
+  fprintf(f, "%u,%llu,%llu,%llu,%llu,%llu,%llu,%llu,%.6f,%.3f,%.3f,%.3f,%.3f,%.3f\n", frame,
           (unsigned long long)s.vertices, (unsigned long long)s.collisions,
           (unsigned long long)s.failed, (unsigned long long)s.cells_used,
           (unsigned long long)s.cells_occupied, (unsigned long long)s.evictions,
           (unsigned long long)s.table_size, s.occupancy, t->add, t->resolve, t->lookup,
-          t->add + t->resolve + t->lookup);
+          t->add + t->resolve + t->lookup, t->cpu);
 }
 
 void psf_cli_stats_line(const psf_cli *o, const hush_psf_timings *t, char *buf, size_t size) {
@@ -100,9 +100,9 @@ void psf_cli_stats_line(const psf_cli *o, const hush_psf_timings *t, char *buf, 
   const double nv = s.vertices ? (double)s.vertices : 1.0;
   snprintf(buf, size,
            "psf: %llu vertices in %llu cells, occupancy %.1f%%, collisions %.1f%%, no cell "
-           "%.2f%%, evictions %llu, %.2f ms (add %.2f, resolve %.2f, lookup %.2f)",
+           "%.2f%%, evictions %llu, %.2f ms (add %.2f, resolve %.2f, lookup %.2f; cpu %.2f)",
            (unsigned long long)s.vertices, (unsigned long long)s.cells_used, 100.0 * s.occupancy,
            100.0 * (double)s.collisions / nv, 100.0 * (double)s.failed / nv,
            (unsigned long long)s.evictions, t->add + t->resolve + t->lookup, t->add, t->resolve,
-           t->lookup);
+           t->lookup, t->cpu);
 }
