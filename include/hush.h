@@ -454,7 +454,7 @@ typedef struct hush_psf_stats {
 
 /*
  * A filter for frames of width x height pixels: the table holds
- * table_size * width * height slots (parameter "table_size", default 2),
+ * table_size * width * height slots (parameter "table_size", default 1),
  * rounded up to whole 64-byte cache lines of 16 slots. The caller owns the
  * returned reference. NULL and an error on the device on failure.
  */

@@ -31,7 +31,7 @@ enum {
 static const hush_param_info params[P_COUNT] = {
     {"scale", HUSH_PARAM_FLOAT, 4.0, 0.01, 1024.0,
      "cell size in projected pixels at the vertex's distance (s of Algorithm 1)", NULL},
-    {"table_size", HUSH_PARAM_FLOAT, 2.0, 0.001, 64.0,
+    {"table_size", HUSH_PARAM_FLOAT, 1.0, 0.001, 64.0,
      "slots per pixel of the frame (rounded up to 64-byte lines of 16 slots)", NULL},
     {"jitter", HUSH_PARAM_FLOAT, 1.0, 0.0, 4.0,
      "tangent-plane jitter of the position before quantisation, in cells (0: none)", NULL},

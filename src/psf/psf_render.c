@@ -38,6 +38,7 @@ struct hush_psf_renderer {
   hush_psf_vertex *vertices;
   uint32_t *tickets;
   float *filtered;         /* 3 per sample: the cell average (lookup) */
+  uint8_t *has;            /* per sample: a selected vertex this frame (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
   uint32_t epoch;          /* 1 + frames begun */
@@ -69,7 +70,8 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->vertices = calloc(r->samples, sizeof *r->vertices);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
   r->filtered = calloc(r->samples * 3, sizeof *r->filtered);
-  if (!r->psf || !r->records || !r->vertices || !r->tickets || !r->filtered) {
+  r->has = calloc(r->samples, 1);
+  if (!r->psf || !r->records || !r->vertices || !r->tickets || !r->filtered || !r->has) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
@@ -86,6 +88,7 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   free(r->vertices);
   free(r->tickets);
   free(r->filtered);
+  free(r->has);
   free(r);
 }
 
@@ -169,6 +172,7 @@ static void on_path_end(void *user, uint32_t x, uint32_t y, uint32_t sample,
   sample_record *rec = &r->records[idx];
   if (rec->epoch != r->epoch) reset(r, rec); /* no surface: the sky or a light */
   memcpy(rec->total, radiance, sizeof rec->total);
+  r->has[idx] = rec->selected;
   if (!rec->selected) return;
   float *own = r->vertices[idx].radiance;
   for (int c = 0; c < 3; c++) {
@@ -197,6 +201,7 @@ hush_status hush__psf_renderer_begin(hush_psf_renderer *r, const hush_render_ctx
   r->eye[1] = ctx->cam.eye.y;
   r->eye[2] = ctx->cam.eye.z;
   r->epoch++;
+  memset(r->has, 0, r->samples);
   r->frame = ctx->frame;
   r->pixel_angle = 2.0f * ctx->cam.tan_half_y / (float)r->height;
   return hush_psf_begin_frame(r->psf, r->frame, r->pixel_angle, history);
@@ -208,9 +213,9 @@ hush_status hush__psf_renderer_repeat(hush_psf_renderer *r) {
 
 /* ---- after the frame ---------------------------------------------------------------- */
 
-static int has_vertex(const hush_psf_renderer *r, size_t i) {
-  return r->records[i].epoch == r->epoch && r->records[i].selected;
-}
+/* has[] is cleared at begin and set at each path's end, so it is 0 for
+ * samples this frame did not trace (holes of a progressive frame). */
+static int has_vertex(const hush_psf_renderer *r, size_t i) { return r->has[i]; }
 
 /* Adds (lookup 0) or looks up (1) the selected vertices of rows [y0, y1)
  * in screen order: each run of consecutive samples with a vertex goes in

@@ -70,7 +70,7 @@ static const char *const help_text =
     "                       statistics, and with --png DIR/frame_NNNN_psf.png\n"
     "  --psf-scale S        cell size in projected pixels (default 4)\n"
     "  --psf-vertex 1|2     filter at the first or second diffuse vertex (default 1)\n"
-    "  --psf-table-size T   hash table slots per pixel (default 2)\n"
+    "  --psf-table-size T   hash table slots per pixel (default 1)\n"
     "  --psf-jitter J, --psf-probes N, --psf-max-samples N\n"
     "  --psf-set KEY=VALUE  any psf parameter (docs/psf.md); each implies --psf\n"
     "  --psf-bench N        filter each frame N times more and report the median\n"
