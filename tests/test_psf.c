@@ -23,6 +23,9 @@
 #include "render/scene.h"
 
 #include <pthread.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <sys/wait.h>
 #include <stdint.h>
 #include <string.h>
 
@@ -449,6 +452,69 @@ static void test_renderer(hush_device dev) {
   hush__scene_free(&scene);
 }
 
+/* ---- the command line ------------------------------------------------------------------ */
+
+#define WORK HUSH_BINARY_DIR "/test_psf_work"
+
+static int run(const char *args) {
+  char line[2048];
+  snprintf(line, sizeof line, "'%s' %s > '%s/out.txt' 2>&1", HUSH_CLI, args, WORK);
+  const int s = system(line);
+  return s == -1 ? -1 : WEXITSTATUS(s);
+}
+
+static int file_contains(const char *path, const char *what) {
+  FILE *f = fopen(path, "rb");
+  if (!f) return 0;
+  static char text[1 << 16];
+  const size_t n = fread(text, 1, sizeof text - 1, f);
+  fclose(f);
+  text[n] = '\0';
+  return strstr(text, what) != NULL;
+}
+
+static void test_cli(hush_device dev) {
+  REQUIRE(system("rm -rf '" WORK "' && mkdir -p '" WORK "'") == 0);
+  /* hush render --psf: a psf layer in every frame, statistics per frame */
+  CHECK(run("render --scene builtin:cornell --out '" WORK "/r' --size 48x32 --frames 2 --psf "
+            "--psf-scale 6 --psf-vertex 2 --threads 2") == 0);
+  CHECK(file_contains(WORK "/out.txt", "psf: "));
+  CHECK(file_contains(WORK "/r/psf.csv", "frame,vertices,collisions"));
+  CHECK(file_contains(WORK "/r/psf.csv", "\n1,"));
+  hush_frame fr = NULL;
+  CHECK(hush_frame_read_exr(dev, WORK "/r/frame_0001.exr", &fr) == HUSH_OK);
+  CHECK(fr && hush_frame_get_layer(fr, "psf", NULL) == HUSH_OK);
+  hush_frame_release(fr);
+  CHECK(run("render --scene builtin:cornell --out '" WORK "/bad' --psf-vertex 3") != 0);
+  CHECK(file_contains(WORK "/out.txt", "vertex"));
+  /* hush eval: psf and psf+FILTER are filters */
+  CHECK(run("eval --scene builtin:cornell --out '" WORK "/e' --size 40x24 --frames 3 --ref-spp 4 "
+            "--filters psf,psf+accumulate --set psf.scale=3 --no-video --quiet --strict") == 0);
+  CHECK(file_contains(WORK "/e/summary.md", "| psf |"));
+  CHECK(file_contains(WORK "/e/summary.md", "| psf+accumulate |"));
+  CHECK(file_contains(WORK "/e/status.csv", "psf+accumulate,ok"));
+  CHECK(file_contains(WORK "/e/psf.csv", "\n2,"));
+  CHECK(run("eval --scene builtin:cornell --out '" WORK "/e2' --size 40x24 --frames 2 "
+            "--filters psf+nosuch --quiet") != 0);
+}
+
+/* docs/psf.md has a row for every parameter of the table. */
+static void test_docs(void) {
+  FILE *f = fopen(HUSH_SOURCE_DIR "/docs/psf.md", "rb");
+  REQUIRE(f);
+  static char text[1 << 16];
+  const size_t n = fread(text, 1, sizeof text - 1, f);
+  fclose(f);
+  text[n] = '\0';
+  uint32_t count = 0;
+  const hush_param_info *p = hush_psf_params(&count);
+  for (uint32_t i = 0; i < count; i++) {
+    char row[64];
+    snprintf(row, sizeof row, "| `%s` |", p[i].name);
+    CHECK_MSG(strstr(text, row) != NULL, "docs/psf.md has no row for parameter %s", p[i].name);
+  }
+}
+
 int main(void) {
   /* one worker thread for the library's own loops: the concurrency under
    * test is test_threads's pthreads (ThreadSanitizer understands them) */
@@ -460,6 +526,8 @@ int main(void) {
   test_temporal(dev);
   test_errors(dev);
   test_renderer(dev);
+  test_docs();
+  test_cli(dev);
   hush_device_release(dev);
   return check_summary();
 }
