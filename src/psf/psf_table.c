@@ -133,6 +133,11 @@ static int evict(hush_psf_table *t, uint32_t base, uint32_t start, uint32_t prob
   for (uint32_t k = 0; k < probes; k++) {
     const uint32_t s = base + ((start + k) & (HUSH_PSF_LINE - 1));
     const uint32_t key = atomic_load_explicit(&t->keys[s], memory_order_relaxed);
+    if (key == v) { /* another thread has just put this cell here */
+      r->slot = s;
+      r->collided = k > 0;
+      return 1;
+    }
     if (age_of(key) > age_of(best_key)) {
       best = s;
       best_key = key;
