@@ -208,8 +208,6 @@ hush_status hush_psf_begin_frame(hush_psf psf, uint64_t frame_index, float pixel
 /* Vertices per chunk of keys computed before the table is touched. */
 #define CHUNK 256u
 
-static int finite3(const float *v) { return isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]); }
-
 hush_status hush_psf_add_vertices(hush_psf psf, const hush_psf_vertex *vertices, uint32_t count,
                                   uint32_t *tickets) {
   if (!psf || (count && (!vertices || !tickets))) return HUSH_ERROR_INVALID_ARGUMENT;
@@ -218,17 +216,15 @@ hush_status hush_psf_add_vertices(hush_psf psf, const hush_psf_vertex *vertices,
   hush_psf_key keys[CHUNK];
   float radiance[3 * CHUNK];
   int valid[CHUNK];
+  hush_psf_combiner combiner;
+  hush__psf_combiner_init(&combiner);
   for (uint32_t at = 0; at < count; at += CHUNK) {
     const uint32_t n = count - at < CHUNK ? count - at : CHUNK;
-    for (uint32_t j = 0; j < n; j++) {
-      const hush_psf_vertex *v = &vertices[at + j];
-      valid[j] = finite3(v->radiance) && finite3(v->origin) && isfinite(v->distance) &&
-                 hush__psf_key_of(&psf->key, v, &keys[j]);
-      if (!valid[j]) keys[j].i = keys[j].v = 0;
-      memcpy(radiance + 3 * j, v->radiance, 3 * sizeof(float));
-    }
-    hush__psf_table_add(&psf->table, &probe, keys, radiance, valid, n, tickets + at);
+    hush__psf_keys(&psf->key, vertices + at, n, keys, valid);
+    for (uint32_t j = 0; j < n; j++) memcpy(radiance + 3 * j, vertices[at + j].radiance, 12);
+    hush__psf_table_add(&psf->table, &probe, &combiner, keys, radiance, valid, n, tickets + at);
   }
+  hush__psf_combiner_flush(&psf->table, &combiner);
   return HUSH_OK;
 }
 

@@ -47,27 +47,51 @@ typedef struct hush_psf_key {
   uint32_t v;              /* verification hash, 1 .. HUSH_PSF_VMASK */
 } hush_psf_key;
 
-/* floor(log2(d)) for d > 0, from the float's exponent bits (d is clamped
- * to the normal range, so tiny and non-positive distances share the lowest
- * level); frexpf would be a library call per vertex. */
+/* The key loop (hush__psf_keys_planar) must vectorise, as it is most of
+ * the cost of adding a vertex: GCC does not if-convert its float selects
+ * and floorf, so these helpers select with integer masks on the bits. */
+static inline float hush__psf_bits_f(uint32_t u) {
+  float f;
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
+static inline uint32_t hush__psf_f_bits(float f) {
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  return u;
+}
+/* x where keep is 1, +0 where it is 0. */
+static inline float hush__psf_keep(float x, int keep) {
+  return hush__psf_bits_f(hush__psf_f_bits(x) & (0u - (uint32_t)keep));
+}
+
+/* floor(log2(d)) for d > 0 from the float's exponent bits, clamped to
+ * [-100, 100] (0 and tiny distances share the lowest level, NaN and Inf the
+ * highest). */
 static inline int hush__psf_level(float d) {
-  d = d > 1e-30f ? (d < 1e30f ? d : 1e30f) : 1e-30f;
-  uint32_t bits;
-  memcpy(&bits, &d, sizeof bits);
-  return (int)((bits >> 23) & 0xffu) - 127;
+  const int e = (int)((hush__psf_f_bits(d) >> 23) & 0xffu) - 127;
+  return e < -100 ? -100 : e > 100 ? 100 : e;
 }
 
 /* 2^level as a float (|level| < 127). */
 static inline float hush__psf_exp2i(int level) {
-  const uint32_t bits = (uint32_t)(level + 127) << 23;
-  float f;
-  memcpy(&f, &bits, sizeof f);
-  return f;
+  return hush__psf_bits_f((uint32_t)(level + 127) << 23);
 }
 
 static inline float hush__psf_cell(const hush_psf_key_params *k, int level) {
   return k->scale * k->pixel_angle * hush__psf_exp2i(level);
 }
+
+/* 1 / sqrt(x) by the bit trick and two Newton steps (relative error below
+ * 1e-6; x = 0 gives a large finite value, so x * rsqrt(x) = 0). */
+static inline float hush__psf_rsqrt(float x) {
+  float y = hush__psf_bits_f(0x5f375a86u - (hush__psf_f_bits(x) >> 1));
+  y = y * (1.5f - 0.5f * x * y * y);
+  return y * (1.5f - 0.5f * x * y * y);
+}
+
+/* sqrt(x) for x >= 0. */
+static inline float hush__psf_sqrt(float x) { return x * hush__psf_rsqrt(x); }
 
 /* Murmur3's finaliser: the verification hash must not be a function of the
  * primary one, so it uses another mixer than rng.h's PCG. */
@@ -80,10 +104,20 @@ static inline uint32_t hush__psf_fmix(uint32_t h) {
   return h;
 }
 
-/* A component in [-1, 1] quantised to 4 levels. */
+/* A component in [-1, 1] quantised to 4 levels (NaN gives 0). */
 static inline uint32_t hush__psf_quant4(float c) {
-  const int q = (int)floorf((c + 1.0f) * 2.0f);
+  const float t = (c + 1.0f) * 2.0f;
+  const int q = (int32_t)hush__psf_keep(t, fabsf(t) < 16.0f);
   return (uint32_t)(q < 0 ? 0 : q > 3 ? 3 : q);
+}
+
+/* floor(x) as an int32 for |x| < 2e9; *ok &= that (NaN fails it). */
+static inline uint32_t hush__psf_floor_i32(float x, int *ok) {
+  const int in = fabsf(x) < 2.0e9f;
+  const float xc = hush__psf_keep(x, in);
+  const int32_t t = (int32_t)xc;
+  *ok &= in;
+  return (uint32_t)(t - (int32_t)((float)t > xc));
 }
 
 static inline float hush__psf_dist3(const float a[3], const float b[3]) {
@@ -91,57 +125,109 @@ static inline float hush__psf_dist3(const float a[3], const float b[3]) {
   return sqrtf(dx * dx + dy * dy + dz * dz);
 }
 
-/* Computes the key of v; returns 0 when the vertex cannot be keyed (not
- * finite, or too far out for 32-bit cell coordinates). */
+/* Keys of n vertices: keys[j] and valid[j] (0 when the vertex cannot be
+ * keyed: not finite, or too far out for 32-bit cell coordinates; its key is
+ * then 0). Written without branches on the vertex so the loop vectorises:
+ * this is most of the cost of adding a vertex. */
+#define HUSH_PSF_KEY_BLOCK 64u
+
+/* Keys of at most HUSH_PSF_KEY_BLOCK vertices given as planar arrays. */
+static inline void hush__psf_keys_planar(const hush_psf_key_params *k, uint32_t n,
+                                         const float *restrict P, const float *restrict N,
+                                         const float *restrict O, const float *restrict D,
+                                         const float *restrict R, const uint32_t *restrict S,
+                                         const uint32_t *restrict G, hush_psf_key *restrict keys,
+                                         int *restrict valid) {
+  const size_t B = HUSH_PSF_KEY_BLOCK; /* size_t indices: affine, so the loop vectorises */
+  const float base = k->scale * k->pixel_angle, jit = k->jitter;
+  const uint32_t frame = k->frame, normals = k->normals ? 1u : 0u;
+  for (size_t j = 0; j < n; j++) {
+    const float x0 = P[j], x1 = P[B + j], x2 = P[2 * B + j];
+    const float n0 = N[j], n1 = N[B + j], n2 = N[2 * B + j];
+    const float o0 = O[j], o1 = O[B + j], o2 = O[2 * B + j];
+    float w0 = o0 - x0, w1 = o1 - x1, w2 = o2 - x2;
+    const float len = hush__psf_sqrt(w0 * w0 + w1 * w1 + w2 * w2);
+    const int level0 = hush__psf_level(D[j] + len);
+    const float cell0 = base * hush__psf_exp2i(level0);
+    /* tangent frame of n (Duff et al. 2017, branchless) */
+    const float sign = copysignf(1.0f, n2);
+    const float a = -1.0f / (sign + n2), b = n0 * n1 * a;
+    const float t0 = 1.0f + sign * n0 * n0 * a, t1 = sign * b, t2 = -sign * n0;
+    const float b0 = b, b1 = sign + n1 * n1 * a, b2 = -n1;
+    /* one 32-bit hash gives both 16-bit jitter coordinates */
+    const uint32_t r = hush_pcg_hash(hush_pcg_hash(S[j]) ^ frame);
+    const float u1 = (float)(r & 0xffffu) * (1.0f / 65536.0f) - 0.5f;
+    const float u2 = (float)(r >> 16) * (1.0f / 65536.0f) - 0.5f;
+    const float jc = jit * cell0;
+    const float y0 = x0 + (t0 * u1 + b0 * u2) * jc;
+    const float y1 = x1 + (t1 * u1 + b1 * u2) * jc;
+    const float y2 = x2 + (t2 * u1 + b2 * u2) * jc;
+    const float e0 = o0 - y0, e1 = o1 - y1, e2 = o2 - y2;
+    const int level = hush__psf_level(D[j] + hush__psf_sqrt(e0 * e0 + e1 * e1 + e2 * e2));
+    const float inv = 1.0f / (base * hush__psf_exp2i(level));
+    /* NaN fails every comparison: this also rejects non-finite input */
+    int ok = (fabsf(R[j]) < 3.0e38f) & (fabsf(R[B + j]) < 3.0e38f) &
+             (fabsf(R[2 * B + j]) < 3.0e38f) & (fabsf(D[j]) < 3.0e38f) & (fabsf(len) < 3.0e38f);
+    const uint32_t q0 = hush__psf_floor_i32(y0 * inv, &ok);
+    const uint32_t q1 = hush__psf_floor_i32(y1 * inv, &ok);
+    const uint32_t q2 = hush__psf_floor_i32(y2 * inv, &ok);
+    const uint32_t lv = (uint32_t)(level + 256);
+    const uint32_t i = hush_pcg_hash(q0 ^ hush_pcg_hash(q1 ^ hush_pcg_hash(q2 ^ hush_pcg_hash(lv))));
+    const uint32_t nq = (hush__psf_quant4(n0) | hush__psf_quant4(n1) << 2 |
+                         hush__psf_quant4(n2) << 4 | 1u << 6) *
+                        normals;
+    const float il = hush__psf_rsqrt(len * len);
+    w0 *= il;
+    w1 *= il;
+    w2 *= il;
+    const uint32_t wq = (hush__psf_quant4(w0) | hush__psf_quant4(w1) << 2 |
+                         hush__psf_quant4(w2) << 4 | 1u << 6) *
+                        (G[j] & HUSH_PSF_GLOSSY);
+    const uint32_t extra = nq | wq << 8;
+    uint32_t h = hush__psf_fmix(q0 * 0x9e3779b1u + lv);
+    h = hush__psf_fmix(h ^ (q1 * 0x85ebca77u));
+    h = hush__psf_fmix(h ^ (q2 * 0xc2b2ae3du));
+    h = hush__psf_fmix(h ^ extra) & HUSH_PSF_VMASK;
+    const uint32_t mask = 0u - (uint32_t)ok; /* a mask, not a branch (vectorisation) */
+    keys[j].i = i & mask;
+    keys[j].v = (h | (uint32_t)(h == 0u)) & mask; /* 0 marks an empty slot */
+    valid[j] = ok;
+  }
+}
+
+/* Keys of n vertices: keys[j] and valid[j] (0 when the vertex cannot be
+ * keyed: not finite, or too far out for 32-bit cell coordinates; its key is
+ * then 0). The vertices are first copied to planar arrays so that the
+ * arithmetic, most of the cost of adding a vertex, vectorises. */
+static inline void hush__psf_keys(const hush_psf_key_params *k, const hush_psf_vertex *vs,
+                                  uint32_t n, hush_psf_key *keys, int *valid) {
+  enum { B = HUSH_PSF_KEY_BLOCK };
+  float P[3 * B], N[3 * B], O[3 * B], D[B], R[3 * B];
+  uint32_t S[B], G[B];
+  for (uint32_t at = 0; at < n; at += B) {
+    const uint32_t m = n - at < B ? n - at : B;
+    for (uint32_t j = 0; j < m; j++) {
+      const hush_psf_vertex *v = &vs[at + j];
+      for (int c = 0; c < 3; c++) {
+        P[c * B + j] = v->position[c];
+        N[c * B + j] = v->normal[c];
+        O[c * B + j] = v->origin[c];
+        R[c * B + j] = v->radiance[c];
+      }
+      D[j] = v->distance;
+      S[j] = v->seed;
+      G[j] = v->flags;
+    }
+    hush__psf_keys_planar(k, m, P, N, O, D, R, S, G, keys + at, valid + at);
+  }
+}
+
+/* The key of one vertex; returns 0 when it cannot be keyed. */
 static inline int hush__psf_key_of(const hush_psf_key_params *k, const hush_psf_vertex *v,
                                    hush_psf_key *out) {
-  const float *x = v->position, *n = v->normal;
-  const float d = v->distance + hush__psf_dist3(x, v->origin);
-  const float cell = hush__psf_cell(k, hush__psf_level(d));
-  /* tangent frame of n (Duff et al. 2017, branchless) */
-  const float sign = copysignf(1.0f, n[2]);
-  const float a = -1.0f / (sign + n[2]), b = n[0] * n[1] * a;
-  const float t[3] = {1.0f + sign * n[0] * n[0] * a, sign * b, -sign * n[0]};
-  const float bt[3] = {b, sign + n[1] * n[1] * a, -n[1]};
-  /* one 32-bit hash gives both 16-bit jitter coordinates */
-  const uint32_t r = hush_pcg_hash(hush_pcg_hash(v->seed) ^ k->frame);
-  const float u1 = (float)(r & 0xffffu) * (1.0f / 65536.0f) - 0.5f;
-  const float u2 = (float)(r >> 16) * (1.0f / 65536.0f) - 0.5f;
-  const float j = k->jitter * cell;
-  float xj[3];
-  for (int c = 0; c < 3; c++) xj[c] = x[c] + (t[c] * u1 + bt[c] * u2) * j;
-  const int level = hush__psf_level(v->distance + hush__psf_dist3(xj, v->origin));
-  const float inv = 1.0f / hush__psf_cell(k, level);
-  int32_t q[3];
-  for (int c = 0; c < 3; c++) {
-    const float f = floorf(xj[c] * inv);
-    if (!(fabsf(f) < 2.0e9f)) return 0; /* NaN, Inf or beyond int32 */
-    q[c] = (int32_t)f;
-  }
-  const uint32_t lv = (uint32_t)(level + 256);
-  out->i = hush_pcg_hash((uint32_t)q[0] ^
-                         hush_pcg_hash((uint32_t)q[1] ^ hush_pcg_hash((uint32_t)q[2] ^
-                                                                      hush_pcg_hash(lv))));
-  uint32_t extra = 0;
-  if (k->normals)
-    extra = hush__psf_quant4(n[0]) | hush__psf_quant4(n[1]) << 2 | hush__psf_quant4(n[2]) << 4 |
-            1u << 6;
-  if (v->flags & HUSH_PSF_GLOSSY) {
-    float w[3];
-    for (int c = 0; c < 3; c++) w[c] = v->origin[c] - x[c];
-    const float len = sqrtf(w[0] * w[0] + w[1] * w[1] + w[2] * w[2]);
-    const float il = len > 0.0f ? 1.0f / len : 0.0f;
-    extra |= (hush__psf_quant4(w[0] * il) | hush__psf_quant4(w[1] * il) << 2 |
-              hush__psf_quant4(w[2] * il) << 4 | 1u << 6)
-             << 8;
-  }
-  uint32_t h = hush__psf_fmix((uint32_t)q[0] * 0x9e3779b1u + lv);
-  h = hush__psf_fmix(h ^ ((uint32_t)q[1] * 0x85ebca77u));
-  h = hush__psf_fmix(h ^ ((uint32_t)q[2] * 0xc2b2ae3du));
-  h = hush__psf_fmix(h ^ extra);
-  h &= HUSH_PSF_VMASK;
-  out->v = h ? h : 1u; /* 0 marks an empty slot */
-  return 1;
+  int ok;
+  hush__psf_keys(k, v, 1, out, &ok);
+  return ok;
 }
 
 #endif

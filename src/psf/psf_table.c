@@ -210,46 +210,57 @@ static inline void prefetch_slot(const hush_psf_table *t, hush_psf_key k) {
   __builtin_prefetch(&t->cells[slot], 1);
 }
 
-void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, const hush_psf_key *keys,
-                         const float *radiance, const int *valid, uint32_t n, uint32_t *tickets) {
+void hush__psf_combiner_init(hush_psf_combiner *c) { memset(c, 0, sizeof *c); }
+
+static inline uint32_t combine_index(hush_psf_key k) {
+  return (k.i ^ (k.v * 0x9e3779b1u)) >> (32 - HUSH_PSF_COMBINE_BITS);
+}
+
+void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, hush_psf_combiner *c,
+                         const hush_psf_key *keys, const float *radiance, const int *valid,
+                         uint32_t n, uint32_t *tickets) {
   for (uint32_t j = 0; j < n && j < PREFETCH_AHEAD; j++)
     if (valid[j]) prefetch_slot(t, keys[j]);
-  uint64_t collisions = 0, failed = 0, evictions = 0;
-  hush_psf_key prev = {0, 0}; /* v == 0 never occurs: no match at first */
-  probe_result cur = {HUSH_PSF_NO_CELL, 0, 0};
-  float sum[3] = {0.0f, 0.0f, 0.0f};
-  uint32_t count = 0;
   for (uint32_t j = 0; j < n; j++) {
     if (j + PREFETCH_AHEAD < n && valid[j + PREFETCH_AHEAD])
       prefetch_slot(t, keys[j + PREFETCH_AHEAD]);
     if (!valid[j]) {
       tickets[j] = HUSH_PSF_NO_CELL;
-      failed++;
+      c->failed++;
       continue;
     }
-    if (keys[j].v != prev.v || keys[j].i != prev.i) {
-      flush(t, cur.slot, sum, count);
-      sum[0] = sum[1] = sum[2] = 0.0f;
-      count = 0;
-      prev = keys[j];
-      cur = probe(t, p->probes, keys[j]);
-      evictions += (uint64_t)cur.evicted;
-      cur.evicted = 0;
+    hush_psf_combine_entry *e = &c->entries[combine_index(keys[j])];
+    if (!e->used || e->key.i != keys[j].i || e->key.v != keys[j].v) {
+      if (e->used) flush(t, e->slot, e->sum, e->count);
+      const probe_result r = probe(t, p->probes, keys[j]);
+      c->evictions += (uint64_t)r.evicted;
+      e->used = 1;
+      e->key = keys[j];
+      e->slot = r.slot;
+      e->collided = r.collided;
+      e->count = 0;
+      e->sum[0] = e->sum[1] = e->sum[2] = 0.0f;
     }
-    tickets[j] = cur.slot;
-    collisions += (uint64_t)cur.collided;
-    if (cur.slot == HUSH_PSF_NO_CELL) {
-      failed++;
+    tickets[j] = e->slot;
+    c->collisions += (uint64_t)e->collided;
+    if (e->slot == HUSH_PSF_NO_CELL) {
+      c->failed++;
       continue;
     }
-    for (int c = 0; c < 3; c++) sum[c] += radiance[3 * j + c];
-    count++;
+    for (int k = 0; k < 3; k++) e->sum[k] += radiance[3 * j + k];
+    e->count++;
   }
-  flush(t, cur.slot, sum, count);
-  atomic_fetch_add_explicit(&t->vertices, n, memory_order_relaxed);
-  atomic_fetch_add_explicit(&t->collisions, collisions, memory_order_relaxed);
-  atomic_fetch_add_explicit(&t->failed, failed, memory_order_relaxed);
-  atomic_fetch_add_explicit(&t->evictions, evictions, memory_order_relaxed);
+  c->vertices += n;
+}
+
+void hush__psf_combiner_flush(hush_psf_table *t, hush_psf_combiner *c) {
+  for (uint32_t k = 0; k < HUSH_PSF_COMBINE; k++)
+    if (c->entries[k].used) flush(t, c->entries[k].slot, c->entries[k].sum, c->entries[k].count);
+  atomic_fetch_add_explicit(&t->vertices, c->vertices, memory_order_relaxed);
+  atomic_fetch_add_explicit(&t->collisions, c->collisions, memory_order_relaxed);
+  atomic_fetch_add_explicit(&t->failed, c->failed, memory_order_relaxed);
+  atomic_fetch_add_explicit(&t->evictions, c->evictions, memory_order_relaxed);
+  hush__psf_combiner_init(c);
 }
 
 /* ---- resolve ----------------------------------------------------------------- */

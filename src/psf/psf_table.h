@@ -18,7 +18,8 @@
  * verification hashes never share a slot within a frame.
  *
  * Contributions are summed with C11 atomics (a compare-and-swap loop on the
- * bits of each float, a fetch-add on the count). At resolve every cell used
+ * bits of each float, a fetch-add on the count), after write combining in
+ * each thread (below). At resolve every cell used
  * this frame averages them and blends the average with its history (§3.3):
  *   mean = mean_old + n_new / (min(n_old, max_samples) + n_new) (avg - mean_old)
  * i.e. a running mean until max_samples vertices, then an exponential average
@@ -75,13 +76,42 @@ void hush__psf_table_clear(hush_psf_table *t, int threads);
 void hush__psf_table_begin_frame(hush_psf_table *t);
 
 /*
- * Adds n vertices with keys keys[] and radiance radiance[3 * j] (finite, the
- * caller checks), in order, writing each one's slot (or HUSH_PSF_NO_CELL)
- * to tickets[]. Thread-safe. Consecutive vertices with equal keys are summed
- * locally and added with one set of atomics.
+ * Write combining: a thread's recent cells, direct-mapped by key, whose
+ * vertices are summed locally and added to the table with one set of
+ * atomics when the entry is replaced or flushed. Neighbouring pixels fall
+ * into the same few cells (interleaved by the jitter), so this saves most of
+ * the atomics and probes. One per thread (on its stack), not shared.
  */
-void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, const hush_psf_key *keys,
-                         const float *radiance, const int *valid, uint32_t n, uint32_t *tickets);
+#define HUSH_PSF_COMBINE_BITS 5u
+#define HUSH_PSF_COMBINE (1u << HUSH_PSF_COMBINE_BITS)
+
+typedef struct hush_psf_combine_entry {
+  hush_psf_key key;
+  uint32_t slot;           /* HUSH_PSF_NO_CELL when the key found none */
+  uint32_t count;
+  float sum[3];
+  int collided, used;
+} hush_psf_combine_entry;
+
+typedef struct hush_psf_combiner {
+  hush_psf_combine_entry entries[HUSH_PSF_COMBINE];
+  uint64_t vertices, collisions, failed, evictions;
+} hush_psf_combiner;
+
+void hush__psf_combiner_init(hush_psf_combiner *c);
+
+/*
+ * Adds n vertices with keys keys[] and radiance radiance[3 * j] (valid[j]
+ * says whether the key is usable), in order, writing each one's slot (or
+ * HUSH_PSF_NO_CELL) to tickets[]. Thread-safe for different combiners; the
+ * sums reach the table at hush__psf_combiner_flush at the latest.
+ */
+void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, hush_psf_combiner *c,
+                         const hush_psf_key *keys, const float *radiance, const int *valid,
+                         uint32_t n, uint32_t *tickets);
+
+/* Adds c's pending sums and statistics to the table and empties c. */
+void hush__psf_combiner_flush(hush_psf_table *t, hush_psf_combiner *c);
 
 typedef struct hush_psf_resolve_params {
   int temporal;            /* 0: each frame's average alone */
