@@ -484,9 +484,9 @@ HUSH_API hush_status hush_psf_begin_frame(hush_psf psf, uint64_t frame_index, fl
 /*
  * Adds count vertices to their cells and writes each one's ticket (a slot,
  * or HUSH_PSF_NO_CELL) to tickets[i]. Thread-safe: call it from the path
- * tracer's threads concurrently (accumulation uses atomics). Runs of
- * consecutive vertices that share a cell are summed locally first, so pass
- * vertices in screen order when possible. Reports no errors through the
+ * tracer's threads concurrently (accumulation uses atomics). Each call
+ * sums the vertices of its recently seen cells locally first, so pass many
+ * vertices per call, in screen order when possible. Reports no errors through the
  * device (it may run on many threads); returns INVALID_ARGUMENT or
  * INVALID_OPERATION (no begin_frame) without recording them.
  */
