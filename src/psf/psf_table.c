@@ -44,11 +44,9 @@ void hush__psf_table_free(hush_psf_table *t) {
 
 /* Zero sums, count and history. */
 static void reset_cell(hush_psf_cell *c) {
-  for (int k = 0; k < 3; k++) {
-    atomic_store_explicit(&c->sum[k], 0u, memory_order_relaxed);
-    c->mean[k] = 0.0f;
-  }
-  atomic_store_explicit(&c->count, 0u, memory_order_relaxed);
+  atomic_store_explicit(&c->rg, 0u, memory_order_relaxed);
+  atomic_store_explicit(&c->bn, 0u, memory_order_relaxed);
+  for (int k = 0; k < 3; k++) c->mean[k] = 0.0f;
   c->samples = 0.0f;
 }
 
@@ -178,22 +176,35 @@ static probe_result probe(hush_psf_table *t, uint32_t probes, hush_psf_key key) 
 
 /* ---- accumulation ------------------------------------------------------------ */
 
-static inline void atomic_add_float(_Atomic uint32_t *a, float v) {
-  uint32_t old = atomic_load_explicit(a, memory_order_relaxed), now;
-  do {
-    float f;
-    memcpy(&f, &old, sizeof f);
-    f += v;
-    memcpy(&now, &f, sizeof now);
-  } while (!atomic_compare_exchange_weak_explicit(a, &old, now, memory_order_relaxed,
-                                                  memory_order_relaxed));
+static inline float lo_float(uint64_t w) {
+  const uint32_t u = (uint32_t)w;
+  float f;
+  memcpy(&f, &u, sizeof f);
+  return f;
 }
 
+static inline uint64_t float_bits(float f) {
+  uint32_t u;
+  memcpy(&u, &f, sizeof u);
+  return u;
+}
+
+/* Adds sum and count to a slot: one compare-and-swap loop per 64-bit word.
+ * The thread whose count leaves 0 puts the slot on the list of this frame. */
 static void flush(hush_psf_table *t, uint32_t slot, const float sum[3], uint32_t count) {
   if (slot == HUSH_PSF_NO_CELL || count == 0) return;
   hush_psf_cell *a = &t->cells[slot];
-  for (int c = 0; c < 3; c++) atomic_add_float(&a->sum[c], sum[c]);
-  if (atomic_fetch_add_explicit(&a->count, count, memory_order_relaxed) == 0) {
+  uint64_t old = atomic_load_explicit(&a->rg, memory_order_relaxed), now;
+  do {
+    now = float_bits(lo_float(old) + sum[0]) | float_bits(lo_float(old >> 32) + sum[1]) << 32;
+  } while (!atomic_compare_exchange_weak_explicit(&a->rg, &old, now, memory_order_relaxed,
+                                                  memory_order_relaxed));
+  old = atomic_load_explicit(&a->bn, memory_order_relaxed);
+  do {
+    now = float_bits(lo_float(old) + sum[2]) | ((old >> 32) + count) << 32;
+  } while (!atomic_compare_exchange_weak_explicit(&a->bn, &old, now, memory_order_relaxed,
+                                                  memory_order_relaxed));
+  if ((old >> 32) == 0) {
     const uint32_t at = atomic_fetch_add_explicit(&t->used_count, 1u, memory_order_relaxed);
     t->used[at] = slot; /* a slot's count leaves 0 once per frame: at < slots */
   }
@@ -267,16 +278,13 @@ void hush__psf_combiner_flush(hush_psf_table *t, hush_psf_combiner *c) {
 
 static void blend(hush_psf_table *t, uint32_t slot, const hush_psf_resolve_params *p) {
   hush_psf_cell *cell = &t->cells[slot];
-  const uint32_t count = atomic_load_explicit(&cell->count, memory_order_relaxed);
-  float avg[3];
-  for (int c = 0; c < 3; c++) {
-    const uint32_t bits = atomic_load_explicit(&cell->sum[c], memory_order_relaxed);
-    float s;
-    memcpy(&s, &bits, sizeof s);
-    avg[c] = s / (float)count;
-    atomic_store_explicit(&cell->sum[c], 0u, memory_order_relaxed);
-  }
-  atomic_store_explicit(&cell->count, 0u, memory_order_relaxed);
+  const uint64_t rg = atomic_load_explicit(&cell->rg, memory_order_relaxed);
+  const uint64_t bn = atomic_load_explicit(&cell->bn, memory_order_relaxed);
+  const uint32_t count = (uint32_t)(bn >> 32);
+  const float avg[3] = {lo_float(rg) / (float)count, lo_float(rg >> 32) / (float)count,
+                        lo_float(bn) / (float)count};
+  atomic_store_explicit(&cell->rg, 0u, memory_order_relaxed);
+  atomic_store_explicit(&cell->bn, 0u, memory_order_relaxed);
   const float n_new = (float)count;
   if (!(isfinite(avg[0]) && isfinite(avg[1]) && isfinite(avg[2]))) return; /* keep the history */
   if (!p->temporal || cell->samples <= 0.0f) {

@@ -17,8 +17,8 @@
  * A cell of age 0 is never evicted, so two vertices with different
  * verification hashes never share a slot within a frame.
  *
- * Contributions are summed with C11 atomics (a compare-and-swap loop on the
- * bits of each float, a fetch-add on the count), after write combining in
+ * Contributions are summed with C11 atomics (a compare-and-swap loop on each
+ * of two 64-bit words: red and green sums, blue sum and count), after write combining in
  * each thread (below). At resolve every cell used
  * this frame averages them and blends the average with its history (§3.3):
  *   mean = mean_old + n_new / (min(n_old, max_samples) + n_new) (avg - mean_old)
@@ -41,12 +41,13 @@
 #define HUSH_PSF_LINE 16u
 
 /* A slot's data, 32 bytes (two per cache line): what the vertices of this
- * frame add (float bits in uint32, for the atomics), and the cell's filtered
+ * frame add (two 64-bit words, so that one vertex, or one combined run,
+ * costs two compare-and-swaps rather than four atomics), and the cell's filtered
  * radiance with the vertex count behind it. Together so that resolve and
  * lookup touch one line per cell. */
 typedef struct hush_psf_cell {
-  _Atomic uint32_t sum[3];
-  _Atomic uint32_t count;
+  _Atomic uint64_t rg;     /* float bits: red sum (low 32 bits), green sum (high) */
+  _Atomic uint64_t bn;     /* float bits of the blue sum (low), vertex count (high) */
   float mean[3];
   float samples;
 } hush_psf_cell;
