@@ -476,7 +476,9 @@ HUSH_API hush_status hush_psf_get_float(hush_psf psf, const char *name, float *v
  * Starts a frame. pixel_angle: the width of one pixel on a plane at unit
  * distance from the camera (2 tan(fov_y / 2) / height), which sets the cell
  * size: scale * pixel_angle * 2^floor(log2(distance)). HUSH_HISTORY_RESET
- * empties the table (a camera cut, or a changed scene).
+ * empties the table (a camera cut, or a changed scene). Resolve each frame
+ * before the next begin_frame: otherwise the cells average both frames'
+ * vertices together.
  */
 HUSH_API hush_status hush_psf_begin_frame(hush_psf psf, uint64_t frame_index, float pixel_angle,
                                           hush_history_mode history);
