@@ -15,18 +15,25 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* What the hooks keep for one camera sample (written only by the thread
- * tracing it). */
-typedef struct sample_record {
-  float prefix[3];
-  float throughput[3];
-  float total[3];
+/* What the hooks keep for one camera sample, written only by the thread
+ * tracing it, in two arrays: the state of the path being traced, and what
+ * composing the layer reads (so that pass streams 36 bytes per sample). */
+typedef struct sample_trace {
   float last[3];           /* the previous vertex (the eye at first) */
   float distance;          /* path length to last */
   uint32_t epoch;          /* frame counter of the last write; stale otherwise */
   uint8_t seen;            /* sufficiently diffuse vertices so far */
   uint8_t selected;        /* vertices[] holds this sample's vertex */
-} sample_record;
+} sample_trace;
+
+typedef struct sample_result {
+  float prefix[3];
+  float throughput[3];
+  float total[3];
+} sample_result;
+
+/* has[] values, per sample. */
+enum { NOT_TRACED = 0, NO_VERTEX = 1, WITH_VERTEX = 2 };
 
 struct hush_psf_renderer {
   hush_device device;
@@ -34,11 +41,12 @@ struct hush_psf_renderer {
   int vertex;              /* 1 or 2 */
   uint32_t width, height, spp;
   size_t samples;          /* width * height * spp */
-  sample_record *records;
+  sample_trace *traces;
+  sample_result *results;
   hush_psf_vertex *vertices;
   uint32_t *tickets;
   float *filtered;         /* 3 per sample: the cell average (lookup) */
-  uint8_t *has;            /* per sample: a selected vertex this frame (set at path end) */
+  uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
   uint32_t epoch;          /* 1 + frames begun */
@@ -66,12 +74,13 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->spp = spp;
   r->samples = (size_t)width * height * spp;
   r->psf = hush_psf_new(device, width, height);
-  r->records = calloc(r->samples, sizeof *r->records);
+  r->traces = calloc(r->samples, sizeof *r->traces);
+  r->results = calloc(r->samples, sizeof *r->results);
   r->vertices = calloc(r->samples, sizeof *r->vertices);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
   r->filtered = calloc(r->samples * 3, sizeof *r->filtered);
   r->has = calloc(r->samples, 1);
-  if (!r->psf || !r->records || !r->vertices || !r->tickets || !r->filtered || !r->has) {
+  if (!r->psf || !r->traces || !r->results || !r->vertices || !r->tickets || !r->filtered || !r->has) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
@@ -84,7 +93,8 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
 void hush__psf_renderer_free(hush_psf_renderer *r) {
   if (!r) return;
   hush_psf_release(r->psf);
-  free(r->records);
+  free(r->traces);
+  free(r->results);
   free(r->vertices);
   free(r->tickets);
   free(r->filtered);
@@ -112,10 +122,11 @@ static size_t sample_index(const hush_psf_renderer *r, uint32_t x, uint32_t y, u
   return ((size_t)y * r->width + x) * r->spp + s;
 }
 
-static void reset(const hush_psf_renderer *r, sample_record *rec) {
-  memset(rec, 0, sizeof *rec);
-  memcpy(rec->last, r->eye, sizeof rec->last);
-  rec->epoch = r->epoch;
+static void reset(const hush_psf_renderer *r, sample_trace *tr, sample_result *res) {
+  memset(tr, 0, sizeof *tr);
+  memset(res, 0, sizeof *res);
+  memcpy(tr->last, r->eye, sizeof tr->last);
+  tr->epoch = r->epoch;
 }
 
 /* 0: passed through (smooth specular, glass, emitters), 1: diffuse,
@@ -130,54 +141,57 @@ static int vertex_kind(const hush_material *m) {
   }
 }
 
-static void select_vertex(hush_psf_renderer *r, size_t idx, sample_record *rec,
-                          const hush_path_vertex *v, const hush_material *m, int kind) {
+static void select_vertex(hush_psf_renderer *r, size_t idx, sample_trace *tr,
+                          sample_result *res, const hush_path_vertex *v, const hush_material *m,
+                          int kind) {
   hush_psf_vertex *pv = &r->vertices[idx];
   memcpy(pv->position, &v->p, sizeof pv->position);
   memcpy(pv->normal, &v->n, sizeof pv->normal);
-  memcpy(pv->origin, rec->last, sizeof pv->origin);
-  pv->distance = rec->distance;
+  memcpy(pv->origin, tr->last, sizeof pv->origin);
+  pv->distance = tr->distance;
   pv->seed = (uint32_t)idx;
   pv->flags = kind == 2 ? HUSH_PSF_GLOSSY : 0u;
   float albedo[3];
   hush__bsdf_albedo(m, v->surface, albedo);
   for (int c = 0; c < 3; c++)
-    rec->throughput[c] = v->throughput[c] * fmaxf(albedo[c], MIN_ALBEDO);
-  rec->selected = 1;
+    res->throughput[c] = v->throughput[c] * fmaxf(albedo[c], MIN_ALBEDO);
+  tr->selected = 1;
 }
 
 static void on_vertex(void *user, const hush_path_vertex *v) {
   hush_psf_renderer *r = user;
   const size_t idx = sample_index(r, v->x, v->y, v->sample);
-  sample_record *rec = &r->records[idx];
-  if (v->depth == 0) reset(r, rec);
-  if (rec->selected) return;
+  sample_trace *tr = &r->traces[idx];
+  sample_result *res = &r->results[idx];
+  if (v->depth == 0) reset(r, tr, res);
+  if (tr->selected) return;
   const hush_material *m = &r->scene->materials[v->material];
   const int kind = vertex_kind(m);
-  if (kind && ++rec->seen == r->vertex) {
-    select_vertex(r, idx, rec, v, m, kind);
+  if (kind && ++tr->seen == r->vertex) {
+    select_vertex(r, idx, tr, res, v, m, kind);
     return;
   }
-  for (int c = 0; c < 3; c++) rec->prefix[c] += v->contribution[c];
+  for (int c = 0; c < 3; c++) res->prefix[c] += v->contribution[c];
   const float p[3] = {v->p.x, v->p.y, v->p.z};
-  const float dx = p[0] - rec->last[0], dy = p[1] - rec->last[1], dz = p[2] - rec->last[2];
-  rec->distance += sqrtf(dx * dx + dy * dy + dz * dz);
-  memcpy(rec->last, p, sizeof p);
+  const float dx = p[0] - tr->last[0], dy = p[1] - tr->last[1], dz = p[2] - tr->last[2];
+  tr->distance += sqrtf(dx * dx + dy * dy + dz * dz);
+  memcpy(tr->last, p, sizeof p);
 }
 
 static void on_path_end(void *user, uint32_t x, uint32_t y, uint32_t sample,
                         const float radiance[3]) {
   hush_psf_renderer *r = user;
   const size_t idx = sample_index(r, x, y, sample);
-  sample_record *rec = &r->records[idx];
-  if (rec->epoch != r->epoch) reset(r, rec); /* no surface: the sky or a light */
-  memcpy(rec->total, radiance, sizeof rec->total);
-  r->has[idx] = rec->selected;
-  if (!rec->selected) return;
+  sample_trace *tr = &r->traces[idx];
+  sample_result *res = &r->results[idx];
+  if (tr->epoch != r->epoch) reset(r, tr, res); /* no surface: the sky or a light */
+  memcpy(res->total, radiance, sizeof res->total);
+  r->has[idx] = tr->selected ? WITH_VERTEX : NO_VERTEX;
+  if (!tr->selected) return;
   float *own = r->vertices[idx].radiance;
   for (int c = 0; c < 3; c++) {
-    const float t = rec->throughput[c];
-    own[c] = t > 1e-20f ? (radiance[c] - rec->prefix[c]) / t : 0.0f;
+    const float t = res->throughput[c];
+    own[c] = t > 1e-20f ? (radiance[c] - res->prefix[c]) / t : 0.0f;
   }
 }
 
@@ -213,9 +227,9 @@ hush_status hush__psf_renderer_repeat(hush_psf_renderer *r) {
 
 /* ---- after the frame ---------------------------------------------------------------- */
 
-/* has[] is cleared at begin and set at each path's end, so it is 0 for
- * samples this frame did not trace (holes of a progressive frame). */
-static int has_vertex(const hush_psf_renderer *r, size_t i) { return r->has[i]; }
+/* has[] is cleared at begin and set at each path's end, so it is
+ * NOT_TRACED for the holes of a progressive frame. */
+static int has_vertex(const hush_psf_renderer *r, size_t i) { return r->has[i] == WITH_VERTEX; }
 
 /* Adds (lookup 0) or looks up (1) the selected vertices of rows [y0, y1)
  * in screen order: each run of consecutive samples with a vertex goes in
@@ -242,9 +256,9 @@ static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *
       float sum[3] = {0.0f, 0.0f, 0.0f};
       for (uint32_t s = 0; s < r->spp; s++) {
         const size_t i = sample_index(r, x, y, s);
-        const sample_record *rec = &r->records[i];
-        if (rec->epoch != r->epoch) continue; /* a hole of a progressive frame */
-        if (!rec->selected) {
+        const sample_result *rec = &r->results[i];
+        if (r->has[i] == NOT_TRACED) continue; /* a hole of a progressive frame */
+        if (r->has[i] == NO_VERTEX) {
           for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
           continue;
         }
