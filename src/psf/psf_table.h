@@ -18,9 +18,9 @@
  * verification hashes never share a slot within a frame.
  *
  * Contributions are summed with C11 atomics (a compare-and-swap loop on each
- * of two 64-bit words: red and green sums, blue sum and count), after write combining in
- * each thread (below). At resolve every cell used
- * this frame averages them and blends the average with its history (§3.3):
+ * of two 64-bit words: red and green sums, blue sum and count), after write
+ * combining in each thread (below). At resolve every cell used this frame
+ * averages them and blends the average with its history (§3.3):
  *   mean = mean_old + n_new / (min(n_old, max_samples) + n_new) (avg - mean_old)
  * i.e. a running mean until max_samples vertices, then an exponential average
  * whose weight on new vertices never drops below n_new / (max_samples + n_new).
