@@ -396,6 +396,25 @@ HUSH_API hush_status hush_image_write_pfm(hush_device device, const hush_image_v
 HUSH_API hush_status hush_frame_read_pfm(hush_device device, const char *path,
                                          const char *layer_name, hush_frame *frame);
 
+/* ------------------------------------------------------------------------ */
+/* nca filter: learned weights (docs/nca.md)                                */
+/* ------------------------------------------------------------------------ */
+
+/*
+ * Loads a weights file written by `hush train-nca` (versioned format with a
+ * checksum, docs/nca.md) into a filter of class "nca"; it replaces the
+ * built-in weights from the next execute and survives commits. path NULL
+ * returns to the built-in weights. HUSH_ERROR_IO, HUSH_ERROR_CORRUPT or
+ * HUSH_ERROR_UNSUPPORTED with a message when the file is refused (the
+ * filter keeps its previous weights); HUSH_ERROR_INVALID_ARGUMENT when the
+ * filter is not an "nca" filter.
+ */
+HUSH_API hush_status hush_nca_load_weights(hush_filter filter, const char *path);
+
+/* ------------------------------------------------------------------------ */
+/* end of the nca section                                                   */
+/* ------------------------------------------------------------------------ */
+
 /* ======================================================================== */
 /* Hashed path-space filtering (hashed-path-space-filtering-binder-2019.md) */
 /* ======================================================================== */

@@ -2,10 +2,11 @@
  * test_export_bmfr.c — `hush render --export bmfr` (io/export_bmfr.h): the
  * files the published BMFR code opens exist, each EXR has exactly the 3 float
  * channels R, G, B; colour * albedo gives the radiance back (also where the
- * albedo is 0); camera_matrices.h parses (and compiles, when a C compiler is
+ * albedo is 0), and sky pixels have colour 1 and their radiance as albedo; camera_matrices.h parses (and compiles, when a C compiler is
  * on the PATH), its matrices are those of cameras.json with clip y negated,
  * and projecting each pixel's world position with them by the code's own
- * formula, uv * size - (offset.x, 1 - offset.y), lands on that pixel.
+ * formula, uv * size - (offset.x, 1 - offset.y), lands on that pixel; with
+ * the previous frame's matrix it lands where the motion vector points.
  */
 #include "check.h"
 
@@ -79,14 +80,16 @@ static void read_text(const char *path, char *buf, size_t size) {
   fclose(f);
 }
 
+/* Pixel 0 and 1: surfaces, some albedo channels 0 (the guard); pixel 2: sky
+ * (normal 0), demodulated by its own radiance, one channel below the guard. */
 static void test_demodulation_guard(hush_device dev) {
-  hush_frame f = hush_frame_new(dev, 2, 1);
+  hush_frame f = hush_frame_new(dev, 3, 1);
   REQUIRE(f);
   const char *names[] = {"color", "albedo", "normal", "position"};
-  const float values[4][6] = {{0.5f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f},
-                              {0.5f, 0.0f, 1e-4f, 1.0f, 0.25f, 0.0f},
-                              {0, 0, 1, 0, 1, 0},
-                              {1, 2, 3, 4, 5, 6}};
+  const float values[4][9] = {{0.5f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f, 20.0f, 0.5f, 1e-5f},
+                              {0.5f, 0.0f, 1e-4f, 1.0f, 0.25f, 0.0f, 1.0f, 1.0f, 1.0f},
+                              {0, 0, 1, 0, 1, 0, 0, 0, 0},
+                              {1, 2, 3, 4, 5, 6, 0, 0, 0}};
   for (int l = 0; l < 4; l++) {
     hush_image_view v;
     REQUIRE(hush_frame_add_layer(f, names[l], 3, &v) == HUSH_OK);
@@ -98,9 +101,9 @@ static void test_demodulation_guard(hush_device dev) {
   REQUIRE(hush_frame_read_exr(dev, WORK "/guard/color7.exr", &c) == HUSH_OK);
   REQUIRE(hush_frame_read_exr(dev, WORK "/guard/albedo7.exr", &a) == HUSH_OK);
   const float *cc = layer3(c, "color"), *aa = layer3(a, "color");
-  const float expect_c[6] = {1.0f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f};
-  const float expect_a[6] = {0.5f, 1.0f, 1.0f, 1.0f, 0.25f, 1.0f};
-  for (int i = 0; i < 6; i++) {
+  const float expect_c[9] = {1.0f, 0.2f, 0.3f, 4.0f, 0.0f, 1.0f, 1.0f, 1.0f, 1e-5f};
+  const float expect_a[9] = {0.5f, 1.0f, 1.0f, 1.0f, 0.25f, 1.0f, 20.0f, 0.5f, 1.0f};
+  for (int i = 0; i < 9; i++) {
     CHECK_NEAR(cc[i], expect_c[i], 1e-6);
     CHECK_NEAR(aa[i], expect_a[i], 1e-6);
   }
@@ -208,12 +211,65 @@ static void test_render_export(hush_device dev) {
                  "/seq/bmfr/camera_matrices.h' -x c++ /dev/null") == 0);
 }
 
+/* The published code's first kernel finds a pixel's history by projecting its
+ * world position with the PREVIOUS frame's matrix and subtracting THIS frame's
+ * offset (bmfr.cpp passes camera_matrices[frame - 1] and pixel_offsets[frame]).
+ * With the export's matrices and offsets that must land where the renderer's
+ * motion vectors say the point was (a static scene and a moving camera, so
+ * the motion is the camera's alone), and the same in every frame. */
+static void test_history_reprojection(hush_device dev) {
+  char cmd[1024];
+  snprintf(cmd, sizeof cmd,
+           "'%s' render --scene builtin:cornell --path orbit --size %dx%d --frames %d --first 5 "
+           "--quiet --export bmfr --out '" WORK "/orbit'",
+           HUSH_CLI, W, H, FRAMES);
+  REQUIRE(system(cmd) == 0);
+  hush_sequence seq;
+  REQUIRE(hush__sequence_read(dev, WORK "/orbit", &seq) == HUSH_OK);
+  static char text[1 << 16];
+  read_text(WORK "/orbit/bmfr/camera_matrices.h", text, sizeof text);
+  float mats[FRAMES * 16 + 1], offs[FRAMES * 2 + 1];
+  REQUIRE(parse_array(text, "const float camera_matrices[", mats, FRAMES * 16 + 1) == FRAMES * 16);
+  REQUIRE(parse_array(text, "const float pixel_offsets[", offs, FRAMES * 2 + 1) == FRAMES * 2);
+  for (int i = 1; i < FRAMES; i++) {
+    hush_frame f;
+    REQUIRE(hush__sequence_read_frame(dev, &seq, (uint32_t)i, &f) == HUSH_OK);
+    hush_layer *ml = hush__frame_find(f, "motion");
+    REQUIRE(ml && ml->channels == 2);
+    const float *mv = ml->pixels, *nn = layer3(f, "normal"), *pp = layer3(f, "position");
+    const float *m = mats + 16 * (i - 1), *o = offs + 2 * i;
+    int surfaces = 0, bad = 0, moved = 0;
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const size_t j = (size_t)y * W + x;
+        if (nn[3 * j] == 0.0f && nn[3 * j + 1] == 0.0f && nn[3 * j + 2] == 0.0f) continue;
+        surfaces++;
+        const float P[4] = {pp[3 * j], pp[3 * j + 1], pp[3 * j + 2], 1.0f};
+        float clip[4];
+        for (int r = 0; r < 4; r++)
+          clip[r] = m[r] * P[0] + m[4 + r] * P[1] + m[8 + r] * P[2] + m[12 + r] * P[3];
+        const float u = (clip[0] / clip[3] + 1.0f) * 0.5f, v = (clip[1] / clip[3] + 1.0f) * 0.5f;
+        const float px = u * W - o[0], py = v * H - (1.0f - o[1]);
+        bad += fabsf(px - (x + mv[2 * j])) > 2e-3f || fabsf(py - (y + mv[2 * j + 1])) > 2e-3f;
+        moved += fabsf(mv[2 * j]) > 0.05f;
+      }
+    CHECK(surfaces > W * H / 2);
+    CHECK_MSG(moved > surfaces / 2, "frame %d: the camera does not move (%d of %d pixels)", i,
+              moved, surfaces);
+    CHECK_MSG(bad == 0, "frame %d: %d of %d pixels reproject elsewhere than their motion vector",
+              i, bad, surfaces);
+    hush_frame_release(f);
+  }
+  hush__sequence_free(&seq);
+}
+
 int main(void) {
   REQUIRE(system("rm -rf '" WORK "' && mkdir -p '" WORK "'") == 0);
   hush_device dev = hush_device_new(NULL);
   REQUIRE(dev);
   test_demodulation_guard(dev);
   test_render_export(dev);
+  test_history_reprojection(dev);
   hush_device_release(dev);
   return check_summary();
 }

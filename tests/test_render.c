@@ -394,8 +394,9 @@ static void test_determinism(void) {
   rig_open(&r, "cornell-moving");
   hush_render_params p;
   hush__render_defaults(&p);
-  p.width = 64;
-  p.height = 48;
+  /* not multiples of the 4 x 4 packets nor of the 16 x 16 tiles */
+  p.width = 67;
+  p.height = 45;
   p.bounces = 3;
   for (int sampler = 0; sampler < 2; sampler++) {
     p.sampler = sampler ? HUSH_SAMPLER_LD : HUSH_SAMPLER_RANDOM;
@@ -411,17 +412,35 @@ static void test_determinism(void) {
     /* another frame uses other numbers */
     hush_frame d = render_at(&r, &p, HUSH_MOVE_ORBIT, 4, &c3);
     CHECK(!same_layers(a, d));
+    /* a frame rendered into the last one's layers (as hush render does)
+     * is the same as one rendered into a new frame */
+    hush_frame e = render_at(&r, &p, HUSH_MOVE_ORBIT, 3, &c2);
+    REQUIRE(hush__scene_set_frame(r.device, &r.scene, 4) == HUSH_OK);
+    hush__lights_set_frame(&r.lights, 4);
+    REQUIRE(hush__render_frame(r.device, &c3, e, NULL, NULL, NULL) == HUSH_OK);
+    CHECK(same_layers(e, d));
+    hush_frame_release(e);
     REQUIRE(hush__scene_set_frame(r.device, &r.scene, 3) == HUSH_OK);
     hush__lights_set_frame(&r.lights, 3);
 
-    /* single pixels re-rendered alone reproduce the frame bit for bit */
+    /* single pixels re-rendered alone reproduce the frame bit for bit,
+     * every pixel: edge blocks of the primary-ray packets included */
     const float *color = layer(a, "color"), *vis = layer(a, "vis");
-    int bad = 0, close = 0, total = 0;
+    int bad = 0, bad_vis = 0, close = 0, total = 0;
+    for (uint32_t y = 0; y < p.height; y++)
+      for (uint32_t x = 0; x < p.width; x++) {
+        hush_pixel_result px;
+        hush__render_pixel(&c1, x, y, 3, &px);
+        const size_t i = (size_t)y * p.width + x;
+        if (memcmp(px.color, color + 3 * i, sizeof px.color)) bad++;
+        if (px.first.kind == HUSH_FIRST_TRIANGLE &&
+            ((float)px.first.hit.triangle != vis[3 * i] || px.first.hit.u != vis[3 * i + 1] ||
+             px.first.hit.v != vis[3 * i + 2]))
+          bad_vis++;
+      }
+    CHECK_MSG(bad_vis == 0, "%d re-rendered pixels have another first hit", bad_vis);
     for (uint32_t k = 0; k < 50; k++) {
       const uint32_t x = (k * 37u) % p.width, y = (k * 11u) % p.height;
-      hush_pixel_result px;
-      hush__render_pixel(&c1, x, y, 3, &px);
-      if (memcmp(px.color, color + 3 * ((size_t)y * p.width + x), sizeof px.color)) bad++;
       /* re-shading the visibility sample with the same numbers gives the
        * same radiance up to the rounding of the recomputed hit point */
       const size_t i = (size_t)y * p.width + x;
@@ -447,6 +466,40 @@ static void test_determinism(void) {
     hush_frame_release(d);
   }
   rig_close(&r);
+}
+
+/* Frames rendered one after the other into the same hush_frame, as
+ * hush render does: every value is rewritten (the layers start out full of
+ * 7s here), sky, sphere-light and progressive holes included, so each
+ * frame equals one rendered into a new hush_frame. */
+static void test_reuse_frame(void) {
+  static const char *const scenes[] = {"courtyard", "moving-light"};
+  for (int si = 0; si < 2; si++) {
+    rig r;
+    rig_open(&r, scenes[si]);
+    hush_progressive prog;
+    REQUIRE(hush__progressive_init(&prog, 0.25));
+    hush_render_params p;
+    hush__render_defaults(&p);
+    p.width = 40;
+    p.height = 30;
+    p.split = p.split_lobes = 1;
+    hush_render_ctx c;
+    hush_frame reused = render_at(&r, &p, HUSH_MOVE_DOLLY, 0, &c);
+    for (uint32_t l = 0; l < reused->layer_count; l++)
+      for (size_t k = 0; k < (size_t)reused->layers[l].channels * p.width * p.height; k++)
+        reused->layers[l].pixels[k] = 7.0f;
+    for (uint32_t f = 1; f < 5; f++) {
+      p.progressive = f > 1 ? &prog : NULL;
+      hush_frame fresh = render_at(&r, &p, HUSH_MOVE_DOLLY, f, &c);
+      REQUIRE(hush__render_frame(r.device, &c, reused, NULL, NULL, NULL) == HUSH_OK);
+      CHECK_MSG(same_layers(reused, fresh), "%s: frame %u differs when rendered into used layers",
+                scenes[si], f);
+      hush_frame_release(fresh);
+    }
+    hush_frame_release(reused);
+    rig_close(&r);
+  }
 }
 
 /* ---- G-buffer --------------------------------------------------------------------------------- */
@@ -490,8 +543,133 @@ static void test_cornell_gbuffer(void) {
   }
   CHECK_MSG(outside == 0, "%d depths outside the box", outside);
   CHECK(dark == 0);
+  /* depth_gradient is the depth of the tangent plane at the next pixel:
+   * where that pixel lies on the same plane, its depth is the prediction */
+  const float *g = layer(f, "depth_gradient"), *pos = layer(f, "position");
+  int pairs = 0, off = 0;
+  for (uint32_t y = 0; y + 1 < H; y++)
+    for (uint32_t x = 0; x + 1 < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      for (int k = 0; k < 2; k++) {
+        const size_t j = k == 0 ? i + 1 : i + W;
+        const float *a = pos + 3 * i, *b = pos + 3 * j, *na = n + 3 * i;
+        const float dist = (b[0] - a[0]) * na[0] + (b[1] - a[1]) * na[1] + (b[2] - a[2]) * na[2];
+        if (!(fabsf(dist) < 1e-5f) || z[i] <= 0.0f || z[j] <= 0.0f) continue;
+        pairs++;
+        if (!(fabsf(z[i] + g[2 * i + k] - z[j]) <= 1e-4f * z[j])) off++;
+      }
+    }
+  CHECK_MSG(pairs > (int)(W * H), "only %d coplanar neighbours", pairs);
+  CHECK_MSG(off == 0, "%d of %d depth gradients miss the neighbour's depth", off, pairs);
   hush_frame_release(f);
   rig_close(&r);
+}
+
+/* ---- diffuse / specular split ----------------------------------------------------------------- */
+
+/* hush__bsdf_eval_lobes: the lobes add up to hush__bsdf_eval bit for bit,
+ * Lambert has no glossy lobe, a conductor no diffuse one, a rough plastic
+ * both. */
+static void test_bsdf_lobes(void) {
+  const bsdf_case cases[] = {
+      {"lambert", HUSH_MAT_DIFFUSE, 0.7f, 0.0f, 0.0f, 0},
+      {"plastic-smooth", HUSH_MAT_PLASTIC, 0.7f, 0.04f, 0.0f, 1},
+      {"plastic-rough", HUSH_MAT_PLASTIC, 0.7f, 0.04f, 0.3f, 0},
+      {"conductor-rough", HUSH_MAT_CONDUCTOR, 0.0f, 0.9f, 0.3f, 0},
+  };
+  for (size_t ci = 0; ci < sizeof cases / sizeof cases[0]; ci++) {
+    const hush_vec3 wo = hush_v3(0.6f, 0.0f, 0.8f);
+    hush_bsdf b;
+    make_bsdf(&cases[ci], wo, &b);
+    int differ = 0, diffuse = 0, glossy = 0;
+    for (int k = 0; k < 2000; k++) {
+      const hush_vec3 wi = uniform_sphere(rnd(40, k), rnd(41, k));
+      float f[3], fd[3], fs[3], pdf, pdf_l;
+      hush__bsdf_eval(&b, wo, wi, f, &pdf);
+      hush__bsdf_eval_lobes(&b, wo, wi, fd, fs, &pdf_l);
+      for (int c = 0; c < 3; c++) {
+        const float sum = fd[c] + fs[c];
+        if (memcmp(&sum, &f[c], sizeof sum) || pdf != pdf_l) differ++;
+        diffuse += fd[c] > 0.0f;
+        glossy += fs[c] > 0.0f;
+      }
+    }
+    CHECK_MSG(differ == 0, "%s: %d lobe sums differ from eval", cases[ci].name, differ);
+    const int lambert = cases[ci].type == HUSH_MAT_DIFFUSE;
+    const int conductor = cases[ci].type == HUSH_MAT_CONDUCTOR;
+    const int rough = cases[ci].roughness > 0.0f;
+    CHECK_MSG((diffuse > 0) == !conductor, "%s: diffuse lobe %d", cases[ci].name, diffuse);
+    CHECK_MSG((glossy > 0) == (!lambert && rough), "%s: glossy lobe %d", cases[ci].name, glossy);
+  }
+}
+
+/* The diffuse and specular layers: color is exactly their sum and within
+ * rounding of the unsplit colour (the paths are the same); a pure Lambert
+ * scene has no specular, a surface of conductors and glass no diffuse
+ * (where the camera does not see a light), a mix has both. */
+static void test_lobe_layers(void) {
+  static const char *const scenes[] = {"cornell", "courtyard", "cornell-metal"};
+  for (int si = 0; si < 3; si++) {
+    rig r;
+    rig_open(&r, si == 2 ? "cornell" : scenes[si]);
+    if (si == 2)
+      for (uint32_t m = 0; m < r.scene.material_count; m++) {
+        hush_material *mat = &r.scene.materials[m];
+        if (mat->emission[0] + mat->emission[1] + mat->emission[2] > 0.0f) continue;
+        /* rough and glossy metal, a mirror and glass: no diffuse lobe */
+        mat->type = m % 4 == 3 ? HUSH_MAT_DIELECTRIC : HUSH_MAT_CONDUCTOR;
+        mat->roughness = m % 4 == 2 ? 0.0f : m % 4 == 1 ? 0.05f : 0.3f;
+        for (int c = 0; c < 3; c++) mat->specular[c] = 0.9f - 0.1f * (float)c;
+      }
+    hush_render_params p;
+    hush__render_defaults(&p);
+    p.width = 48;
+    p.height = 36;
+    p.bounces = 2;
+    /* more samples may land on another material than the G-buffer's
+     * sample 0: 1 spp where materials are checked pixel by pixel */
+    p.spp = si == 0 ? 3 : 1;
+    hush_render_ctx c1, c2;
+    hush_frame plain = render_at(&r, &p, HUSH_MOVE_STATIC, 0, &c1);
+    p.split_lobes = 1;
+    hush_frame split = render_at(&r, &p, HUSH_MOVE_STATIC, 0, &c2);
+    const float *color = layer(split, "color"), *d = layer(split, "diffuse");
+    const float *sp = layer(split, "specular"), *color0 = layer(plain, "color");
+    const float *id = layer(split, "id");
+    int inexact = 0, far = 0, spec_in_lambert = 0, diff_in_metal = 0, seen = 0;
+    double dsum = 0.0, ssum = 0.0;
+    for (uint32_t i = 0; i < 3 * p.width * p.height; i++) {
+      const float sum = d[i] + sp[i];
+      if (memcmp(&sum, &color[i], sizeof sum)) inexact++;
+      if (!(fabsf(color[i] - color0[i]) <= 1e-5f * fmaxf(1.0f, color0[i]))) far++;
+      dsum += d[i];
+      ssum += sp[i];
+      const uint32_t m = (uint32_t)id[i / 3];
+      if (m == 0 || m > r.scene.material_count) continue; /* sky, sphere lights */
+      const hush_material *mat = &r.scene.materials[m - 1];
+      if (mat->emission[0] + mat->emission[1] + mat->emission[2] > 0.0f) continue;
+      seen++;
+      if (mat->type == HUSH_MAT_DIFFUSE && sp[i] != 0.0f) spec_in_lambert++;
+      if ((mat->type == HUSH_MAT_CONDUCTOR || mat->type == HUSH_MAT_DIELECTRIC) && d[i] != 0.0f)
+        diff_in_metal++;
+    }
+    CHECK_MSG(inexact == 0, "%s: %d colours are not diffuse + specular", scenes[si], inexact);
+    CHECK_MSG(far == 0, "%s: %d split colours differ from the unsplit ones", scenes[si], far);
+    CHECK_MSG(spec_in_lambert == 0, "%s: %d Lambert pixels with specular", scenes[si],
+              spec_in_lambert);
+    CHECK_MSG(diff_in_metal == 0, "%s: %d conductor/glass pixels with diffuse", scenes[si],
+              diff_in_metal);
+    CHECK(seen > 0);
+    if (si == 0) CHECK_MSG(ssum == 0.0, "cornell (all Lambert): specular sum %g", ssum);
+    if (si >= 1) CHECK_MSG(ssum > 0.01 * (dsum + ssum), "%s: specular %g of %g", scenes[si], ssum,
+                           dsum + ssum);
+    if (si == 1) CHECK_MSG(dsum > 0.01 * (dsum + ssum), "courtyard: diffuse %g", dsum);
+    /* the G-buffer does not change */
+    CHECK(!memcmp(layer(split, "vis"), layer(plain, "vis"), 3 * sizeof(float) * p.width * p.height));
+    hush_frame_release(plain);
+    hush_frame_release(split);
+    rig_close(&r);
+  }
 }
 
 /* ---- camera -------------------------------------------------------------------------------------- */
@@ -585,6 +763,9 @@ int main(void) {
   test_motion("cornell-moving", HUSH_MOVE_ORBIT, 1);
   test_motion("courtyard", HUSH_MOVE_DOLLY, 1);
   test_determinism();
+  test_reuse_frame();
   test_cornell_gbuffer();
+  test_bsdf_lobes();
+  test_lobe_layers();
   return check_summary();
 }

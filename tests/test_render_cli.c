@@ -73,12 +73,14 @@ static void write_file(const char *path, const char *text) {
 }
 
 /* A floor quad lit by nothing, a degenerate triangle (three collinear
- * points) and one with a NaN vertex: WORK/bad/scene.json and variants. */
+ * points), one with a NaN vertex and one with an infinite vertex:
+ * WORK/bad/scene.json and variants. */
 static void write_bad_scenes(void) {
   REQUIRE(system("mkdir -p '" WORK "/bad'") == 0);
   const char *obj = "mtllib %s.mtl\n"
                     "v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nv 0 1 0\nv nan 0 0\nv 2 0 -1\n"
-                    "usemtl floor\nf 1 2 3\nf 1 3 4\nf 1 2 7\nf 1 5 6\n";
+                    "v 0 0 inf\n"
+                    "usemtl floor\nf 1 2 3\nf 1 3 4\nf 1 2 7\nf 1 5 6\nf 2 3 8\n";
   const char *manifest =
       "{\"format\": \"hush-scene/1\", \"name\": \"bad\", \"mesh\": \"%s\",\n"
       " \"camera\": {\"position\": [0, 2, 3], \"target\": [0, 0, 0], \"up\": [0, 1, 0],\n"
@@ -120,13 +122,13 @@ static void test_bad_scenes(hush_device dev) {
           "lights[0].type: unknown light type 'area'");
   expect2("--scene " WORK "/bad/json.json --out " WORK "/x", 1, "json.json", "malformed JSON");
 
-  /* no light: a warning (also with --quiet), and a black frame; the two
+  /* no light: a warning (also with --quiet), and a black frame; the three
    * bad triangles are counted */
   result r;
   hush(&r, "--scene " WORK "/bad/scene.json --frames 1 --out " WORK "/dark");
   CHECK_MSG(r.status == 0, "no-light scene: exit %d (%s)", r.status, r.err);
   CHECK_MSG(strstr(r.err, "warning: scene 'bad' has no light"), "no warning in '%s'", r.err);
-  CHECK_MSG(strstr(r.err, "skipped 2 triangles"), "no skipped count in '%s'", r.err);
+  CHECK_MSG(strstr(r.err, "skipped 3 triangles"), "no skipped count in '%s'", r.err);
   hush(&r, "--scene " WORK "/bad/scene.json --frames 1 --quiet --out " WORK "/dark");
   CHECK_MSG(strstr(r.err, "warning: scene 'bad' has no light") && !strstr(r.err, "frame 1/1"),
             "--quiet: '%s'", r.err);
@@ -145,7 +147,7 @@ static void test_bad_scenes(hush_device dev) {
   hush_frame_release(f);
   char json[8192];
   read_file(WORK "/dark/render.json", json, sizeof json);
-  CHECK(strstr(json, "\"skipped_triangles\": 2") != NULL);
+  CHECK(strstr(json, "\"skipped_triangles\": 3") != NULL);
 }
 
 /* --spp-fraction: usage errors, and a sequence whose frames have holes in
@@ -239,8 +241,8 @@ int main(void) {
         strstr(json, "\"command\": [\"hush\", \"render\""));
 
   /* references: spp and variance layers; a static scene uses camera motion */
-  expect("--scene builtin:cornell --size 16x12 --frames 1 --spp 4 --no-jitter --split --quiet "
-         "--out " WORK "/ref",
+  expect("--scene builtin:cornell --size 16x12 --frames 1 --spp 4 --no-jitter --split "
+         "--split-lobes --quiet --out " WORK "/ref",
          0, NULL);
   REQUIRE(hush__sequence_read(dev, WORK "/ref", &seq) == HUSH_OK);
   CHECK(seq.motion == HUSH_MOTION_CAMERA);
@@ -250,6 +252,19 @@ int main(void) {
   CHECK(hush_frame_get_layer(f, "variance", NULL) == HUSH_OK);
   CHECK(hush_frame_get_layer(f, "direct", NULL) == HUSH_OK);
   CHECK(hush_frame_get_layer(f, "indirect", NULL) == HUSH_OK);
+  hush_image_view dv, sv, cv;
+  REQUIRE(hush_frame_get_layer(f, "diffuse", &dv) == HUSH_OK);
+  REQUIRE(hush_frame_get_layer(f, "specular", &sv) == HUSH_OK);
+  REQUIRE(hush_frame_get_layer(f, "color", &cv) == HUSH_OK);
+  /* written as float: the sum still holds bit for bit after the EXR */
+  int inexact = 0;
+  for (uint32_t i = 0; i < 16 * 12 * 3; i++) {
+    const float sum = ((const float *)dv.data)[i] + ((const float *)sv.data)[i];
+    if (sum != ((const float *)cv.data)[i]) inexact++;
+  }
+  CHECK_MSG(inexact == 0, "%d colours are not diffuse + specular", inexact);
+  read_file(WORK "/ref/render.json", json, sizeof json);
+  CHECK(strstr(json, "\"split_lobes\": true") != NULL);
   hush_frame_release(f);
   hush__sequence_free(&seq);
   test_bad_scenes(dev);

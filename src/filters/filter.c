@@ -86,6 +86,7 @@ void hush_filter_retain(hush_filter filter) {
 void hush_filter_release(hush_filter filter) {
   if (!filter || --filter->refcount > 0) return;
   if (filter->state) filter->cls->destroy(filter->state);
+  free(filter->class_data);
   free(filter->params);
   hush_device_release(filter->device);
   free(filter);

@@ -40,6 +40,9 @@ struct hush_filter_t {
   uint32_t width, height;                /* committed size, 0 before commit */
   int committed;                         /* 0 until commit, or after a binding changed size */
   void *state;
+  /* Class data that outlives commits, freed with free() at release (nca:
+   * weights loaded with hush_nca_load_weights); NULL until a class sets it. */
+  void *class_data;
   /* timings of the last execute */
   const char *stage_names[HUSH_MAX_STAGES];
   double stage_ms[HUSH_MAX_STAGES];

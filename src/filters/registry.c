@@ -7,11 +7,13 @@
 extern const hush_filter_class hush__filter_accumulate;
 extern const hush_filter_class hush__filter_svgf;
 extern const hush_filter_class hush__filter_taa;
+extern const hush_filter_class hush__filter_nca;
 
 const hush_filter_class *const hush__filter_classes[] = {
     &hush__filter_accumulate,
     &hush__filter_svgf,
     &hush__filter_taa,
+    &hush__filter_nca,
 };
 
 const uint32_t hush__filter_class_count =

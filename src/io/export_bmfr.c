@@ -64,6 +64,20 @@ static void demodulate(const float *color, const float *albedo, size_t n, float 
   }
 }
 
+/* The albedo to demodulate by: the frame's, except at sky pixels (nothing
+ * hit: normal 0), where it is the pixel's own radiance, so that their colour
+ * is 1 (see export_bmfr.h: why the sky must not reach the fit). */
+static void demodulation_albedo(const float *color, const float *albedo, const float *normal,
+                                size_t n, float *out) {
+  for (size_t p = 0; p < n; p++) {
+    const float *nn = normal + 3 * p;
+    const float *src = (nn[0] == 0.0f && nn[1] == 0.0f && nn[2] == 0.0f) ? color : albedo;
+    out[3 * p] = src[3 * p];
+    out[3 * p + 1] = src[3 * p + 1];
+    out[3 * p + 2] = src[3 * p + 2];
+  }
+}
+
 hush_status hush__bmfr_write_frame(hush_device device, const char *dir, uint32_t index,
                                    hush_frame frame) {
   const uint32_t W = hush_frame_width(frame), H = hush_frame_height(frame);
@@ -73,10 +87,11 @@ hush_status hush__bmfr_write_frame(hush_device device, const char *dir, uint32_t
   const float *position = normal ? layer3(device, frame, "position") : NULL;
   if (!position) return HUSH_ERROR_NOT_FOUND;
   const size_t n = (size_t)W * H;
-  float *demod = hush__alloc_floats(6 * n);
+  float *demod = hush__alloc_floats(9 * n);
   if (!demod) return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr export: out of memory");
-  float *alb = demod + 3 * n;
-  demodulate(color, albedo, n, demod, alb);
+  float *alb = demod + 3 * n, *by = demod + 6 * n;
+  demodulation_albedo(color, albedo, normal, n, by);
+  demodulate(color, by, n, demod, alb);
   hush_status st = write_rgb(device, dir, "color", index, W, H, demod);
   if (st == HUSH_OK) st = write_rgb(device, dir, "albedo", index, W, H, alb);
   if (st == HUSH_OK) st = write_rgb(device, dir, "shading_normal", index, W, H, normal);

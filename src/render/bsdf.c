@@ -7,6 +7,7 @@
  * Everything is done in a local frame with the shading normal on +z.
  */
 #include "render/bsdf.h"
+#include "render/fminmax.h"
 
 #include <math.h>
 #include <string.h>
@@ -27,7 +28,7 @@ void hush__onb(hush_vec3 n, hush_vec3 *t, hush_vec3 *b) {
 }
 
 float hush__fresnel_dielectric(float cos_i, float eta) {
-  cos_i = fminf(fabsf(cos_i), 1.0f);
+  cos_i = hush_fminf(fabsf(cos_i), 1.0f);
   const float sin_t2 = (1.0f - cos_i * cos_i) / (eta * eta);
   if (sin_t2 >= 1.0f) return 1.0f;
   const float cos_t = sqrtf(1.0f - sin_t2);
@@ -37,7 +38,7 @@ float hush__fresnel_dielectric(float cos_i, float eta) {
 }
 
 static float schlick(float f0, float cos_i) {
-  const float m = 1.0f - fminf(fmaxf(cos_i, 0.0f), 1.0f);
+  const float m = 1.0f - hush_fminf(hush_fmaxf(cos_i, 0.0f), 1.0f);
   const float m2 = m * m;
   return f0 + (1.0f - f0) * m2 * m2 * m;
 }
@@ -81,7 +82,7 @@ static float ggx_d(float alpha, hush_vec3 h) {
 static float ggx_lambda(float alpha, hush_vec3 w) {
   const float c2 = w.z * w.z;
   if (c2 <= 0.0f) return 0.0f;
-  const float t2 = fmaxf(0.0f, 1.0f - c2) / c2;
+  const float t2 = hush_fmaxf(0.0f, 1.0f - c2) / c2;
   return 0.5f * (-1.0f + sqrtf(1.0f + alpha * alpha * t2));
 }
 
@@ -104,11 +105,11 @@ static hush_vec3 ggx_sample_vndf(float alpha, hush_vec3 wo, float u1, float u2) 
   const float p1 = r * cosf(phi);
   float p2 = r * sinf(phi);
   const float s = 0.5f * (1.0f + vh.z);
-  p2 = (1.0f - s) * sqrtf(fmaxf(0.0f, 1.0f - p1 * p1)) + s * p2;
-  const float p3 = sqrtf(fmaxf(0.0f, 1.0f - p1 * p1 - p2 * p2));
+  p2 = (1.0f - s) * sqrtf(hush_fmaxf(0.0f, 1.0f - p1 * p1)) + s * p2;
+  const float p3 = sqrtf(hush_fmaxf(0.0f, 1.0f - p1 * p1 - p2 * p2));
   const hush_vec3 nh =
       hush_v3_add(hush_v3_add(hush_v3_scale(t1, p1), hush_v3_scale(t2, p2)), hush_v3_scale(vh, p3));
-  return hush_v3_normalize(hush_v3(alpha * nh.x, alpha * nh.y, fmaxf(1e-6f, nh.z)));
+  return hush_v3_normalize(hush_v3(alpha * nh.x, alpha * nh.y, hush_fmaxf(1e-6f, nh.z)));
 }
 
 /* Density of wi = reflect(wo, h) under VNDF sampling. */
@@ -122,7 +123,7 @@ static hush_vec3 reflect_local(hush_vec3 wo, hush_vec3 h) {
 
 static hush_vec3 cosine_hemisphere(float u1, float u2) {
   const float r = sqrtf(u1), phi = 2.0f * BSDF_PI * u2;
-  return hush_v3(r * cosf(phi), r * sinf(phi), sqrtf(fmaxf(0.0f, 1.0f - u1)));
+  return hush_v3(r * cosf(phi), r * sinf(phi), sqrtf(hush_fmaxf(0.0f, 1.0f - u1)));
 }
 
 /* ---- set-up ---------------------------------------------------------------------- */
@@ -132,7 +133,7 @@ void hush__bsdf_setup(hush_bsdf *b, const hush_material *m, const hush_surface *
   b->type = m->type;
   memcpy(b->diffuse, s->albedo, sizeof b->diffuse);
   memcpy(b->specular, m->specular, sizeof b->specular);
-  b->alpha = m->roughness > 0.0f ? fmaxf(m->roughness, MIN_ALPHA) : 0.0f;
+  b->alpha = m->roughness > 0.0f ? hush_fmaxf(m->roughness, MIN_ALPHA) : 0.0f;
   const float ior = m->ior > 0.0f ? m->ior : 1.5f;
   b->eta = ior;
   b->n = s->ns;
@@ -149,7 +150,7 @@ void hush__bsdf_setup(hush_bsdf *b, const hush_material *m, const hush_surface *
   if (m->type == HUSH_MAT_PLASTIC) {
     /* Ks is the coat's normal-incidence reflectance: Fresnel(ior) scaled to it */
     const float f0 = ((ior - 1.0f) * (ior - 1.0f)) / ((ior + 1.0f) * (ior + 1.0f));
-    for (int k = 0; k < 3; k++) b->specular[k] = fminf(1.0f, fmaxf(0.0f, m->specular[k] / f0));
+    for (int k = 0; k < 3; k++) b->specular[k] = hush_fminf(1.0f, hush_fmaxf(0.0f, m->specular[k] / f0));
     b->fdr_int = fresnel_diffuse_reflectance(1.0f / ior);
   }
   hush__onb(b->n, &b->t, &b->b);
@@ -189,17 +190,22 @@ static float plastic_spec_prob(const hush_bsdf *b, float cos_o) {
   const float wd = (1.0f - fo) * lum3(b->diffuse);
   if (ws <= 0.0f) return 0.0f;
   if (wd <= 0.0f) return 1.0f;
-  return fminf(0.9f, fmaxf(0.1f, ws / (ws + wd)));
+  return hush_fminf(0.9f, hush_fmaxf(0.1f, ws / (ws + wd)));
 }
 
 /* ---- evaluation ---------------------------------------------------------------------- */
 
-static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf) {
-  set3(f, 0.0f, 0.0f, 0.0f);
+/* The non-delta lobes at (wo, wi), local frame: fd the diffuse one
+ * (Lambert, or the plastic's base), fs the glossy one (GGX of the conductor
+ * or of the plastic's coat). */
+static void eval_lobes(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float fd[3], float fs[3],
+                       float *pdf) {
+  set3(fd, 0.0f, 0.0f, 0.0f);
+  set3(fs, 0.0f, 0.0f, 0.0f);
   *pdf = 0.0f;
   if (wo.z <= 0.0f || wi.z <= 0.0f) return;
   if (b->type == HUSH_MAT_DIFFUSE) {
-    for (int k = 0; k < 3; k++) f[k] = b->diffuse[k] * wi.z * INV_PI;
+    for (int k = 0; k < 3; k++) fd[k] = b->diffuse[k] * wi.z * INV_PI;
     *pdf = wi.z * INV_PI;
     return;
   }
@@ -208,7 +214,7 @@ static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3
     if (b->alpha <= 0.0f) return;
     const float dg = ggx_d(b->alpha, h) * ggx_g2(b->alpha, wo, wi) / (4.0f * wo.z);
     const float c = hush_v3_dot(wo, h);
-    for (int k = 0; k < 3; k++) f[k] = schlick(b->specular[k], c) * dg;
+    for (int k = 0; k < 3; k++) fs[k] = schlick(b->specular[k], c) * dg;
     *pdf = ggx_pdf(b->alpha, wo, h);
     return;
   }
@@ -222,14 +228,21 @@ static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3
    * asks for, and the only form Tungsten has; the linear Kd / (1 - Fdr_int)
    * made the living room's floor and panels up to twice too bright. */
   const float base = (1.0f - fi) * (1.0f - fo) / (b->eta * b->eta) * wi.z * INV_PI;
-  for (int k = 0; k < 3; k++) f[k] = b->diffuse[k] / (1.0f - b->diffuse[k] * b->fdr_int) * base;
+  for (int k = 0; k < 3; k++) fd[k] = b->diffuse[k] / (1.0f - b->diffuse[k] * b->fdr_int) * base;
   *pdf = (1.0f - ps) * wi.z * INV_PI;
   if (b->alpha > 0.0f) {
     const float fr = hush__fresnel_dielectric(hush_v3_dot(wo, h), b->eta);
     const float spec = fr * ggx_d(b->alpha, h) * ggx_g2(b->alpha, wo, wi) / (4.0f * wo.z);
-    for (int k = 0; k < 3; k++) f[k] += b->specular[k] * spec;
+    for (int k = 0; k < 3; k++) fs[k] = b->specular[k] * spec;
     *pdf += ps * ggx_pdf(b->alpha, wo, h);
   }
+}
+
+/* Both lobes together: fd + fs (a lobe that is absent adds an exact 0). */
+static void eval_local(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf) {
+  float fs[3];
+  eval_lobes(b, wo, wi, f, fs, pdf);
+  for (int k = 0; k < 3; k++) f[k] += fs[k];
 }
 
 void hush__bsdf_eval(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf) {
@@ -237,6 +250,15 @@ void hush__bsdf_eval(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3],
   *pdf = 0.0f;
   if (b->black || hush_v3_dot(wi, b->ng) <= 0.0f) return;
   eval_local(b, to_local(b, wo), to_local(b, wi), f, pdf);
+}
+
+void hush__bsdf_eval_lobes(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float fd[3],
+                           float fs[3], float *pdf) {
+  set3(fd, 0.0f, 0.0f, 0.0f);
+  set3(fs, 0.0f, 0.0f, 0.0f);
+  *pdf = 0.0f;
+  if (b->black || hush_v3_dot(wi, b->ng) <= 0.0f) return;
+  eval_lobes(b, to_local(b, wo), to_local(b, wi), fd, fs, pdf);
 }
 
 /* ---- sampling ---------------------------------------------------------------------------- */
@@ -303,7 +325,7 @@ static int sample_local(const hush_bsdf *b, hush_vec3 wo, const float u[3], hush
       return 1;
     }
     const float inv = 1.0f / b->eta;
-    const float cos_t = sqrtf(fmaxf(0.0f, 1.0f - inv * inv * (1.0f - wo.z * wo.z)));
+    const float cos_t = sqrtf(hush_fmaxf(0.0f, 1.0f - inv * inv * (1.0f - wo.z * wo.z)));
     s->wi = hush_v3_normalize(hush_v3(-wo.x * inv, -wo.y * inv, -cos_t));
     /* radiance is compressed by (n_i / n_t)^2 on the way into the denser side */
     set3(s->weight, inv * inv, inv * inv, inv * inv);

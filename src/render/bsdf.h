@@ -55,6 +55,13 @@ int hush__bsdf_has_smooth(const hush_bsdf *b);
  * density with which hush__bsdf_sample returns wi (delta lobes excluded). */
 void hush__bsdf_eval(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float f[3], float *pdf);
 
+/* The same split by lobe, for the diffuse / specular layers: fd the
+ * diffuse lobe (Lambert, the plastic's base), fs the glossy one (rough
+ * conductor, the plastic's rough coat); fd + fs is hush__bsdf_eval's f,
+ * bit for bit. Delta lobes (mirror, smooth coat, glass) are specular. */
+void hush__bsdf_eval_lobes(const hush_bsdf *b, hush_vec3 wo, hush_vec3 wi, float fd[3],
+                           float fs[3], float *pdf);
+
 /* Draws wi from u in [0,1)^3. Returns 0 when no direction was produced. */
 int hush__bsdf_sample(const hush_bsdf *b, hush_vec3 wo, const float u[3], hush_bsdf_sample *s);
 

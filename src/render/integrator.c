@@ -8,6 +8,7 @@
 
 #include "core/rng.h"
 #include "render/bsdf.h"
+#include "render/fminmax.h"
 
 #include <math.h>
 #include <string.h>
@@ -95,27 +96,29 @@ static float power_heuristic(float a, float b) {
 }
 
 static float max3(const float c[3]) {
-  return fmaxf(c[0], fmaxf(c[1], c[2]));
+  return hush_fmaxf(c[0], hush_fmaxf(c[1], c[2]));
 }
 
 /* A ray origin just off the surface on the side of direction w: the offset
  * scales with the magnitude of the position so large scenes stay clean. */
 static hush_vec3 offset_origin(hush_vec3 p, hush_vec3 ng, hush_vec3 w) {
-  const float mag = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
-  const float eps = 1e-4f * fmaxf(1.0f, mag);
+  const float mag = hush_fmaxf(fabsf(p.x), hush_fmaxf(fabsf(p.y), fabsf(p.z)));
+  const float eps = 1e-4f * hush_fmaxf(1.0f, mag);
   const float side = hush_v3_dot(w, ng) >= 0.0f ? eps : -eps;
   return hush_v3_add(p, hush_v3_scale(ng, side));
 }
 
 static float ray_eps(hush_vec3 p) {
-  const float mag = fmaxf(fabsf(p.x), fmaxf(fabsf(p.y), fabsf(p.z)));
-  return 1e-4f * fmaxf(1.0f, mag);
+  const float mag = hush_fmaxf(fabsf(p.x), hush_fmaxf(fabsf(p.y), fabsf(p.z)));
+  return 1e-4f * hush_fmaxf(1.0f, mag);
 }
 
 /* Adds beta * c * w to the result; contributions beyond the first hit are
- * clamped when asked. */
+ * clamped when asked. With split_lobes, the share `share` of it (per
+ * channel) goes to the diffuse layer and the rest to the specular one. */
 static void add(const hush_integrator *it, hush_path_result *out, float vertex_sum[3],
-                const float beta[3], const float c[3], float w, int depth, int direct) {
+                const float beta[3], const float c[3], float w, int depth, int direct,
+                const float share[3]) {
   float v[3];
   for (int k = 0; k < 3; k++) v[k] = beta[k] * c[k] * w;
   if (!(isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]))) return;
@@ -129,12 +132,30 @@ static void add(const hush_integrator *it, hush_path_result *out, float vertex_s
     vertex_sum[k] += v[k];
     if (direct) out->direct[k] += v[k];
   }
+  if (it->split_lobes)
+    for (int k = 0; k < 3; k++) {
+      const float d = v[k] * share[k];
+      out->diffuse[k] += d;
+      out->specular[k] += v[k] - d;
+    }
 }
 
-/* Next event: one light sample, MIS-weighted unless it is the last vertex. */
+/* The diffuse share of f = fd + fs, per channel: 1 where f is 0 (nothing
+ * to split; it only multiplies zeros). fd / f is exactly 1 when fs is 0 and
+ * exactly 0 when fd is 0, so pure Lambert or pure glossy surfaces put
+ * nothing in the other layer. */
+static void diffuse_share(const float fd[3], const float fs[3], float share[3]) {
+  for (int k = 0; k < 3; k++) {
+    const float f = fd[k] + fs[k];
+    share[k] = f > 0.0f ? fd[k] / f : 1.0f;
+  }
+}
+
+/* Next event: one light sample, MIS-weighted unless it is the last vertex.
+ * share (may be NULL) receives the diffuse lobe's share of it. */
 static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t base,
                        const hush_bsdf *b, hush_vec3 p, hush_vec3 wo, int last, float out[3],
-                       uint32_t *rays) {
+                       float share[3], uint32_t *rays) {
   out[0] = out[1] = out[2] = 0.0f;
   const float u[3] = {hush__rand(rng, base + D_LIGHT_PICK), hush__rand(rng, base + D_LIGHT_UV),
                       hush__rand(rng, base + D_LIGHT_UV + 1)};
@@ -142,7 +163,14 @@ static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t
   if (!hush__lights_sample(it->lights, p, u, &ls)) return;
   if (!(max3(ls.radiance) > 0.0f)) return;
   float f[3], pdf_b;
-  hush__bsdf_eval(b, wo, ls.wi, f, &pdf_b);
+  if (share) {
+    float fs[3];
+    hush__bsdf_eval_lobes(b, wo, ls.wi, f, fs, &pdf_b);
+    diffuse_share(f, fs, share);
+    for (int k = 0; k < 3; k++) f[k] += fs[k]; /* hush__bsdf_eval's f, bit for bit */
+  } else {
+    hush__bsdf_eval(b, wo, ls.wi, f, &pdf_b);
+  }
   if (!(max3(f) > 0.0f)) return;
   const hush_vec3 o = offset_origin(p, b->ng, ls.wi);
   const float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - ray_eps(p) : INFINITY;
@@ -181,13 +209,16 @@ typedef struct next_hit {
   float t;
 } next_hit;
 
-static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_hit *h) {
-  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+/* What a ray whose closest triangle is `tri` (triangle UINT32_MAX: none)
+ * hits: that triangle, or a sphere light in front of it, or nothing. */
+static void complete_hit(const hush_integrator *it, hush_vec3 o, hush_vec3 d, const hush_hit *tri,
+                         next_hit *h) {
   h->kind = HUSH_FIRST_SKY;
   h->t = INFINITY;
-  if (hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &h->hit)) {
+  h->hit = *tri;
+  if (tri->triangle != UINT32_MAX) {
     h->kind = HUSH_FIRST_TRIANGLE;
-    h->t = h->hit.t;
+    h->t = tri->t;
   }
   float ts;
   const uint32_t s = hush__lights_intersect_sphere(it->lights, o, d, 0.0f, h->t, &ts);
@@ -196,6 +227,13 @@ static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_
     h->sphere = s - 1;
     h->t = ts;
   }
+}
+
+static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_hit *h) {
+  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
+  hush_hit tri;
+  hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &tri);
+  complete_hit(it, o, d, &tri, h);
 }
 
 /* ---- the path ------------------------------------------------------------------ */
@@ -214,6 +252,9 @@ static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_firs
   h.t = first->t;
   float prev_pdf = 0.0f;
   int prev_delta = 1; /* the camera ray sees emission with full weight */
+  /* split_lobes: the diffuse share of what the path adds; light seen
+   * directly counts as diffuse, then the first hit's BSDF sample sets it */
+  float share[3] = {1.0f, 1.0f, 1.0f};
   for (int depth = 0;; depth++) {
     const int direct = depth == 0;
     float vsum[3] = {0.0f, 0.0f, 0.0f};
@@ -221,63 +262,80 @@ static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_firs
       float le[3];
       const float pdf_env = hush__lights_env_eval(L, d, le);
       const float w = prev_delta ? 1.0f : power_heuristic(prev_pdf, pdf_env);
-      add(it, out, vsum, beta, le, w, depth, direct);
+      add(it, out, vsum, beta, le, w, depth, direct, share);
       return;
     }
     if (h.kind == HUSH_FIRST_SPHERE) {
       const float w =
           prev_delta ? 1.0f
                      : power_heuristic(prev_pdf, hush__lights_sphere_pdf(L, h.sphere, origin));
-      add(it, out, vsum, beta, sc->spheres[h.sphere].radiance, w, depth, direct);
+      add(it, out, vsum, beta, sc->spheres[h.sphere].radiance, w, depth, direct, share);
       return;
     }
-    hush_surface s;
-    if (depth == 0) {
-      s = first->surface;
-    } else {
+    /* the first hit's surface is read in place (copying it and reading a
+     * field back stalls on store forwarding) */
+    hush_surface later;
+    const hush_surface *sp = &first->surface;
+    if (depth > 0) {
       const float dd[3] = {d.x, d.y, d.z};
-      hush__scene_surface(sc, &h.hit, dd, &s);
+      hush__scene_surface(sc, &h.hit, dd, &later);
+      sp = &later;
     }
-    const hush_material *m = &sc->materials[s.material];
+    const hush_material *m = &sc->materials[sp->material];
     if (max3(m->emission) > 0.0f) {
       float w = 1.0f;
       if (!prev_delta) {
-        const float cos_l = fabsf(hush_v3_dot(d, s.ng));
+        const float cos_l = fabsf(hush_v3_dot(d, sp->ng));
         const float area = hush__lights_triangle_area(sc, h.hit.triangle);
         w = power_heuristic(prev_pdf, hush__lights_triangle_pdf(L, h.hit.triangle, area, h.t, cos_l));
       }
-      add(it, out, vsum, beta, m->emission, w, depth, direct);
+      add(it, out, vsum, beta, m->emission, w, depth, direct, share);
     }
     const hush_vec3 wo = hush_v3_scale(d, -1.0f);
     hush_bsdf b;
-    hush__bsdf_setup(&b, m, &s, wo);
+    hush__bsdf_setup(&b, m, sp, wo);
     const int last = depth >= it->bounces;
     const uint32_t base = DIM_PATH + DIMS_PER_VERTEX * (uint32_t)depth;
     if (hush__bsdf_has_smooth(&b) && hush__lights_any(L)) {
-      float c[3];
-      next_event(it, rng, base, &b, s.p, wo, last, c, &out->rays);
+      float c[3], nee_share[3] = {1.0f, 1.0f, 1.0f};
+      /* at the first hit the light sample is split by lobe; later ones
+       * follow the first hit's split of the path */
+      const int split_here = it->split_lobes && depth == 0;
+      next_event(it, rng, base, &b, sp->p, wo, last, c, split_here ? nee_share : NULL, &out->rays);
       const float one[3] = {1.0f, 1.0f, 1.0f};
       float bc[3];
       for (int k = 0; k < 3; k++) bc[k] = beta[k] * c[k];
-      add(it, out, vsum, one, bc, 1.0f, depth, direct);
+      add(it, out, vsum, one, bc, 1.0f, depth, direct, depth == 0 ? nee_share : share);
     }
-    call_hook(it, x, y, rng, depth, &s, h.hit.triangle, beta, vsum);
+    call_hook(it, x, y, rng, depth, sp, h.hit.triangle, beta, vsum);
     if (last) return;
 
     const float u[3] = {hush__rand(rng, base + D_BSDF_LOBE), hush__rand(rng, base + D_BSDF_UV),
                         hush__rand(rng, base + D_BSDF_UV + 1)};
     hush_bsdf_sample bs;
     if (!hush__bsdf_sample(&b, wo, u, &bs)) return;
+    if (it->split_lobes && depth == 0) {
+      /* the rest of the path is split as the first hit's lobes reflect
+       * the sampled direction: delta lobes are specular, a smooth
+       * direction by the lobes' values there */
+      if (bs.delta) {
+        share[0] = share[1] = share[2] = 0.0f;
+      } else {
+        float fd[3], fs[3], pdf_l;
+        hush__bsdf_eval_lobes(&b, wo, bs.wi, fd, fs, &pdf_l);
+        diffuse_share(fd, fs, share);
+      }
+    }
     for (int k = 0; k < 3; k++) beta[k] *= bs.weight[k];
     if (!(max3(beta) > 0.0f)) return;
     if (depth + 1 > it->rr_depth) {
-      const float q = fminf(0.95f, max3(beta));
+      const float q = hush_fminf(0.95f, max3(beta));
       if (hush__rand(rng, base + D_RR) >= q) return;
       for (int k = 0; k < 3; k++) beta[k] /= q;
     }
     prev_pdf = bs.pdf;
     prev_delta = bs.delta;
-    origin = offset_origin(s.p, b.ng, bs.wi);
+    origin = offset_origin(sp->p, b.ng, bs.wi);
     d = bs.wi;
     out->rays++;
     trace_ray(it, origin, d, &h);
@@ -316,12 +374,21 @@ int hush__integrator_first_hit(const hush_integrator *it, hush_vec3 eye, uint32_
 void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
                             const hush_rand *rng, uint32_t x, uint32_t y, hush_first_hit *first,
                             hush_path_result *out) {
+  const float oo[3] = {eye.x, eye.y, eye.z}, dd[3] = {d.x, d.y, d.z};
+  hush_hit tri;
+  hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &tri);
+  hush__integrator_trace_hit(it, eye, d, &tri, rng, x, y, first, out);
+}
+
+void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                                const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
+                                hush_first_hit *first, hush_path_result *out) {
   hush_first_hit local;
   hush_first_hit *f = first ? first : &local;
   memset(f, 0, sizeof *f);
   f->dir = d;
   next_hit h;
-  trace_ray(it, eye, d, &h);
+  complete_hit(it, eye, d, tri, &h);
   f->kind = h.kind;
   f->t = h.t;
   if (h.kind == HUSH_FIRST_TRIANGLE) {

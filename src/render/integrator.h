@@ -78,6 +78,7 @@ typedef struct hush_integrator {
   hush_path_vertex_fn vertex_fn;
   hush_path_end_fn path_end_fn; /* called with vertex_user */
   void *vertex_user;
+  int split_lobes;         /* also fill hush_path_result's diffuse and specular */
 } hush_integrator;
 
 void hush__integrator_defaults(hush_integrator *it, const hush_scene *scene,
@@ -104,6 +105,14 @@ typedef struct hush_first_hit {
 typedef struct hush_path_result {
   float radiance[3];
   float direct[3];         /* emission seen directly + the first hit's shadow ray */
+  /* With split_lobes (else 0): radiance by the first hit's lobe. Light seen
+   * directly is diffuse. The first hit's shadow ray is split by the BSDF's
+   * lobes evaluated towards the light (hush__bsdf_eval_lobes); everything
+   * after the first hit by the lobes' values in the sampled direction, all
+   * specular for a delta lobe (mirror, smooth coat, glass). So each layer's
+   * expectation is its lobe's integral, and diffuse + specular = radiance
+   * up to rounding. */
+  float diffuse[3], specular[3];
   uint32_t rays;           /* rays traced, primary and shadow included */
 } hush_path_result;
 
@@ -112,6 +121,13 @@ typedef struct hush_path_result {
 void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
                             const hush_rand *rng, uint32_t x, uint32_t y, hush_first_hit *first,
                             hush_path_result *out);
+
+/* The same for a camera ray whose closest triangle was already found (by
+ * a packet, hush__scene_intersect_packet; triangle UINT32_MAX: none): the
+ * sphere lights are tested, then the path is shaded. */
+void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                                const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
+                                hush_first_hit *first, hush_path_result *out);
 
 /* The first hit of visibility sample (triangle, u, v) at the scene's
  * current frame, seen from eye: what a forward-projected sample needs to be

@@ -10,6 +10,7 @@
 #include "render/lights.h"
 
 #include "core/device.h"
+#include "render/fminmax.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -92,7 +93,7 @@ static hush_vec3 frame_to_world(hush_vec3 axis, hush_vec3 local) {
 /* A direction in the cone of half-angle acos(cos_max) around axis. */
 static hush_vec3 sample_cone(hush_vec3 axis, float cos_max, float u1, float u2) {
   const float cos_t = 1.0f - u1 * (1.0f - cos_max);
-  const float sin_t = sqrtf(fmaxf(0.0f, 1.0f - cos_t * cos_t));
+  const float sin_t = sqrtf(hush_fmaxf(0.0f, 1.0f - cos_t * cos_t));
   const float phi = 2.0f * L_PI * u2;
   return hush_v3_normalize(frame_to_world(axis, hush_v3(sin_t * cosf(phi), sin_t * sinf(phi), cos_t)));
 }
@@ -118,13 +119,13 @@ static float acos_poly(float x) {
                 a * (-0.0501743046f +
                      a * (0.0308918810f +
                           a * (-0.0170881256f + a * (0.0066700901f + a * -0.0012624911f))))));
-  const float r = sqrtf(fmaxf(0.0f, 1.0f - a)) * p;
+  const float r = sqrtf(hush_fmaxf(0.0f, 1.0f - a)) * p;
   return x < 0.0f ? L_PI - r : r;
 }
 
 static float atan2_poly(float y, float x) {
   const float ax = fabsf(x), ay = fabsf(y);
-  const float hi = fmaxf(ax, ay), lo = fminf(ax, ay);
+  const float hi = hush_fmaxf(ax, ay), lo = hush_fminf(ax, ay);
   if (!(hi > 0.0f)) return 0.0f;
   const float t = lo / hi, t2 = t * t;
   float r = t * (1.0f +
@@ -148,7 +149,7 @@ void hush__envmap_dir_to_uv(hush_vec3 d, float *u, float *v) {
   float a = atan2_poly(d.x, -d.z) / (2.0f * L_PI);
   if (a < 0.0f) a += 1.0f;
   *u = a < 1.0f ? a : 0.0f;
-  *v = acos_poly(fminf(1.0f, fmaxf(-1.0f, d.y))) / L_PI;
+  *v = acos_poly(hush_fminf(1.0f, hush_fmaxf(-1.0f, d.y))) / L_PI;
 }
 
 hush_vec3 hush__envmap_uv_to_dir(float u, float v) {
@@ -171,8 +172,8 @@ static hush_vec3 map_to_world(const hush_envmap *m, hush_vec3 d) {
 
 static void texel_of(const hush_envmap *m, float u, float v, uint32_t *x, uint32_t *y) {
   float fx = floorf(u * (float)m->width), fy = floorf(v * (float)m->height);
-  fx = fminf(fmaxf(fx, 0.0f), (float)(m->width - 1));
-  fy = fminf(fmaxf(fy, 0.0f), (float)(m->height - 1));
+  fx = hush_fminf(hush_fmaxf(fx, 0.0f), (float)(m->width - 1));
+  fy = hush_fminf(hush_fmaxf(fy, 0.0f), (float)(m->height - 1));
   *x = (uint32_t)fx;
   *y = (uint32_t)fy;
 }
@@ -252,7 +253,7 @@ static float texel_pdf(const hush_envmap *m, uint32_t x, uint32_t y, float cos_t
   const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
   const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
   const float p_col = cc[x + 1] - cc[x];
-  const float sin_t = sqrtf(fmaxf(0.0f, 1.0f - cos_t * cos_t));
+  const float sin_t = sqrtf(hush_fmaxf(0.0f, 1.0f - cos_t * cos_t));
   if (sin_t <= 0.0f) return 0.0f;
   const float pdf_uv = p_row * p_col * (float)m->width * (float)m->height;
   return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
@@ -291,8 +292,8 @@ static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, f
   const uint32_t x = cdf_find(cc, m->col_guide + (size_t)y * m->width, m->width, u1);
   /* where inside the bins the numbers fell, reused as the position in the texel */
   const float pr = m->row_cdf[y + 1] - m->row_cdf[y], pc = cc[x + 1] - cc[x];
-  const float fy = pr > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u2 - m->row_cdf[y]) / pr)) : 0.5f;
-  const float fx = pc > 0.0f ? fminf(0.999999f, fmaxf(0.0f, (u1 - cc[x]) / pc)) : 0.5f;
+  const float fy = pr > 0.0f ? hush_fminf(0.999999f, hush_fmaxf(0.0f, (u2 - m->row_cdf[y]) / pr)) : 0.5f;
+  const float fx = pc > 0.0f ? hush_fminf(0.999999f, hush_fmaxf(0.0f, (u1 - cc[x]) / pc)) : 0.5f;
   const float u = ((float)x + fx) / (float)m->width, v = ((float)y + fy) / (float)m->height;
   const hush_vec3 l = hush__envmap_uv_to_dir(u, v);
   *pdf = texel_pdf(m, x, y, l.y);
@@ -308,13 +309,13 @@ hush_vec3 hush__envmap_sample(const hush_envmap *m, float u1, float u2, float *p
 /* ---- sun and sky --------------------------------------------------------------------- */
 
 static float perez(const float c[5], float cos_theta, float gamma, float cos_gamma) {
-  return (1.0f + c[0] * expf(c[1] / fmaxf(cos_theta, 1e-3f))) *
+  return (1.0f + c[0] * expf(c[1] / hush_fmaxf(cos_theta, 1e-3f))) *
          (1.0f + c[2] * expf(c[3] * gamma) + c[4] * cos_gamma * cos_gamma);
 }
 
 void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float T) {
   sky->sun_dir = sun_dir;
-  const float ts = acosf(fminf(1.0f, fmaxf(-1.0f, sun_dir.y)));
+  const float ts = acosf(hush_fminf(1.0f, hush_fmaxf(-1.0f, sun_dir.y)));
   const float c[3][5] = {
       {0.1787f * T - 1.4630f, -0.3554f * T + 0.4275f, -0.0227f * T + 5.3251f,
        0.1206f * T - 2.5771f, -0.0670f * T + 0.3703f},
@@ -324,7 +325,7 @@ void hush__sky_model_init(hush_sky_model *sky, hush_vec3 sun_dir, float T) {
        -0.0441f * T - 1.6537f, -0.0109f * T + 0.0529f}};
   memcpy(sky->coef, c, sizeof sky->coef);
   const float chi = (4.0f / 9.0f - T / 120.0f) * (L_PI - 2.0f * ts);
-  const float Yz = fmaxf(0.0f, (4.0453f * T - 4.9710f) * tanf(chi) - 0.2155f * T + 2.4192f);
+  const float Yz = hush_fmaxf(0.0f, (4.0453f * T - 4.9710f) * tanf(chi) - 0.2155f * T + 2.4192f);
   const float t2 = ts * ts, t3 = t2 * ts;
   const float xz = T * T * (0.00166f * t3 - 0.00375f * t2 + 0.00209f * ts) +
                    T * (-0.02903f * t3 + 0.06377f * t2 - 0.03202f * ts + 0.00394f) +
@@ -344,15 +345,15 @@ static void sky_xyy_to_rgb(float Y, float x, float y, float out[3]) {
   /* kcd/m^2 -> Mitsuba's W / (m^2 sr nm) as RGB: 1000 / (683 lm/W * 106.857 nm) */
   const float Yu = Y * (1000.0f / (683.0f * 106.857f));
   const float X = x / y * Yu, Z = (1.0f - x - y) / y * Yu;
-  out[0] = fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
-  out[1] = fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
-  out[2] = fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
+  out[0] = hush_fmaxf(0.0f, 3.2404542f * X - 1.5371385f * Yu - 0.4985314f * Z);
+  out[1] = hush_fmaxf(0.0f, -0.9692660f * X + 1.8760108f * Yu + 0.0415560f * Z);
+  out[2] = hush_fmaxf(0.0f, 0.0556434f * X - 0.2040259f * Yu + 1.0572252f * Z);
 }
 
 void hush__sky_model_eval(const hush_sky_model *sky, hush_vec3 d, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   if (d.y <= 0.0f) return; /* Mitsuba's sky is black below the horizon */
-  const float cos_gamma = fminf(1.0f, fmaxf(-1.0f, hush_v3_dot(d, sky->sun_dir)));
+  const float cos_gamma = hush_fminf(1.0f, hush_fmaxf(-1.0f, hush_v3_dot(d, sky->sun_dir)));
   const float gamma = acosf(cos_gamma);
   const float Y = sky->zenith[0] * perez(sky->coef[0], d.y, gamma, cos_gamma);
   const float x = sky->zenith[1] * perez(sky->coef[1], d.y, gamma, cos_gamma);
@@ -377,7 +378,7 @@ void hush__sky_table_init(hush_sky_table *t, const hush_sky_model *sky) {
 
 /* Row a of a table at x in [0, 1], linearly interpolated. */
 static void table_lerp(const float (*tab)[3], float x, float out[3]) {
-  const float f = fminf(fmaxf(x, 0.0f), 1.0f) * (float)HUSH_SKY_TABLE;
+  const float f = hush_fminf(hush_fmaxf(x, 0.0f), 1.0f) * (float)HUSH_SKY_TABLE;
   uint32_t i = (uint32_t)f;
   if (i >= HUSH_SKY_TABLE) i = HUSH_SKY_TABLE - 1;
   const float w = f - (float)i;
@@ -388,7 +389,7 @@ void hush__sky_table_eval(const hush_sky_table *t, hush_vec3 d, float out[3]) {
   out[0] = out[1] = out[2] = 0.0f;
   if (d.y <= 0.0f) return;
   const float cos_gamma = hush_v3_dot(d, t->sun_dir);
-  const float s = sqrtf(fmaxf(0.0f, 0.5f - 0.5f * cos_gamma));
+  const float s = sqrtf(hush_fmaxf(0.0f, 0.5f - 0.5f * cos_gamma));
   float a[3], b[3];
   table_lerp(t->theta, d.y, a);
   table_lerp(t->gamma, s, b);
@@ -409,7 +410,7 @@ static void sun_radiance(float theta_s, float T, float out[3]) {
   static const float solar[3] = {24173.2f, 25503.8f, 30360.0f}; /* Mitsuba's table */
   const float beta = 0.04608365822050f * T - 0.04586025928522f;
   const float deg = theta_s * 180.0f / L_PI;
-  const float m = 1.0f / (cosf(theta_s) + 0.15f * powf(fmaxf(93.885f - deg, 1e-3f), -1.253f));
+  const float m = 1.0f / (cosf(theta_s) + 0.15f * powf(hush_fmaxf(93.885f - deg, 1e-3f), -1.253f));
   for (int k = 0; k < 3; k++) {
     const float l = lambda[k] / 1000.0f;
     const float tau_r = expf(-m * 0.008735f * powf(l, -4.08f));
@@ -489,10 +490,10 @@ static hush_status env_init(hush_device device, hush_lights *L, const hush_scene
         hush_v3(env->sun_direction[0], env->sun_direction[1], env->sun_direction[2]));
     const float theta0 = SUN_HALF_ANGLE_DEG * L_PI / 180.0f;
     const float scale = env->sun_radius_scale > 0.0f ? env->sun_radius_scale : 1.0f;
-    const float theta = fminf(theta0 * scale, 0.5f * L_PI);
+    const float theta = hush_fminf(theta0 * scale, 0.5f * L_PI);
     L->sun_cos_max = cosf(theta);
-    const float theta_s = acosf(fminf(1.0f, fmaxf(-1.0f, L->sun_dir.y)));
-    sun_radiance(fminf(theta_s, 0.5f * L_PI), env->turbidity, L->sun_radiance);
+    const float theta_s = acosf(hush_fminf(1.0f, hush_fmaxf(-1.0f, L->sun_dir.y)));
+    sun_radiance(hush_fminf(theta_s, 0.5f * L_PI), env->turbidity, L->sun_radiance);
     /* Mitsuba keeps the sun's power when its radius is scaled */
     const float ratio = cone_solid_angle(cosf(theta0), sinf(theta0) * sinf(theta0)) /
                         cone_solid_angle(L->sun_cos_max, sinf(theta) * sinf(theta));
@@ -560,8 +561,8 @@ hush_status hush__lights_init(hush_device device, hush_lights *L, const hush_sce
   float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
   for (uint32_t i = 0; i < scene->vertex_count; i++)
     for (int k = 0; k < 3; k++) {
-      lo[k] = fminf(lo[k], scene->positions[3 * i + k]);
-      hi[k] = fmaxf(hi[k], scene->positions[3 * i + k]);
+      lo[k] = hush_fminf(lo[k], scene->positions[3 * i + k]);
+      hi[k] = hush_fmaxf(hi[k], scene->positions[3 * i + k]);
     }
   if (scene->vertex_count > 0) {
     L->scene_center = hush_v3(0.5f * (lo[0] + hi[0]), 0.5f * (lo[1] + hi[1]), 0.5f * (lo[2] + hi[2]));
@@ -734,7 +735,7 @@ static int sphere_cone(const hush_lights *L, uint32_t i, hush_vec3 p, hush_vec3 
   const float d = hush_v3_length(to);
   if (!(d > r * 1.0001f)) return 0;
   const float sin2 = (r * r) / (d * d);
-  *cos_max = sqrtf(fmaxf(0.0f, 1.0f - sin2));
+  *cos_max = sqrtf(hush_fmaxf(0.0f, 1.0f - sin2));
   *omega = cone_solid_angle(*cos_max, sin2);
   *axis = hush_v3_scale(to, 1.0f / d);
   *dist_c = d;
@@ -809,7 +810,7 @@ static int sample_sphere(const hush_lights *L, uint32_t i, hush_vec3 p, float u1
   const float r = L->scene->spheres[i].radius;
   const float b = d * hush_v3_dot(s->wi, axis);
   const float disc = r * r - (d * d - b * b);
-  s->dist = b - sqrtf(fmaxf(0.0f, disc));
+  s->dist = b - sqrtf(hush_fmaxf(0.0f, disc));
   s->pdf = L->p_sphere[i] / omega;
   memcpy(s->radiance, L->scene->spheres[i].radiance, 3 * sizeof(float));
   return s->pdf > 0.0f;
@@ -836,7 +837,7 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
     if (sun) {
       s->wi = sample_cone(L->sun_dir, L->sun_cos_max, u[1], u[2]);
     } else {
-      const float z = 1.0f - 2.0f * u[1], r = sqrtf(fmaxf(0.0f, 1.0f - z * z));
+      const float z = 1.0f - 2.0f * u[1], r = sqrtf(hush_fmaxf(0.0f, 1.0f - z * z));
       const float phi = 2.0f * L_PI * u[2];
       s->wi = hush_v3(r * cosf(phi), r * sinf(phi), z);
     }

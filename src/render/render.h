@@ -21,6 +21,10 @@
  *   variance (1)       when spp > 1: the sample variance of the luminance
  *                      of one sample
  *   direct, indirect (3) with split: first-hit emission + its shadow ray, and the rest
+ *   diffuse, specular (3) with split_lobes: the radiance by the first hit's
+ *                      BSDF lobe (integrator.h, hush_path_result); light seen
+ *                      directly is diffuse. color is then diffuse + specular,
+ *                      exactly (without the split it can differ in the last bit)
  *
  * With params.progressive (fewer than one sample per pixel, progressive.h)
  * only the pattern's pixels are traced; the others are holes: spp 0, every
@@ -51,6 +55,7 @@ typedef struct hush_render_params {
   int jitter;              /* Halton frame jitter; samples 1.. of a pixel spread over it */
   float clamp;             /* > 0: firefly clamp of indirect contributions */
   int split;               /* also write "direct" and "indirect" */
+  int split_lobes;         /* also write "diffuse" and "specular" (color = their sum) */
   int threads;             /* 0: the device's */
   const hush_progressive *progressive; /* not NULL: trace only its pixels (progressive.h) */
   hush_path_vertex_fn vertex_fn;
@@ -79,6 +84,7 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
 typedef struct hush_pixel_result {
   float color[3];
   float direct[3];
+  float diffuse[3], specular[3]; /* split_lobes; color = diffuse + specular */
   float variance;          /* of one sample's luminance (spp > 1) */
   hush_first_hit first;    /* of sample 0 */
   uint64_t rays;

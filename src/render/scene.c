@@ -429,6 +429,53 @@ int hush__scene_intersect(const hush_scene *scene, const float o[3], const float
   return 1;
 }
 
+void hush__scene_intersect_packet(const hush_scene *scene, const float o[3],
+                                  const float d[HUSH_PACKET][3], uint32_t lanes,
+                                  hush_hit hits[HUSH_PACKET]) {
+  for (int i = 0; i < HUSH_PACKET; i++) {
+    hits[i].triangle = UINT32_MAX;
+    hits[i].u = hits[i].v = 0.0f;
+    hits[i].t = INFINITY;
+  }
+  if (!scene || !scene->rtc_scene || !lanes) return;
+  /* Embree reads packets with aligned vector loads */
+  _Alignas(64) struct RTCRayHit16 rh;
+  _Alignas(64) int valid[HUSH_PACKET];
+  for (int i = 0; i < HUSH_PACKET; i++) {
+    const int on = (lanes >> i) & 1u;
+    valid[i] = on ? -1 : 0;
+    rh.ray.org_x[i] = o[0];
+    rh.ray.org_y[i] = o[1];
+    rh.ray.org_z[i] = o[2];
+    rh.ray.dir_x[i] = on ? d[i][0] : 0.0f;
+    rh.ray.dir_y[i] = on ? d[i][1] : 0.0f;
+    rh.ray.dir_z[i] = on ? d[i][2] : 1.0f;
+    rh.ray.tnear[i] = 0.0f;
+    rh.ray.tfar[i] = INFINITY;
+    rh.ray.time[i] = 0.0f;
+    rh.ray.mask[i] = 0xffffffffu;
+    rh.ray.id[i] = (unsigned)i;
+    rh.ray.flags[i] = 0;
+    rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.primID[i] = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+  }
+  struct RTCIntersectContext ctx;
+  rtcInitIntersectContext(&ctx);
+  ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
+  rtcIntersect16(valid, (RTCScene)scene->rtc_scene, &ctx, &rh);
+  for (int i = 0; i < HUSH_PACKET; i++) {
+    if (!valid[i] || rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+    const uint32_t object =
+        rh.hit.instID[0][i] != RTC_INVALID_GEOMETRY_ID ? rh.hit.instID[0][i] : rh.hit.geomID[i];
+    if (object >= scene->object_count) continue;
+    hits[i].triangle = scene->objects[object].first_triangle + rh.hit.primID[i];
+    hits[i].u = rh.hit.u[i];
+    hits[i].v = rh.hit.v[i];
+    hits[i].t = rh.ray.tfar[i];
+  }
+}
+
 int hush__scene_occluded(const hush_scene *scene, const float o[3], const float d[3], float tnear,
                          float tfar) {
   if (!scene || !scene->rtc_scene) return 0;

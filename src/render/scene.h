@@ -209,6 +209,17 @@ typedef struct hush_hit {
  * skipped. Returns 1 on a hit. */
 int hush__scene_intersect(const hush_scene *scene, const float o[3], const float d[3], float tnear,
                           float tfar, hush_hit *hit);
+/* Closest hits of a packet of camera rays from one origin o: lane i has
+ * direction d[i] (t in (0, inf)) when bit i of `lanes` is set; other lanes
+ * get no hit. Embree's packet traversal is ~3x faster than single rays for
+ * the coherent rays of a pixel block. A lane's hit can differ from
+ * hush__scene_intersect's where two triangles tie exactly (coplanar
+ * duplicates, shared edges), and may depend on the other lanes, so a caller
+ * that must reproduce a hit traces the same packet again. */
+#define HUSH_PACKET 16
+void hush__scene_intersect_packet(const hush_scene *scene, const float o[3],
+                                  const float d[HUSH_PACKET][3], uint32_t lanes,
+                                  hush_hit hits[HUSH_PACKET]);
 /* Whether anything opaque lies along o + t d for t in (tnear, tfar). */
 int hush__scene_occluded(const hush_scene *scene, const float o[3], const float d[3], float tnear,
                          float tfar);

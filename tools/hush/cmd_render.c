@@ -59,6 +59,9 @@ static const char *const help_text =
     "  --no-jitter          no subpixel jitter (default: Halton(2,3) per frame)\n"
     "  --clamp X            clamp indirect contributions to X (default: off)\n"
     "  --split              also write the layers direct and indirect\n"
+    "  --split-lobes        also write the layers diffuse and specular: the\n"
+    "                       radiance by the first hit's BSDF lobe (light seen\n"
+    "                       directly is diffuse); color is their sum\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
     "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
@@ -181,6 +184,8 @@ static void parse_options(int argc, char **argv, render_options *o) {
       o->params.clamp = cli_parse_float(a.cmd, "--clamp", v, 1e-6f, 1e30f);
     } else if (cli_switch(&a, arg, "--split")) {
       o->params.split = 1;
+    } else if (cli_switch(&a, arg, "--split-lobes")) {
+      o->params.split_lobes = 1;
     } else if (cli_option(&a, arg, "--spp-fraction", &v)) {
       parse_fraction(a.cmd, v, o);
     } else if (cli_option(&a, arg, "--export", &v)) {
@@ -328,13 +333,14 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
   fprintf(f,
           ",\n  \"width\": %u,\n  \"height\": %u,\n  \"first_frame\": %u,\n  \"frame_count\": %u,\n"
           "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
-          "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n"
+          "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n  \"split_lobes\": %s,\n"
           "  \"spp_fraction\": %.9g,\n  \"progressive_block\": [%u, %u],\n  \"export\": %s,\n"
           "  \"psf\": %s,\n  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
           "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
           r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
           p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
-          (double)p->clamp, p->split ? "true" : "false", r->o->spp_fraction,
+          (double)p->clamp, p->split ? "true" : "false", p->split_lobes ? "true" : "false",
+          r->o->spp_fraction,
           r->o->spp_fraction < 1.0 ? r->o->progressive.k : 1u,
           r->o->spp_fraction < 1.0 ? r->o->progressive.m : 1u,
           r->o->export_bmfr ? "\"bmfr\"" : "null", r->psf.on ? "true" : "false",
@@ -404,6 +410,68 @@ static hush_status write_psf_png(render_run *r, hush_frame frame, const char *pn
   return hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
 }
 
+/* Renders frames first .. first + n - 1 into `frame` (reused: its layers
+ * are rewritten each time) and writes them. */
+static int render_sequence(render_run *r, const hush_render_params *params,
+                           const hush_camera_move_setup *moves, hush_frame frame, uint32_t n,
+                           uint64_t *rays_total) {
+  const render_options *o = r->o;
+  hush_status st;
+  render_progress_begin(&r->progress, n, r->tty, o->quiet, params->spp > 1);
+  for (uint32_t i = 0; i < n; i++) {
+    const uint32_t f = o->first + i;
+    render_progress_frame_start(&r->progress, i);
+    st = hush__scene_set_frame(r->device, &r->scene, f);
+    if (st != HUSH_OK) return fail(r, st, "set frame");
+    hush__lights_set_frame(&r->lights, f);
+    hush_render_camera cam, prev;
+    int have_prev;
+    if (!hush__camera_move_frame(moves, f, &cam, &prev, &have_prev)) {
+      render_progress_break(&r->progress);
+      return cli_error("render", "frame %u: degenerate camera (eye on target, or up along the view)",
+                       f);
+    }
+    hush_render_ctx ctx;
+    hush__render_ctx_init(&ctx, &r->scene, &r->lights, params, &cam, have_prev ? &prev : NULL, f);
+    if (r->psf.on) {
+      st = hush__psf_renderer_begin(r->psf.renderer, &ctx,
+                                    i == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE);
+      if (st != HUSH_OK) return fail(r, st, "psf");
+    }
+    const double start_ms = hush__now_ms(), start_cpu = hush__cpu_seconds();
+    uint64_t rays = 0;
+    st = hush__render_frame(r->device, &ctx, frame, progress, r, &rays);
+    const double ms = hush__now_ms() - start_ms, cpu = hush__cpu_seconds() - start_cpu;
+    *rays_total += rays;
+    hush_psf_timings psf_t;
+    if (st == HUSH_OK && r->psf.on) {
+      st = hush__psf_renderer_finish(r->psf.renderer, frame, &psf_t);
+      if (st == HUSH_OK && o->psf_bench) st = psf_bench(r, frame, &psf_t);
+      if (st == HUSH_OK) psf_report(r, f, &psf_t);
+    }
+    char path[HUSH_PATH_MAX];
+    if (st == HUSH_OK) st = hush__sequence_frame_path(r->device, &r->seq, i, path, sizeof path);
+    if (st == HUSH_OK) st = hush_frame_write_exr(frame, path, o->exr_type);
+    if (st == HUSH_OK && o->png) {
+      const size_t len = strlen(path);
+      memcpy(path + len - 3, "png", 3);
+      hush_image_view view;
+      hush_frame_get_layer(frame, "color", &view);
+      st = hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
+      if (st == HUSH_OK && r->psf.on) st = write_psf_png(r, frame, path);
+    }
+    if (st == HUSH_OK && o->export_bmfr)
+      st = hush__bmfr_write_frame(r->device, r->bmfr_dir, i, frame);
+    if (st != HUSH_OK) return fail(r, st, NULL);
+    hush_camera *c = &r->seq.cameras[i];
+    memcpy(c->world_to_view, cam.world_to_view, sizeof c->world_to_view);
+    memcpy(c->view_to_clip, cam.view_to_clip, sizeof c->view_to_clip);
+    memcpy(c->jitter, cam.jitter, sizeof c->jitter);
+    render_progress_frame_done(&r->progress, ms / 1000.0, cpu, rays);
+  }
+  return 0;
+}
+
 static int render_frames(render_run *r, int argc, char **argv) {
   const render_options *o = r->o;
   uint32_t W = o->width, H = o->height;
@@ -454,61 +522,13 @@ static int render_frames(render_run *r, int argc, char **argv) {
 
   const double t0 = hush__now_ms();
   uint64_t rays_total = 0;
-  render_progress_begin(&r->progress, n, r->tty, o->quiet, params.spp > 1);
-  for (uint32_t i = 0; i < n; i++) {
-    const uint32_t f = o->first + i;
-    render_progress_frame_start(&r->progress, i);
-    st = hush__scene_set_frame(r->device, &r->scene, f);
-    if (st != HUSH_OK) return fail(r, st, "set frame");
-    hush__lights_set_frame(&r->lights, f);
-    hush_render_camera cam, prev;
-    int have_prev;
-    if (!hush__camera_move_frame(&moves, f, &cam, &prev, &have_prev)) {
-      render_progress_break(&r->progress);
-      return cli_error("render", "frame %u: degenerate camera (eye on target, or up along the view)",
-                       f);
-    }
-    hush_render_ctx ctx;
-    hush__render_ctx_init(&ctx, &r->scene, &r->lights, &params, &cam, have_prev ? &prev : NULL, f);
-    if (r->psf.on) {
-      st = hush__psf_renderer_begin(r->psf.renderer, &ctx,
-                                    i == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE);
-      if (st != HUSH_OK) return fail(r, st, "psf");
-    }
-    hush_frame frame = hush_frame_new(r->device, W, H);
-    if (!frame) return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
-    const double start_ms = hush__now_ms(), start_cpu = hush__cpu_seconds();
-    uint64_t rays = 0;
-    st = hush__render_frame(r->device, &ctx, frame, progress, r, &rays);
-    const double ms = hush__now_ms() - start_ms, cpu = hush__cpu_seconds() - start_cpu;
-    rays_total += rays;
-    hush_psf_timings psf_t;
-    if (st == HUSH_OK && r->psf.on) {
-      st = hush__psf_renderer_finish(r->psf.renderer, frame, &psf_t);
-      if (st == HUSH_OK && o->psf_bench) st = psf_bench(r, frame, &psf_t);
-      if (st == HUSH_OK) psf_report(r, f, &psf_t);
-    }
-    char path[HUSH_PATH_MAX];
-    if (st == HUSH_OK) st = hush__sequence_frame_path(r->device, &r->seq, i, path, sizeof path);
-    if (st == HUSH_OK) st = hush_frame_write_exr(frame, path, o->exr_type);
-    if (st == HUSH_OK && o->png) {
-      const size_t len = strlen(path);
-      memcpy(path + len - 3, "png", 3);
-      hush_image_view view;
-      hush_frame_get_layer(frame, "color", &view);
-      st = hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
-      if (st == HUSH_OK && r->psf.on) st = write_psf_png(r, frame, path);
-    }
-    if (st == HUSH_OK && o->export_bmfr)
-      st = hush__bmfr_write_frame(r->device, r->bmfr_dir, i, frame);
-    hush_frame_release(frame);
-    if (st != HUSH_OK) return fail(r, st, NULL);
-    hush_camera *c = &r->seq.cameras[i];
-    memcpy(c->world_to_view, cam.world_to_view, sizeof c->world_to_view);
-    memcpy(c->view_to_clip, cam.view_to_clip, sizeof c->view_to_clip);
-    memcpy(c->jitter, cam.jitter, sizeof c->jitter);
-    render_progress_frame_done(&r->progress, ms / 1000.0, cpu, rays);
-  }
+  /* one frame for the whole sequence: hush__render_frame rewrites its
+   * layers in place instead of allocating and zeroing them every frame */
+  hush_frame frame = hush_frame_new(r->device, W, H);
+  if (!frame) return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
+  const int rc = render_sequence(r, &params, &moves, frame, n, &rays_total);
+  hush_frame_release(frame);
+  if (rc) return rc;
   render_progress_break(&r->progress);
   st = hush__sequence_write_cameras(r->device, &r->seq);
   if (st == HUSH_OK && o->export_bmfr)

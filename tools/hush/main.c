@@ -16,6 +16,7 @@ int cmd_bench(int argc, char **argv);
 int cmd_render(int argc, char **argv);
 int cmd_eval(int argc, char **argv);
 int cmd_compare(int argc, char **argv);
+int cmd_train_nca(int argc, char **argv);
 
 static const struct {
   const char *name;
@@ -30,6 +31,7 @@ static const struct {
     {"render", cmd_render, "path-trace a noisy frame sequence (or references) of a scene"},
     {"eval", cmd_eval, "compare filters against references: metrics, timings, report"},
     {"compare", cmd_compare, "mean luminance ratio and RMSE of a render against a reference"},
+    {"train-nca", cmd_train_nca, "train the weights of the nca filter on rendered frames"},
 };
 
 #define COMMAND_COUNT (sizeof commands / sizeof commands[0])

@@ -4,7 +4,8 @@
  *   import -> demodulate by albedo -> temporal accumulation of colour and
  *   luminance moments (src/temporal, shared with "accumulate") -> variance
  *   from the moments, or a 7x7 bilateral spatial estimate while the history
- *   is short -> edge-avoiding a-trous (5x5 B3 kernel, step 2^i), guided by
+ *   is short -> edge-avoiding a-trous (5x5 B3 or 3x3 kernel, steps 2^i in
+ *   increasing, decreasing or 0-then-decreasing order), guided by
  *   depth (with its screen-space gradient), normal and luminance (scaled by
  *   the 3x3-blurred variance), the variance filtered along with squared
  *   weights -> the first level fed back as the colour history -> remodulate
@@ -12,32 +13,36 @@
  *   the "taa" filter can also follow svgf).
  *
  * Follows Dundr 2018 §4.1.4-4.1.5 (a-trous, weights, variance propagation)
- * and §4.4 (spatial variance while history < 4 frames), with the published
- * defaults of Schied et al. 2017 given in papers/NOTES.md ("SVGF").
+ * and §4.4 (spatial variance while history < 4 samples), with the published
+ * defaults of Schied et al. 2017 given in papers/NOTES.md ("SVGF"); §4.3
+ * (more than 1 spp: 'spp' and 'variance' merged into the moments) and §4.2
+ * (fewer than 1 spp: holes with spp 0) when those images are bound; direct
+ * and indirect light filtered separately when both are bound (Schied 2017).
  *
- * Layout: planar floats. The a-trous loops go tap-outer, pixel-inner over a
- * row, with per-thread row accumulators, so the inner loop is a plain
- * vectorisable loop over x; image borders are handled by clamping the tap
- * coordinates (done in short separate loops at the row ends). Every pixel is
- * computed on its own: the result does not depend on the thread count.
+ * Files: guide.c (padded depth/normal, depth gradient), variance.c (7x7
+ * spatial estimate), atrous.c (one fused pass per level: Gaussian of the
+ * variance, weights, colour and variance), weights.h (one exp per tap),
+ * padded.c (row padding so every inner loop is branch-free), samples.c
+ * (§4.3), progressive.c (§4.2). Every pixel is computed on its own (the
+ * progressive scatter breaks depth ties by source index): the result does
+ * not depend on the thread count.
  */
 #include "filters/albedo.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/svgf/atrous.h"
+#include "filters/svgf/guide.h"
+#include "filters/svgf/padded.h"
+#include "filters/svgf/progressive.h"
+#include "filters/svgf/samples.h"
+#include "filters/svgf/variance.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
 
 #include <math.h>
-#include <omp.h>
 #include <stdlib.h>
 #include <string.h>
-
-/* Albedo below this is clamped before dividing (demodulation). */
-/* Keep the depth and luminance weights' denominators away from 0: a flat
- * facing plane (zero gradient) or zero variance must not divide by 0. */
-#define SVGF_EPS_Z 1e-3f
-#define SVGF_EPS_L 1e-4f
 
 enum {
   P_NONFINITE = 0,
@@ -58,8 +63,18 @@ enum {
   P_FEEDBACK_FIRST_LEVEL,
   P_TAA,
   P_TAA_ALPHA,
+  P_KERNEL,
+  P_ORDER,
+  P_DEPTH_STEEP,
+  P_SAMPLE_VARIANCE,
+  P_PROGRESSIVE,
+  P_PROGRESSIVE_EPSILON,
   P_COUNT
 };
+
+static const char *const svgf_kernel_names[] = {"5x5", "3x3"};
+enum { ORDER_INCREASING = 0, ORDER_DECREASING, ORDER_ZERO_THEN_DECREASING };
+static const char *const svgf_order_names[] = {"increasing", "decreasing", "0-then-decreasing"};
 
 static const hush_param_info svgf_params[P_COUNT] = {
     HUSH_PARAM_NONFINITE_ENTRY,
@@ -84,7 +99,9 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
      "with 'albedo' bound: filter color / max(albedo, 1e-3), multiply back after", NULL},
     {"iterations", HUSH_PARAM_INT, 5, 0, 10,
-     "a-trous iterations of the 5x5 B3 kernel, tap step 2^i (0: accumulation only)", NULL},
+     "a-trous levels, tap steps 1, 2, ..., 2^(iterations-1) (0: accumulation only); the thesis "
+     "uses 6 with the 3x3 kernel",
+     NULL},
     {"sigma_z", HUSH_PARAM_FLOAT, 1.0, 1e-6, 1e6,
      "depth weight exp(-|z_p - z_q| / (sigma_z |grad z . (p - q)| + eps))", NULL},
     {"sigma_n", HUSH_PARAM_FLOAT, 128.0, 0.0, 1024.0,
@@ -92,7 +109,8 @@ static const hush_param_info svgf_params[P_COUNT] = {
     {"sigma_l", HUSH_PARAM_FLOAT, 4.0, 1e-6, 1e6,
      "luminance weight exp(-|l_p - l_q| / (sigma_l sqrt(g3x3(var_p)) + eps))", NULL},
     {"spatial_variance_frames", HUSH_PARAM_INT, 4, 0, 65535,
-     "below this history length the variance is a 7x7 bilateral spatial estimate (0: never)",
+     "below this history length (in samples: frames x spp) the variance is a 7x7 bilateral "
+     "spatial estimate (0: never)",
      NULL},
     {"feedback_first_level", HUSH_PARAM_BOOL, 1, 0, 1,
      "the first a-trous level becomes the next frame's colour history (else the accumulation)",
@@ -103,6 +121,33 @@ static const hush_param_info svgf_params[P_COUNT] = {
      NULL},
     {"taa_alpha", HUSH_PARAM_FLOAT, 0.1, 0.01, 1.0,
      "with taa: weight of the current frame in the TAA blend", NULL},
+    {"kernel", HUSH_PARAM_ENUM, 0, 0, 1,
+     "a-trous kernel: 5x5 B3 spline (1 4 6 4 1)/16 (Schied 2017) or 3x3 (1 2 1)/4 (Dundr 2018 "
+     "§4.1.4.6)",
+     svgf_kernel_names},
+    {"order", HUSH_PARAM_ENUM, 0, 0, 2,
+     "order of the tap steps: increasing (1, 2, 4, ...; Schied 2017), decreasing (largest "
+     "first) or 0-then-decreasing (1, then largest down to 2: Dundr 2018 §4.1.4.6, 'i = 0, 5, 4, "
+     "3, 2, 1'); the first level run is the one fed back (with decreasing that is the coarsest: "
+     "its bias accumulates, measured +2 % on a noisy wall after 8 frames)",
+     svgf_order_names},
+    {"depth_steep", HUSH_PARAM_FLOAT, 0.0, 0.0, 1e6,
+     "the depth weight is 1 where |grad z| > depth_steep * z (relative slope per pixel; Dundr "
+     "2018 §4.1.4.3, a scene-dependent constant without a published value); 0: never",
+     NULL},
+    {"sample_variance", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'variance' and 'spp' bound: merge the within-pixel sample variance into the moments "
+     "(Dundr 2018 §4.3)",
+     NULL},
+    {"progressive", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'spp' bound and holes (spp 0, `hush render --spp-fraction`): fewer than 1 spp "
+     "(Dundr 2018 §4.2): G-buffer holes filled by a pyramid, forward reprojection by scatter "
+     "with a depth test, near/far rejection, holes without data weightless; needs 'position'",
+     NULL},
+    {"progressive_epsilon", HUSH_PARAM_FLOAT, 0.05, 0.0, 1e6,
+     "progressive: the luminance weight's epsilon is 1e-4 + this / samples below 4 samples "
+     "(Dundr 2018 §4.2.3: typically 0.01 to 0.1)",
+     NULL},
 };
 
 enum {
@@ -114,8 +159,12 @@ enum {
   I_ID,
   I_MOTION,
   I_ALBEDO,
+  I_SPP,
+  I_SAMPLE_VARIANCE,
+  I_DIRECT,
+  I_INDIRECT,
   I_OUTPUT,
-  I_VARIANCE,
+  I_VARIANCE_ESTIMATE,
   I_HISTORY_LENGTH,
   I_COUNT
 };
@@ -132,8 +181,19 @@ static const hush_image_info svgf_images[I_COUNT] = {
     {"motion", HUSH_IMAGE_INPUT, 0, 2,
      "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
+    {"spp", HUSH_IMAGE_INPUT, 0, 1,
+     "samples per pixel of 'color' (else 1; `hush render --spp N`): the variance of a pixel "
+     "value is the per-sample variance / spp"},
+    {"variance", HUSH_IMAGE_INPUT, 0, 1,
+     "per-sample luminance variance within the pixel (`hush render --spp N`, needs 'spp'), "
+     "merged into the moments (Dundr 2018 §4.3)"},
+    {"direct", HUSH_IMAGE_INPUT, 0, 3,
+     "direct light (`hush render --split`): with 'indirect' also bound, each is filtered on its "
+     "own (own history, variance and a-trous; Schied 2017) and the output is their sum ('color' "
+     "is then not used)"},
+    {"indirect", HUSH_IMAGE_INPUT, 0, 3, "indirect light, see 'direct'"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
-    {"variance", HUSH_IMAGE_OUTPUT, 0, 1,
+    {"variance_estimate", HUSH_IMAGE_OUTPUT, 0, 1,
      "luminance variance estimate that guides the first a-trous level (demodulated)"},
     {"history_length", HUSH_IMAGE_OUTPUT, 0, 1, "frames accumulated per pixel"},
 };
@@ -148,41 +208,69 @@ static const hush_filter_class_info svgf_info = {
     I_COUNT,
 };
 
+/* One filtered signal: 'color', or each of 'direct' and 'indirect'. */
+typedef struct svgf_component {
+  hush_accum acc;     /* its history */
+  hush_planar color;  /* this frame, demodulated in place */
+  hush_planar result; /* 3: its last a-trous level */
+} svgf_component;
+
 typedef struct svgf_state {
   hush_reprojector rp;
-  hush_accum acc;
-  hush_planar color;   /* this frame, demodulated in place */
+  svgf_component comp[2]; /* [1] allocated when 'direct' and 'indirect' are first bound */
   hush_planar grad;    /* 2: depth gradient (imported or computed) */
-  hush_planar ping[2]; /* 4: a-trous colour (3) + variance (1) */
-  hush_planar lum;     /* 1: luminance of the a-trous input */
-  hush_planar gvar;    /* 1: 3x3 Gaussian of the variance, then the scratch of its blur */
-  float *rows;         /* per thread: ROW_ARRAYS rows of width floats */
+  hush_planar zon;     /* 1: 1 where the depth weight applies (guide.h) */
+  hush_planar var;     /* 1: variance from the moments or the spatial estimate */
+  hush_planar samples; /* 1: samples behind the moments, age * spp */
+  svgf_padded zn;        /* depth + normal, padded for the widest tap */
+  svgf_padded moments;   /* 2: the moments, padded for the spatial estimate */
+  svgf_padded signal[2]; /* SVGF_SIGNAL_CHANNELS: a-trous ping-pong */
   int threads;
+  int split; /* the components' histories are of direct and indirect */
+  svgf_progressive prog; /* allocated on the first frame with holes */
+  hush_planar eps;       /* 1: progressive luminance epsilon */
   /* allocated on first use: */
   hush_planar albedo;
+  hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
 } svgf_state;
 
-/* Row accumulators of the a-trous: weight, colour (3), variance, and the
- * reciprocal of the luminance weight's denominator. */
-#define ROW_ARRAYS 6
+static void component_free(svgf_component *c) {
+  hush__accum_free(&c->acc);
+  hush__planar_free(&c->color);
+  hush__planar_free(&c->result);
+}
+
+static hush_status component_init(hush_device device, svgf_component *c, uint32_t W, uint32_t H) {
+  hush_status s = hush__accum_init(device, &c->acc, 3, W, H);
+  if (!s) s = hush__planar_init(device, &c->color, 3, W, H);
+  if (!s) s = hush__planar_init(device, &c->result, 3, W, H);
+  if (s) component_free(c);
+  return s;
+}
 
 static void svgf_destroy(void *state) {
   svgf_state *st = state;
   if (!st) return;
   hush__reprojector_free(&st->rp);
-  hush__accum_free(&st->acc);
-  hush__planar_free(&st->color);
+  component_free(&st->comp[0]);
+  component_free(&st->comp[1]);
   hush__planar_free(&st->grad);
-  hush__planar_free(&st->ping[0]);
-  hush__planar_free(&st->ping[1]);
-  hush__planar_free(&st->lum);
-  hush__planar_free(&st->gvar);
-  hush__free_floats(st->rows);
+  hush__planar_free(&st->zon);
+  hush__planar_free(&st->var);
+  hush__planar_free(&st->samples);
+  svgf_padded_free(&st->zn);
+  svgf_padded_free(&st->moments);
+  svgf_padded_free(&st->signal[0]);
+  svgf_padded_free(&st->signal[1]);
   hush__planar_free(&st->albedo);
+  hush__planar_free(&st->spp);
+  hush__planar_free(&st->sample_var);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
+  svgf_progressive_free(&st->prog);
+  hush__planar_free(&st->eps);
   free(st);
 }
 
@@ -192,17 +280,11 @@ static hush_status svgf_create(hush_filter f, void **state) {
   const uint32_t W = f->width, H = f->height;
   st->threads = f->device->threads > 0 ? f->device->threads : 1;
   hush_status s = hush__reprojector_init(f->device, &st->rp, W, H);
-  if (!s) s = hush__accum_init(f->device, &st->acc, 3, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->color, 3, W, H);
+  if (!s) s = component_init(f->device, &st->comp[0], W, H);
   if (!s) s = hush__planar_init(f->device, &st->grad, 2, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->ping[0], 4, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->ping[1], 4, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->lum, 1, W, H);
-  if (!s) s = hush__planar_init(f->device, &st->gvar, 2, W, H);
-  if (!s) {
-    st->rows = hush__alloc_floats((size_t)st->threads * ROW_ARRAYS * W);
-    if (!st->rows) s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "svgf: out of memory");
-  }
+  if (!s) s = hush__planar_init(f->device, &st->zon, 1, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->var, 1, W, H);
+  if (!s) s = hush__planar_init(f->device, &st->samples, 1, W, H);
   if (s) {
     svgf_destroy(st);
     return s;
@@ -211,279 +293,207 @@ static hush_status svgf_create(hush_filter f, void **state) {
   return HUSH_OK;
 }
 
-static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
-
-/* e^x for x <= 0 (larger x is not needed), branch-free so loops over it
- * vectorise without -ffast-math: 2^n * 2^f with n = round(x log2 e),
- * |f| <= 1/2 and a degree-6 Taylor polynomial of 2^f (relative error about
- * 1e-7). Below -20 it returns exactly 0: such a tap weighs under 2e-9 of
- * the centre's, and tiny weights (squared for the variance) would
- * otherwise make subnormal numbers, which cost x86 a microcode assist each
- * (measured: 3x slower a-trous on frames with background). */
-static inline float exp_neg(float x) {
-  const int keep = x > -20.0f;
-  x = hush__select_bits(keep, x, -20.0f);
-  const float t = x * 1.44269504f;
-  const float n = hush__floorf_vec(t + 0.5f);
-  const float f = (t - n) * 0.693147181f; /* 2^(t-n) = e^f */
-  const float p =
-      1.0f + f * (1.0f + f * (0.5f + f * (1.0f / 6 + f * (1.0f / 24 + f * (1.0f / 120 + f * (1.0f / 720))))));
-  const int32_t bits = ((int32_t)n + 127) << 23;
-  float scale;
-  memcpy(&scale, &bits, sizeof scale);
-  return hush__select_bits(keep, p * scale, 0.0f);
+/* The pad the a-trous taps and the spatial estimate need. */
+static int needed_pad(const svgf_kernel *k, int levels) {
+  const int widest = levels > 0 ? k->radius << (levels - 1) : 0;
+  return widest > SVGF_SPATIAL_VARIANCE_RADIUS ? widest : SVGF_SPATIAL_VARIANCE_RADIUS;
 }
 
-/* ln(d) for d > 0 (d <= 0 is taken as 1e-30), branch-free like exp_neg:
- * d = m 2^e with m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh(s), s = (m-1)/(m+1),
- * |s| < 0.172, by its series to s^9 (absolute error below 1e-9). It lets
- * the normal weight max(0, dot)^sigma_n join the one exp of the tap. */
-static inline float log_pos(float d) {
-  d = hush__select_bits(d > 1e-30f, d, 1e-30f);
-  int32_t bits;
-  memcpy(&bits, &d, sizeof bits);
-  float e = (float)((bits >> 23) - 127);
-  const int32_t mbits = (bits & 0x007fffff) | 0x3f800000;
-  float m;
-  memcpy(&m, &mbits, sizeof m);
-  const int big = m > 1.41421356f;
-  m = hush__select_bits(big, 0.5f * m, m);
-  e = hush__select_bits(big, e + 1.0f, e);
-  const float sv = (m - 1.0f) / (m + 1.0f), s2 = sv * sv;
-  const float series = 1.0f + s2 * (1.0f / 3 + s2 * (1.0f / 5 + s2 * (1.0f / 7 + s2 * (1.0f / 9))));
-  return e * 0.693147181f + 2.0f * sv * series;
-}
-
-/* ---- demodulation ---------------------------------------------------------- */
-
-/* ---- depth gradient -------------------------------------------------------- */
-
-/* The smaller of the two one-sided differences: at a depth edge one side
- * still sees the surface, so the edge does not inflate the gradient (which
- * would make the depth weight accept the other side). */
-static inline float smaller_diff(float a, float b) { return fabsf(a) < fabsf(b) ? a : b; }
-
-static void depth_gradient(const float *z, hush_planar *grad, int threads) {
-  const int H = (int)grad->height, W = (int)grad->width;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++) {
-    const float *r = z + (size_t)y * W;
-    const float *up = z + (size_t)(y > 0 ? y - 1 : y) * W;
-    const float *dn = z + (size_t)(y < H - 1 ? y + 1 : y) * W;
-    float *gx = grad->plane[0] + (size_t)y * W, *gy = grad->plane[1] + (size_t)y * W;
-    for (int x = 0; x < W; x++) {
-      const int xl = x > 0 ? x - 1 : x, xr = x < W - 1 ? x + 1 : x;
-      gx[x] = smaller_diff(r[xr] - r[x], r[x] - r[xl]);
-      gy[x] = smaller_diff(dn[x] - r[x], r[x] - up[x]);
-    }
+/* Tap step of the i-th level run out of `levels` in the given order. */
+static int level_step(int order, int i, int levels) {
+  switch (order) {
+  case ORDER_DECREASING: return 1 << (levels - 1 - i);
+  case ORDER_ZERO_THEN_DECREASING: return i == 0 ? 1 : 1 << (levels - i);
+  default: return 1 << i;
   }
 }
 
-/* ---- variance ------------------------------------------------------------- */
-
-typedef struct guide {
-  int W, H;
-  const float *z, *gx, *gy;
-  const float *n[3];
-  float sigma_z, sigma_n;
-} guide;
-
-/* Depth and normal weight (no luminance) of q seen from p, offset (dx, dy). */
-static inline float geometry_weight(const guide *g, size_t p, size_t q, float dx, float dy) {
-  const float dz = fabsf(g->z[p] - g->z[q]);
-  const float dd = g->sigma_z * fabsf(g->gx[p] * dx + g->gy[p] * dy) + SVGF_EPS_Z;
-  const float dn = g->n[0][p] * g->n[0][q] + g->n[1][p] * g->n[1][q] + g->n[2][p] * g->n[2][q];
-  return exp_neg(g->sigma_n * log_pos(dn) - dz / dd);
-}
-
-/* var = max(0, m2 - m1^2) from the temporal moments (already there), except
- * where the history is shorter than min_age: there the moments are averaged
- * over 7x7 with depth and normal weights first (Dundr §4.4: too few frames
- * for a temporal estimate). */
-static void spatial_variance(const guide *g, const hush_planar *moments, const float *age,
-                             float min_age, float *var, int threads) {
-  const float *m1 = moments->plane[0], *m2 = moments->plane[1];
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < g->H; y++)
-    for (int x = 0; x < g->W; x++) {
-      const size_t p = (size_t)y * g->W + x;
-      if (age[p] >= min_age) continue;
-      float sw = 0.0f, s1 = 0.0f, s2 = 0.0f;
-      for (int j = -3; j <= 3; j++) {
-        const size_t row = (size_t)clampi(y + j, 0, g->H - 1) * g->W;
-        for (int i = -3; i <= 3; i++) {
-          const size_t q = row + clampi(x + i, 0, g->W - 1);
-          const float w = (i == 0 && j == 0) ? 1.0f : geometry_weight(g, p, q, (float)i, (float)j);
-          sw += w;
-          s1 += w * m1[q];
-          s2 += w * m2[q];
-        }
-      }
-      s1 /= sw;
-      s2 /= sw;
-      const float v = s2 - s1 * s1;
-      var[p] = v > 0.0f ? v : 0.0f;
-    }
-}
-
-/* out = 3x3 Gaussian (1 2 1)/4 x (1 2 1)/4 of in, clamped at the borders;
- * tmp is a scratch plane. */
-static void gauss3x3(const float *in, float *tmp, float *out, int W, int H, int threads) {
-#pragma omp parallel num_threads(threads)
-  {
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; y++) {
-      const float *r = in + (size_t)y * W;
-      float *t = tmp + (size_t)y * W;
-      for (int x = 0; x < W; x++) {
-        const int xl = x > 0 ? x - 1 : x, xr = x < W - 1 ? x + 1 : x;
-        t[x] = 0.25f * r[xl] + 0.5f * r[x] + 0.25f * r[xr];
-      }
-    }
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; y++) {
-      const float *up = tmp + (size_t)(y > 0 ? y - 1 : y) * W;
-      const float *mid = tmp + (size_t)y * W;
-      const float *dn = tmp + (size_t)(y < H - 1 ? y + 1 : y) * W;
-      float *o = out + (size_t)y * W;
-      for (int x = 0; x < W; x++) o[x] = 0.25f * up[x] + 0.5f * mid[x] + 0.25f * dn[x];
-    }
-  }
-}
-
-/* ---- a-trous ------------------------------------------------------------- */
-
-static const float b3[5] = {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16};
-
-typedef struct atrous_row {
-  const guide *g;
-  const float *lum;  /* luminance of the input colour */
-  const float *c[3]; /* input colour */
-  const float *var;  /* input variance */
-  float *sw, *sc[3], *sv, *inv_l; /* row accumulators, indexed by x */
-  size_t prow, qrow;              /* row offsets of p and of the tap row */
-  float h, dx, dy;
-  int ix;                         /* tap offset in x, pixels */
-} atrous_row;
-
-/* Adds the taps (x + ix, tap row) of pixels x in [x0, x1) of the p row; with
- * clamp (a constant at each call) the tap column is clamped to the image.
- * One exp per tap: exp(-dz/dd - dl/dl_max + sigma_n ln(dot)). */
-static HUSH_ALWAYS_INLINE void atrous_span(const atrous_row *r, int x0, int x1, int W,
-                                           int clamp) {
-  const guide *g = r->g;
-  /* unclamped: the tap rows are addressed from x + ix, so every access in
-   * the loop is p[x], a plain vector load */
-  const size_t qo = r->qrow + (size_t)(clamp ? 0 : r->ix);
-  const float *restrict zp = g->z + r->prow, *restrict zq = g->z + qo;
-  const float *restrict gx = g->gx + r->prow, *restrict gy = g->gy + r->prow;
-  const float *restrict n0p = g->n[0] + r->prow, *restrict n1p = g->n[1] + r->prow,
-                        *restrict n2p = g->n[2] + r->prow;
-  const float *restrict n0q = g->n[0] + qo, *restrict n1q = g->n[1] + qo,
-                        *restrict n2q = g->n[2] + qo;
-  const float *restrict lp = r->lum + r->prow, *restrict lq = r->lum + qo;
-  const float *restrict c0 = r->c[0] + qo, *restrict c1 = r->c[1] + qo,
-                        *restrict c2 = r->c[2] + qo, *restrict vq = r->var + qo;
-  const float *restrict inv_l = r->inv_l;
-  float *restrict sw = r->sw, *restrict s0 = r->sc[0], *restrict s1 = r->sc[1],
-                  *restrict s2 = r->sc[2], *restrict sv = r->sv;
-  const float h = r->h, dx = r->dx, dy = r->dy, sigma_z = g->sigma_z, sigma_n = g->sigma_n;
-  const int ix = r->ix;
-  /* every x is independent (the accumulators are indexed by x) */
-#pragma omp simd
-  for (int x = x0; x < x1; x++) {
-    const int q = clamp ? clampi(x + ix, 0, W - 1) : x;
-    const float dz = fabsf(zp[x] - zq[q]);
-    const float dd = sigma_z * fabsf(gx[x] * dx + gy[x] * dy) + SVGF_EPS_Z;
-    const float dl = fabsf(lp[x] - lq[q]);
-    const float dn = n0p[x] * n0q[q] + n1p[x] * n1q[q] + n2p[x] * n2q[q];
-    const float w = h * exp_neg(sigma_n * log_pos(dn) - dz / dd - dl * inv_l[x]);
-    sw[x] += w;
-    s0[x] += w * c0[q];
-    s1[x] += w * c1[q];
-    s2[x] += w * c2[q];
-    sv[x] += w * w * vq[q];
-  }
-}
-
-/* One tap offset over a whole row: clamped coordinates only where the tap
- * leaves the image, so the middle span is a plain strided loop. */
-static void atrous_tap_row(const atrous_row *r, int W) {
-  int xa = r->ix < 0 ? -r->ix : 0;
-  int xb = r->ix > 0 ? W - r->ix : W;
-  xa = xa < W ? xa : W;
-  xb = xb > xa ? xb : xa;
-  atrous_span(r, 0, xa, W, 1);
-  atrous_span(r, xa, xb, W, 0);
-  atrous_span(r, xb, W, W, 1);
-}
-
-/* One a-trous level with tap step `step`: in (colour 3 + variance) -> out. */
-static void atrous_level(const guide *g, const hush_planar *in, const float *lum,
-                         const float *gvar, hush_planar *out, int step, float sigma_l,
-                         float *rows, int threads) {
-  const int W = g->W, H = g->H;
-#pragma omp parallel num_threads(threads)
-  {
-    float *base = rows + (size_t)omp_get_thread_num() * ROW_ARRAYS * W;
-    atrous_row r;
-    r.g = g;
-    r.lum = lum;
-    for (int c = 0; c < 3; c++) r.c[c] = in->plane[c];
-    r.var = in->plane[3];
-    r.sw = base;
-    for (int c = 0; c < 3; c++) r.sc[c] = base + (size_t)(1 + c) * W;
-    r.sv = base + (size_t)4 * W;
-    r.inv_l = base + (size_t)5 * W;
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; y++) {
-      const size_t prow = (size_t)y * W;
-      r.prow = prow;
-      /* the centre tap: every weight 1 */
-      const float h0 = b3[2] * b3[2];
-      for (int x = 0; x < W; x++) {
-        r.inv_l[x] = 1.0f / (sigma_l * sqrtf(gvar[prow + x]) + SVGF_EPS_L);
-        r.sw[x] = h0;
-        for (int c = 0; c < 3; c++) r.sc[c][x] = h0 * r.c[c][prow + x];
-        r.sv[x] = h0 * h0 * r.var[prow + x];
-      }
-      for (int j = -2; j <= 2; j++) {
-        r.qrow = (size_t)clampi(y + j * step, 0, H - 1) * W;
-        r.dy = (float)(j * step);
-        for (int i = -2; i <= 2; i++) {
-          if (i == 0 && j == 0) continue;
-          r.ix = i * step;
-          r.dx = (float)r.ix;
-          r.h = b3[i + 2] * b3[j + 2];
-          atrous_tap_row(&r, W);
-        }
-      }
-      for (int x = 0; x < W; x++) {
-        const float inv = 1.0f / r.sw[x];
-        for (int c = 0; c < 3; c++) out->plane[c][prow + x] = r.sc[c][x] * inv;
-        out->plane[3][prow + x] = r.sv[x] * inv * inv;
-      }
-    }
-  }
-}
-
-static void luminance(const hush_planar *img, float *lum, int threads) {
-  const int H = (int)img->height;
-  const size_t W = img->width;
+/* The a-trous input of the first level: colour, variance and luminance. */
+static void first_signal(const hush_planar *color, const float *var, const float *age,
+                         svgf_padded *sig, int threads) {
+  const int W = sig->width, H = sig->height;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
     const size_t o = (size_t)y * W;
-    for (size_t x = 0; x < W; x++)
-      lum[o + x] = hush_luminance(img->plane[0][o + x], img->plane[1][o + x], img->plane[2][o + x]);
+    const float *restrict r = color->plane[0] + o, *restrict g = color->plane[1] + o,
+                          *restrict b = color->plane[2] + o, *restrict v = var + o;
+    float *restrict sr = svgf_padded_row(sig, SVGF_R, y), *restrict sg = svgf_padded_row(sig, SVGF_G, y),
+                    *restrict sb = svgf_padded_row(sig, SVGF_B, y),
+                    *restrict sv = svgf_padded_row(sig, SVGF_VAR, y),
+                    *restrict sl = svgf_padded_row(sig, SVGF_LUM, y),
+                    *restrict ok = svgf_padded_row(sig, SVGF_VALID, y);
+    const float *restrict a = age + o;
+#pragma omp simd
+    for (int x = 0; x < W; x++) {
+      ok[x] = hush__select_bits(a[x] > 0.0f, 1.0f, 0.0f);
+      sr[x] = r[x];
+      sg[x] = g[x];
+      sb[x] = b[x];
+      sv[x] = v[x];
+      sl[x] = hush_luminance(r[x], g[x], b[x]);
+    }
+    for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
+      svgf_pad_row(svgf_padded_row(sig, c, y), W, sig->pad);
   }
 }
 
-static void copy_planes(const hush_planar *src, hush_planar *dst, int channels) {
-  const size_t n = hush__planar_pixels(src);
-  for (int c = 0; c < channels; c++) memcpy(dst->plane[c], src->plane[c], n * sizeof(float));
+/* dst <- the colour of a level's output where age >= 1 (Dundr §4.2.2:
+ * fed back only once a full sample was accumulated; a hole's state averaged
+ * from its neighbours can hold a fraction) or age 0 (no data: the spatial
+ * estimate is a placeholder, so that backward reprojection taps there do
+ * not mix in black; its age stays 0). */
+static void copy_color_where(const svgf_level_out *src, hush_planar *dst, const float *age,
+                             int threads) {
+  const int W = (int)dst->width, H = (int)dst->height;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++)
+    for (int c = 0; c < 3; c++) {
+      float *restrict d = dst->plane[c] + (size_t)y * W;
+      const float *restrict sp = src->plane[c] + (size_t)y * src->stride;
+      const float *restrict a = age + (size_t)y * W;
+#pragma omp simd
+      for (int x = 0; x < W; x++)
+        d[x] = hush__select_bits((a[x] >= 1.0f) | (a[x] == 0.0f), sp[x], d[x]);
+    }
 }
 
-/* ---- execute --------------------------------------------------------------- */
+/* dst (3 unpadded planes) <- the colour of a level's output. */
+static void copy_color(const svgf_level_out *src, hush_planar *dst, int threads) {
+  const int W = (int)dst->width, H = (int)dst->height;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++)
+    for (int c = 0; c < 3; c++)
+      memcpy(dst->plane[c] + (size_t)y * W, src->plane[c] + (size_t)y * src->stride,
+             (size_t)W * sizeof(float));
+}
+
+/* Per frame: what every component's pass shares. */
+typedef struct frame_ctx {
+  hush_filter f;
+  svgf_state *st;
+  const svgf_guide *gd;
+  hush_accum_params ap;
+  int demod, merge, iterations, order, threads;
+  int holes; /* progressive: this frame has untraced pixels */
+  const svgf_kernel *kernel;
+} frame_ctx;
+
+/* Accumulation, variance and a-trous of one component: c->result. */
+static void filter_component(const frame_ctx *fc, svgf_component *c, int export_variance) {
+  hush_filter f = fc->f;
+  svgf_state *st = fc->st;
+  const int threads = fc->threads, W = (int)f->width;
+  if (fc->demod) hush__demodulate(&c->color, &st->albedo, threads);
+  /* the history before the blend writes the other buffer set */
+  const float *prev[6] = {NULL};
+  const int had_history = c->acc.has_history;
+  if (fc->holes && had_history) {
+    for (int k = 0; k < 3; k++) prev[k] = hush__accum_color(&c->acc)->plane[k];
+    for (int k = 0; k < 2; k++) prev[3 + k] = hush__accum_moments(&c->acc)->plane[k];
+    prev[5] = hush__accum_age(&c->acc)->plane[0];
+  }
+  hush__accum_blend(&c->acc, &st->rp.plan, (const float *const *)c->color.plane, &fc->ap,
+                    st->var.plane[0], threads);
+  if (fc->holes) {
+    float *const cur[6] = {
+        hush__accum_color(&c->acc)->plane[0],   hush__accum_color(&c->acc)->plane[1],
+        hush__accum_color(&c->acc)->plane[2],   hush__accum_moments(&c->acc)->plane[0],
+        hush__accum_moments(&c->acc)->plane[1], hush__accum_age(&c->acc)->plane[0]};
+    svgf_forward_state(&st->prog, st->spp.plane[0], had_history ? prev : NULL, cur,
+                       fc->ap.alpha_min, fc->ap.alpha_moments_min, threads);
+    /* the variance of the state as it now is */
+    const long long n = (long long)hush__planar_pixels(&st->var);
+    float *restrict v = st->var.plane[0];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+    for (long long i = 0; i < n; i++) {
+      const float d = cur[4][i] - cur[3][i] * cur[3][i];
+      v[i] = d > 0.0f ? d : 0.0f;
+    }
+  }
+  hush__filter_timing_stage(f, "accumulate");
+
+  /* the history behind each pixel's moments, in samples (frames at 1 spp) */
+  const float *samples = hush__accum_age(&c->acc)->plane[0];
+  if (fc->merge) {
+    svgf_samples sm;
+    sm.spp = st->spp.plane[0];
+    sm.variance = st->sample_var.plane[0];
+    sm.color = &c->color;
+    sm.albedo = fc->demod ? &st->albedo : NULL;
+    sm.alpha_moments_min = fc->ap.alpha_moments_min;
+    svgf_merge_samples(&sm, hush__accum_moments(&c->acc), samples, st->var.plane[0],
+                       st->samples.plane[0], threads);
+    samples = st->samples.plane[0];
+  }
+  const int min_age = hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES);
+  if (min_age > 1) {
+    const hush_planar *m = hush__accum_moments(&c->acc);
+    for (int k = 0; k < 2; k++) svgf_padded_import(&st->moments, k, m->plane[k], threads);
+    svgf_spatial_variance(fc->gd, &st->moments, samples, (float)min_age, st->var.plane[0],
+                          threads);
+  }
+  /* with the merge the moments are per sample; else they see only the
+   * frame-to-frame spread of the pixel means, already per frame value */
+  if (fc->merge)
+    svgf_variance_per_frame(st->spp.plane[0], st->var.plane[0], hush__planar_pixels(&st->var),
+                            threads);
+  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
+  if (var_view && export_variance) hush__view_export(&st->var, var_view, threads);
+  const float *age = hush__accum_age(&c->acc)->plane[0];
+  first_signal(hush__accum_color(&c->acc), st->var.plane[0], age, &st->signal[0], threads);
+  hush__filter_timing_stage(f, "variance");
+
+  svgf_level_params lp;
+  lp.kernel = fc->kernel;
+  lp.sigma_l = hush__param_f(f, P_SIGMA_L);
+  lp.eps_l = NULL;
+  lp.validity = fc->holes;
+  if (fc->holes) {
+    svgf_progressive_epsilon(samples, hush__param_f(f, P_PROGRESSIVE_EPSILON), st->eps.plane[0],
+                             hush__planar_pixels(&st->eps), threads);
+    lp.eps_l = st->eps.plane[0];
+  }
+  int cur = 0;
+  svgf_level_out last;
+  last.plane[SVGF_R] = c->result.plane[0];
+  last.plane[SVGF_G] = c->result.plane[1];
+  last.plane[SVGF_B] = c->result.plane[2];
+  last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = last.plane[SVGF_VALID] = NULL;
+  last.stride = (size_t)W;
+  last.pad = 0;
+  if (fc->iterations == 0) {
+    const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
+    copy_color(&accumulated, &c->result, threads);
+  }
+  for (int i = 0; i < fc->iterations; i++) {
+    const svgf_level_out out =
+        i == fc->iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
+    lp.step = level_step(fc->order, i, fc->iterations);
+    svgf_atrous_level(fc->gd, &lp, &st->signal[cur], &out, threads);
+    cur = 1 - cur;
+    /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
+     * §4.1.4.6: the first level run): less noise is fed back, at the cost
+     * of a little extra blur over time */
+    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL)) {
+      if (fc->holes)
+        copy_color_where(&out, hush__accum_color(&c->acc), age, threads);
+      else
+        copy_color(&out, hush__accum_color(&c->acc), threads);
+    }
+  }
+  hush__filter_timing_stage(f, "atrous");
+}
+
+/* a += b, 3 planes. */
+static void add_planes(hush_planar *a, const hush_planar *b, int threads) {
+  const long long n = (long long)hush__planar_pixels(a);
+  for (int c = 0; c < 3; c++) {
+    float *restrict x = a->plane[c];
+    const float *restrict y = b->plane[c];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+    for (long long i = 0; i < n; i++) x[i] += y[i];
+  }
+}
 
 static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_info *info) {
   svgf_state *st = state;
@@ -495,22 +505,74 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   const int has_dgrad = hush__filter_view(f, I_DEPTH_GRADIENT) != NULL;
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
   const int with_taa = hush__param_i(f, P_TAA);
+  const int iterations = hush__param_i(f, P_ITERATIONS);
+  const svgf_kernel *kernel = hush__param_i(f, P_KERNEL) ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
+  const int split = hush__filter_view(f, I_DIRECT) && hush__filter_view(f, I_INDIRECT);
   if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
 
   /* ---- import: nothing of the history changes until every input is read */
+  const int pad = needed_pad(kernel, iterations);
+  if ((s = svgf_padded_ensure(f->device, &st->zn, 4, W, H, pad))) return s;
+  if ((s = svgf_padded_ensure(f->device, &st->moments, 2, W, H, SVGF_SPATIAL_VARIANCE_RADIUS)))
+    return s;
+  for (int i = 0; i < 2; i++)
+    if ((s = svgf_padded_ensure(f->device, &st->signal[i], SVGF_SIGNAL_CHANNELS, W, H, pad)))
+      return s;
+  const int has_spp = hush__filter_view(f, I_SPP) != NULL;
+  const int has_svar = hush__filter_view(f, I_SAMPLE_VARIANCE) != NULL;
+  if (has_svar && !has_spp)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "svgf: image 'variance' (per-sample variance) needs 'spp' bound too");
+  if (split && !st->comp[1].color.plane[0] &&
+      (s = component_init(f->device, &st->comp[1], f->width, f->height)))
+    return s;
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (has_spp && (s = hush__filter_scratch(f, &st->spp, 1))) return s;
+  if (has_svar && (s = hush__filter_scratch(f, &st->sample_var, 1))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
-  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  if ((s = hush__filter_import(f, split ? I_DIRECT : I_COLOR, &st->comp[0].color))) return s;
+  if (split && (s = hush__filter_import(f, I_INDIRECT, &st->comp[1].color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
+  if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
+  const size_t npix = (size_t)W * H;
+  const int holes = has_spp && hush__param_i(f, P_PROGRESSIVE) &&
+                    svgf_has_holes(st->spp.plane[0], npix, threads);
+  if (holes && !st->gin.has_position)
+    return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
+                      "svgf: frames with holes (spp 0) need 'position' (progressive mode; or set "
+                      "progressive=false)");
+  if (holes && !st->prog.src &&
+      ((s = svgf_progressive_init(f->device, &st->prog, f->width, f->height)) ||
+       (s = hush__filter_scratch(f, &st->eps, 1))))
+    return s;
   hush__filter_timing_stage(f, "import");
 
-  /* ---- reproject + accumulate */
+  /* ---- progressive: the G-buffer holes filled (Dundr §4.2.1) */
+  hush_gbuffer_store *next = hush__reprojector_next(&st->rp);
+  if (holes) {
+    memcpy(st->prog.depth.plane[0], next->depth.plane[0], npix * sizeof(float));
+    float *planes[SVGF_PYRAMID_MAX_PLANES];
+    int count = 0;
+    planes[count++] = next->depth.plane[0];
+    for (int k = 0; k < 3; k++) planes[count++] = next->normal.plane[k];
+    for (int k = 0; k < 3; k++) planes[count++] = st->gin.position.plane[k];
+    if (demod)
+      for (int k = 0; k < 3; k++) planes[count++] = st->albedo.plane[k];
+    svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
+    svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
+                         threads);
+  }
+  /* a frame without holes carries no positions; a reset forgets them */
+  if (!holes || info->history == HUSH_HISTORY_RESET) st->prog.has_pos = 0;
+
+  /* ---- reproject */
   hush_reproject_params rp;
   rp.depth_tolerance = hush__param_f(f, P_DEPTH_TOLERANCE);
   rp.depth_gradient = hush__param_f(f, P_DEPTH_GRADIENT);
@@ -518,59 +580,66 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
-  hush_accum_params ap;
-  ap.alpha_min = hush__param_f(f, P_ALPHA);
-  ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS);
-  ap.max_age = hush__param_i(f, P_MAX_AGE);
-  hush_planar *cur = &st->ping[0];
-  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap,
-                    cur->plane[3], threads);
-  hush__filter_timing_stage(f, "accumulate");
+  if (split != st->split) {
+    /* the first component's history was of the other signal */
+    hush__accum_reset(&st->comp[0].acc);
+    hush__accum_reset(&st->comp[1].acc);
+    st->split = split;
+  }
 
-  /* ---- variance */
+  /* ---- guide */
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
-  if (!has_dgrad) depth_gradient(gb->depth.plane[0], &st->grad, threads);
-  guide gd;
-  gd.W = W;
-  gd.H = H;
-  gd.z = gb->depth.plane[0];
+  svgf_guide_import(&st->zn, gb->depth.plane[0], (const float *const *)gb->normal.plane, threads);
+  /* with holes the imported gradient is 0 there: take the filled depth's */
+  svgf_guide_gradient(&st->zn, has_dgrad && !holes, &st->grad, st->zon.plane[0],
+                      hush__param_f(f, P_DEPTH_STEEP), threads);
+  svgf_guide gd;
+  gd.width = W;
+  gd.height = H;
+  gd.zn = &st->zn;
   gd.gx = st->grad.plane[0];
   gd.gy = st->grad.plane[1];
-  for (int c = 0; c < 3; c++) gd.n[c] = gb->normal.plane[c];
+  gd.zon = st->zon.plane[0];
   gd.sigma_z = hush__param_f(f, P_SIGMA_Z);
-  gd.sigma_n = hush__param_f(f, P_SIGMA_N);
-  spatial_variance(&gd, hush__accum_moments(&st->acc), hush__accum_age(&st->acc)->plane[0],
-                   (float)hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES), cur->plane[3], threads);
-  const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE);
-  if (var_view) {
-    hush_planar v = {{cur->plane[3]}, 1, f->width, f->height};
-    hush__view_export(&v, var_view, threads);
-  }
-  copy_planes(hush__accum_color(&st->acc), cur, 3);
-  hush__filter_timing_stage(f, "variance");
+  gd.np = svgf_normal_power_of(hush__param_f(f, P_SIGMA_N));
+  /* progressive: the previous state scattered forwards (Dundr §4.2.4-4.2.5) */
+  if (holes)
+    svgf_forward_scatter(&st->prog, st->spp.plane[0],
+                         st->comp[0].acc.has_history ? hush__accum_age(&st->comp[0].acc)->plane[0]
+                                                     : NULL,
+                         info, threads);
+  hush__filter_timing_stage(f, "reproject");
 
-  /* ---- a-trous */
-  const int iterations = hush__param_i(f, P_ITERATIONS);
-  const float sigma_l = hush__param_f(f, P_SIGMA_L);
-  for (int i = 0; i < iterations; i++) {
-    hush_planar *next = cur == &st->ping[0] ? &st->ping[1] : &st->ping[0];
-    luminance(cur, st->lum.plane[0], threads);
-    gauss3x3(cur->plane[3], st->gvar.plane[1], st->gvar.plane[0], W, H, threads);
-    atrous_level(&gd, cur, st->lum.plane[0], st->gvar.plane[0], next, 1 << i, sigma_l, st->rows,
-                 threads);
-    cur = next;
-    /* the history keeps some spatial filtering (Schied 2017 §4.4): less
-     * noise is fed back, at the cost of a little extra blur over time */
-    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL))
-      copy_planes(cur, hush__accum_color(&st->acc), 3);
+  /* ---- per component: accumulate, variance, a-trous */
+  frame_ctx fc;
+  fc.f = f;
+  fc.st = st;
+  fc.gd = &gd;
+  fc.ap.alpha_min = hush__param_f(f, P_ALPHA);
+  fc.ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS);
+  fc.ap.max_age = hush__param_i(f, P_MAX_AGE);
+  fc.demod = demod;
+  /* the renderer's sample variance is of the whole radiance: not split */
+  fc.merge = has_svar && !split && hush__param_i(f, P_SAMPLE_VARIANCE);
+  fc.iterations = iterations;
+  fc.order = hush__param_i(f, P_ORDER);
+  fc.kernel = kernel;
+  fc.threads = threads;
+  fc.holes = holes;
+  filter_component(&fc, &st->comp[0], 1);
+  if (split) {
+    filter_component(&fc, &st->comp[1], 0);
+    add_planes(&st->comp[0].result, &st->comp[1].result, threads);
   }
-  hush__filter_timing_stage(f, "atrous");
+  if (holes)
+    svgf_carry_positions(&st->prog, st->spp.plane[0],
+                         (const float *const *)st->gin.position.plane, gb->depth.plane[0],
+                         threads);
 
   /* ---- export */
-  const hush_planar *result = cur;
+  const hush_planar *result = &st->comp[0].result;
   if (demod) {
-    hush__remodulate(&st->albedo, cur, threads);
+    hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
   }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
@@ -586,7 +655,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
-  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
+  if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
 }

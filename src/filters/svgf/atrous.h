@@ -1,0 +1,66 @@
+/*
+ * atrous.h — one level of the edge-avoiding a-trous wavelet filter of SVGF
+ * (Dundr 2018 §4.1.4.6; Schied et al. 2017 in papers/NOTES.md): a B-spline
+ * kernel with taps 2^i pixels apart, every tap weighted by weights.h, the
+ * colour normalised by the sum of weights and the variance filtered along
+ * with the squared weights, var' = sum(h^2 w^2 var) / (sum h w)^2. The
+ * luminance weight's variance is the 3x3 Gaussian of the input variance
+ * (fused into the level; Dundr §4.1.3.1).
+ *
+ * One pass per level: per row, blocks of pixels; per tap pair (q and its
+ * mirror share the depth-gradient denominator) a branch-free vector loop
+ * over the block, borders handled by the input's row padding (x) and one
+ * row clamp per tap row (y). Every pixel is computed on its own: the result
+ * does not depend on the thread count.
+ */
+#ifndef HUSH_FILTERS_SVGF_ATROUS_H
+#define HUSH_FILTERS_SVGF_ATROUS_H
+
+#include "filters/svgf/guide.h"
+#include "filters/svgf/padded.h"
+
+/* Separable kernel h[radius + i], i in [-radius, radius]. */
+typedef struct svgf_kernel {
+  int radius;
+  float h[5];
+} svgf_kernel;
+
+extern const svgf_kernel svgf_kernel_5x5; /* B3 spline (1, 4, 6, 4, 1) / 16 (Schied 2017) */
+extern const svgf_kernel svgf_kernel_3x3; /* (1, 2, 1) / 4 (Dundr 2018 §4.1.4.6) */
+
+/* Channels of the a-trous signal planes. */
+/* VALID: 1 where the pixel holds data, 0 for a hole nothing reached yet
+ * (read only with svgf_level_params.validity). */
+enum { SVGF_R = 0, SVGF_G, SVGF_B, SVGF_VAR, SVGF_LUM, SVGF_VALID, SVGF_SIGNAL_CHANNELS };
+
+/* Where a level writes: SVGF_SIGNAL_CHANNELS planes at pixel (0, 0) with a
+ * row stride; var and lum may be NULL (the last level needs neither); with
+ * pad > 0 every written row's pad of that many pixels is filled too. */
+typedef struct svgf_level_out {
+  float *plane[SVGF_SIGNAL_CHANNELS];
+  size_t stride;
+  int pad;
+} svgf_level_out;
+
+static inline svgf_level_out svgf_level_out_padded(svgf_padded *p) {
+  svgf_level_out o;
+  for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) o.plane[c] = p->plane[c];
+  o.stride = p->stride;
+  o.pad = p->pad;
+  return o;
+}
+
+typedef struct svgf_level_params {
+  const svgf_kernel *kernel;
+  int step;       /* tap spacing in pixels; kernel radius * step <= the pads */
+  float sigma_l;
+  const float *eps_l; /* per-pixel luminance epsilon (unpadded), or NULL: SVGF_EPS_L */
+  int validity;       /* taps and centre weighted by VALID (progressive, Dundr §4.2) */
+} svgf_level_params;
+
+/* in (padded, SVGF_SIGNAL_CHANNELS planes) -> out. in and out must not
+ * overlap. */
+void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,
+                       const svgf_level_out *out, int threads);
+
+#endif

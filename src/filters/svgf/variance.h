@@ -1,0 +1,26 @@
+/*
+ * variance.h — the spatial luminance-variance estimate of SVGF for pixels
+ * with a short history (Dundr 2018 §4.4; Schied et al. 2017 in
+ * papers/NOTES.md): where fewer than min_age frames were accumulated, the
+ * temporal moments are averaged over a 7x7 window with the depth and normal
+ * weights (weights.h; no luminance weight) and var = max(0, m2 - m1^2).
+ *
+ * Vectorised like the a-trous (atrous.h): blocks of pixels, mirrored tap
+ * pairs sharing the depth-gradient denominator, padding for the columns;
+ * a block with no short-history pixel is skipped.
+ */
+#ifndef HUSH_FILTERS_SVGF_VARIANCE_H
+#define HUSH_FILTERS_SVGF_VARIANCE_H
+
+#include "filters/svgf/guide.h"
+#include "filters/svgf/padded.h"
+
+/* The window radius (7x7); the guide and moment pads must be at least this. */
+#define SVGF_SPATIAL_VARIANCE_RADIUS 3
+
+/* moments: padded, 2 planes (E[l], E[l^2]); age: unpadded history lengths;
+ * var (unpadded) is overwritten where age < min_age and kept elsewhere. */
+void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
+                           float min_age, float *var, int threads);
+
+#endif
