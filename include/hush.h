@@ -415,6 +415,124 @@ HUSH_API hush_status hush_nca_load_weights(hush_filter filter, const char *path)
 /* end of the nca section                                                   */
 /* ------------------------------------------------------------------------ */
 
+/* ======================================================================== */
+/* Hashed path-space filtering (hashed-path-space-filtering-binder-2019.md) */
+/* ======================================================================== */
+/*
+ * A filter that lives inside a path tracer: each path hands one selected
+ * vertex (e.g. its first sufficiently diffuse hit) to a hash table keyed by
+ * the vertex's jittered, quantised world position (level of detail from the
+ * distance along the path, Algorithm 1); vertices with the same key average
+ * their radiance, and the path then uses its cell's average instead of its
+ * own estimate. Cell averages persist across frames (a sample-count
+ * weighted exponential average, §3.3) and stale cells are evicted by age
+ * (§3.4). docs/psf.md describes it; docs/api.md shows the calls.
+ *
+ * Per frame:  hush_psf_begin_frame -> hush_psf_add_vertices (any threads,
+ * concurrently) -> hush_psf_resolve -> hush_psf_lookup (any threads).
+ * Unlike the rest of the API, hush_psf_add_vertices and hush_psf_lookup may
+ * be called from many threads at once on one object (between begin_frame and
+ * resolve, and after resolve, respectively); everything else is
+ * one-thread-at-a-time as usual.
+ */
+typedef struct hush_psf_t *hush_psf;
+
+/* A ticket of hush_psf_add_vertices for a vertex that found no cell (the
+ * cache line was full of cells of this frame, or the vertex was not finite):
+ * hush_psf_lookup returns the vertex's own radiance for it. */
+#define HUSH_PSF_NO_CELL 0xffffffffu
+
+/* hush_psf_vertex.flags: the surface is glossy; its direction goes into
+ * the verification hash (cells then differ by the direction of view). */
+#define HUSH_PSF_GLOSSY 1u
+
+typedef struct hush_psf_vertex {
+  float position[3];       /* world space */
+  float normal[3];         /* unit shading normal */
+  float origin[3];         /* the previous vertex of the path (the camera for a first hit) */
+  float distance;          /* path length from the camera to origin (0 for a first hit) */
+  float radiance[3];       /* what is averaged: e.g. the path's radiance leaving the vertex
+                            * towards origin, divided by the vertex's albedo */
+  uint32_t seed;           /* random seed of the tangent-plane jitter: unique per path,
+                            * e.g. (pixel * spp + sample); the frame index is mixed in */
+  uint32_t flags;          /* HUSH_PSF_GLOSSY */
+} hush_psf_vertex;
+
+/* Statistics of the last resolved frame (the paper's Figure 7 and more). */
+typedef struct hush_psf_stats {
+  uint64_t vertices;       /* added this frame */
+  uint64_t collisions;     /* vertices whose cell was not at the first slot probed */
+  uint64_t failed;         /* vertices that found no cell (HUSH_PSF_NO_CELL) */
+  uint64_t cells_used;     /* distinct cells that received vertices this frame */
+  uint64_t cells_occupied; /* cells holding a key after resolve (history included) */
+  uint64_t evictions;      /* cells replaced while adding + cells aged out at resolve */
+  uint64_t table_size;     /* slots */
+  double occupancy;        /* cells_occupied / table_size */
+  double ms_resolve;       /* wall time of hush_psf_resolve */
+} hush_psf_stats;
+
+/*
+ * A filter for frames of width x height pixels: the table holds
+ * table_size * width * height slots (parameter "table_size", default 1),
+ * rounded up to whole 64-byte cache lines of 16 slots. The caller owns the
+ * returned reference. NULL and an error on the device on failure.
+ */
+HUSH_API hush_psf hush_psf_new(hush_device device, uint32_t width, uint32_t height);
+HUSH_API void hush_psf_retain(hush_psf psf);
+HUSH_API void hush_psf_release(hush_psf psf);
+
+/* The parameter table (static): "scale", "table_size", "jitter", "normals",
+ * "probes", "max_samples", "max_age", "temporal"; docs/psf.md explains them. */
+HUSH_API const hush_param_info *hush_psf_params(uint32_t *count);
+/* Setters validate name, type and range as hush_filter_set_*. A change of
+ * "table_size" reallocates the table at the next begin_frame (history lost). */
+HUSH_API hush_status hush_psf_set_float(hush_psf psf, const char *name, float value);
+HUSH_API hush_status hush_psf_set_int(hush_psf psf, const char *name, int value);
+HUSH_API hush_status hush_psf_set_string(hush_psf psf, const char *name, const char *value);
+HUSH_API hush_status hush_psf_get_float(hush_psf psf, const char *name, float *value);
+
+/*
+ * Starts a frame. pixel_angle: the width of one pixel on a plane at unit
+ * distance from the camera (2 tan(fov_y / 2) / height), which sets the cell
+ * size: scale * pixel_angle * 2^floor(log2(distance)). HUSH_HISTORY_RESET
+ * empties the table (a camera cut, or a changed scene). Resolve each frame
+ * before the next begin_frame: otherwise the cells average both frames'
+ * vertices together.
+ */
+HUSH_API hush_status hush_psf_begin_frame(hush_psf psf, uint64_t frame_index, float pixel_angle,
+                                          hush_history_mode history);
+
+/*
+ * Adds count vertices to their cells and writes each one's ticket (a slot,
+ * or HUSH_PSF_NO_CELL) to tickets[i]. Thread-safe: call it from the path
+ * tracer's threads concurrently (accumulation uses atomics). Each call
+ * sums the vertices of its recently seen cells locally first, so pass many
+ * vertices per call, in screen order when possible. Reports no errors through the
+ * device (it may run on many threads); returns INVALID_ARGUMENT or
+ * INVALID_OPERATION (no begin_frame) without recording them.
+ */
+HUSH_API hush_status hush_psf_add_vertices(hush_psf psf, const hush_psf_vertex *vertices,
+                                           uint32_t count, uint32_t *tickets);
+
+/* Averages the frame's cells, blends them with their history, ages and
+ * evicts stale cells, and fills the statistics. Uses the device's threads. */
+HUSH_API hush_status hush_psf_resolve(hush_psf psf);
+
+/*
+ * After resolve: the filtered radiance of count vertices, from their tickets,
+ * into rgb (3 floats each); a vertex with HUSH_PSF_NO_CELL gets its own
+ * radiance. The path's filtered contribution is its throughput up to the
+ * vertex times this. Thread-safe.
+ */
+HUSH_API hush_status hush_psf_lookup(hush_psf psf, const hush_psf_vertex *vertices,
+                                     const uint32_t *tickets, uint32_t count, float *rgb);
+
+HUSH_API hush_status hush_psf_get_stats(hush_psf psf, hush_psf_stats *stats);
+
+/* ======================================================================== */
+/* End of hashed path-space filtering                                       */
+/* ======================================================================== */
+
 #ifdef __cplusplus
 }
 #endif

@@ -216,7 +216,7 @@ static int plain_name(const char *s) {
   if (!*s || strlen(s) >= NAME_MAX_LEN || strcmp(s, ".") == 0 || strcmp(s, "..") == 0) return 0;
   for (const char *p = s; *p; p++)
     if (!((*p >= 'a' && *p <= 'z') || (*p >= 'A' && *p <= 'Z') || (*p >= '0' && *p <= '9') ||
-          *p == '_' || *p == '-' || *p == '.'))
+          *p == '_' || *p == '-' || *p == '.' || *p == '+'))
       return 0;
   return 1;
 }
@@ -387,7 +387,7 @@ static hush_status filter_find_or_add(report *r, const char *name, const char *w
   }
   if (!plain_name(name) || strcmp(name, "reference") == 0)
     return hush__fail(r->device, HUSH_ERROR_CORRUPT,
-                      "%s: '%s' cannot be a filter name (letters, digits, '_', '-', '.'; not "
+                      "%s: '%s' cannot be a filter name (letters, digits, '_', '-', '.', '+'; not "
                       "\"reference\")",
                       where, name);
   report_filter *f = realloc(r->filters, (r->filter_count + 1) * sizeof *f);

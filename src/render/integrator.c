@@ -197,6 +197,7 @@ static void call_hook(const hush_integrator *it, uint32_t x, uint32_t y, const h
   v.material = s->material;
   memcpy(v.throughput, beta, sizeof v.throughput);
   memcpy(v.contribution, sum, sizeof v.contribution);
+  v.surface = s;
   it->vertex_fn(it->vertex_user, &v);
 }
 
@@ -237,8 +238,8 @@ static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_
 
 /* ---- the path ------------------------------------------------------------------ */
 
-void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
-                            const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
+static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
+                       const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
   memset(out, 0, sizeof *out);
   const hush_scene *sc = it->scene;
   const hush_lights *L = it->lights;
@@ -339,6 +340,12 @@ void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush
     out->rays++;
     trace_ray(it, origin, d, &h);
   }
+}
+
+void hush__integrator_shade(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
+                            const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
+  shade_path(it, eye, first, rng, x, y, out);
+  if (it->path_end_fn) it->path_end_fn(it->vertex_user, x, y, rng->sample, out->radiance);
 }
 
 int hush__integrator_first_hit(const hush_integrator *it, hush_vec3 eye, uint32_t triangle, float u,

@@ -22,7 +22,9 @@
  * must be thread-safe) with the vertex position and normal, the path
  * throughput up to it and the radiance the vertex adds to the pixel
  * (emission and next-event estimation, throughput applied). Path-space
- * filtering hooks in here.
+ * filtering hooks in here (src/psf/psf_render.h). path_end_fn, when not
+ * NULL, is called once at the end of every path with its total radiance
+ * (what the vertices added plus the emission a terminating ray saw).
  */
 #ifndef HUSH_RENDER_INTEGRATOR_H
 #define HUSH_RENDER_INTEGRATOR_H
@@ -60,9 +62,12 @@ typedef struct hush_path_vertex {
   uint32_t triangle, material;
   float throughput[3];     /* camera to this vertex */
   float contribution[3];   /* radiance this vertex adds to the pixel */
+  const hush_surface *surface; /* the hit, valid during the call */
 } hush_path_vertex;
 
 typedef void (*hush_path_vertex_fn)(void *user, const hush_path_vertex *vertex);
+typedef void (*hush_path_end_fn)(void *user, uint32_t x, uint32_t y, uint32_t sample,
+                                 const float radiance[3]);
 
 typedef struct hush_integrator {
   const hush_scene *scene; /* set to `frame` (hush__scene_set_frame) */
@@ -71,6 +76,7 @@ typedef struct hush_integrator {
   int rr_depth;            /* Russian roulette before secondary ray rr_depth + 1 (3) */
   float clamp;             /* > 0: clamp each indirect contribution to this (max channel) */
   hush_path_vertex_fn vertex_fn;
+  hush_path_end_fn path_end_fn; /* called with vertex_user */
   void *vertex_user;
   int split_lobes;         /* also fill hush_path_result's diffuse and specular */
 } hush_integrator;

@@ -41,6 +41,7 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
   ctx->it.bounces = params->bounces < 0 ? 0 : params->bounces;
   ctx->it.clamp = params->clamp;
   ctx->it.vertex_fn = params->vertex_fn;
+  ctx->it.path_end_fn = params->path_end_fn;
   ctx->it.vertex_user = params->vertex_user;
   ctx->it.split_lobes = params->split_lobes;
 }

@@ -59,6 +59,7 @@ typedef struct hush_render_params {
   int threads;             /* 0: the device's */
   const hush_progressive *progressive; /* not NULL: trace only its pixels (progressive.h) */
   hush_path_vertex_fn vertex_fn;
+  hush_path_end_fn path_end_fn; /* integrator.h; both get vertex_user */
   void *vertex_user;
 } hush_render_params;
 

@@ -19,6 +19,7 @@
  * (scene_frames.h), then evaluates those.
  */
 #include "cli.h"
+#include "psf_cli.h"
 #include "render_progress.h"
 #include "scene_frames.h"
 
@@ -69,9 +70,13 @@ static const char *const help_text =
     "  --ref REF_DIR        the reference sequence: same frame count and size\n"
     "  --out REPORT_DIR     where the results go, created if missing (required)\n"
     "  --filters A,B,...    filters to compare (default: every filter; `hush\n"
-    "                       filters` lists them)\n"
+    "                       filters` lists them). \"psf\" is hashed path-space\n"
+    "                       filtering (docs/psf.md): the input's \"psf\" layer, which\n"
+    "                       --scene renders (or `hush render --psf`); \"psf+F\" runs\n"
+    "                       filter F on it instead of on \"color\" (e.g. psf+svgf)\n"
     "  --set F.KEY=VALUE    parameter KEY of filter F; repeatable (default: the\n"
-    "                       filter's defaults)\n"
+    "                       filter's defaults); psf.KEY=VALUE sets a psf parameter\n"
+    "                       (psf.vertex=2, psf.scale=4 ...) for --scene\n"
     "  --frames A:B         --seq: only frames A to B-1 (default all)\n"
     "                       --scene: the number of frames to render (default:\n"
     "                       the camera path's length, else 16)\n"
@@ -124,7 +129,9 @@ typedef struct eval_row {
 } eval_row;
 
 typedef struct eval_filter {
-  const char *name;          /* "noisy", "accumulate", ... */
+  const char *name;          /* "noisy", "accumulate", "psf", "psf+svgf" ... */
+  const char *cls;           /* the filter class, NULL for "noisy" and "psf" */
+  const char *color_layer;   /* the layer bound to "color", or read for no class */
   hush_filter filter;        /* NULL for "noisy" */
   hush_frame out;            /* the filter's output layers ("color", ...) */
   int failed;
@@ -156,6 +163,8 @@ typedef struct eval_run {
   float *ref_luma, *ref_prev_luma;
   hush_frame picture;        /* one "color" layer: what frames/ receives */
   int tty;
+  int psf;                   /* a filter reads the "psf" layer */
+  double *psf_ms;            /* --scene: psf time of each frame, else NULL */
 } eval_run;
 
 /* ---- options ---------------------------------------------------------------- */
@@ -248,18 +257,28 @@ static int has_filter(const eval_run *r, const char *name) {
 
 static int add_filter(eval_run *r, const char *name) {
   if (has_filter(r, name)) return 0;
-  if (strcmp(name, "noisy") != 0 && !hush_filter_class_find(name)) {
+  /* "psf" reads the psf layer; "psf+F" runs F with the psf layer as colour */
+  const int psf = strcmp(name, "psf") == 0 || strncmp(name, "psf+", 4) == 0;
+  const char *cls = strcmp(name, "psf") == 0 ? NULL : psf ? name + 4 : name;
+  if (cls && strcmp(cls, "noisy") != 0 && !hush_filter_class_find(cls)) {
     char names[512] = "";
     for (uint32_t i = 0; i < hush_filter_class_count(); i++) {
       const size_t len = strlen(names);
       snprintf(names + len, sizeof names - len, "%s%s", i ? ", " : "",
                hush_filter_class_at(i)->name);
     }
-    return cli_error(r->cmd, "--filters: unknown filter '%s' (filters: %s)", name, names);
+    return cli_error(r->cmd, "--filters: unknown filter '%s' (filters: %s, psf, psf+FILTER)",
+                     cls, names);
   }
+  if (psf && cls && strcmp(cls, "noisy") == 0)
+    return cli_error(r->cmd, "--filters: '%s': use psf", name);
   if (r->filter_count == MAX_FILTERS)
     return cli_error(r->cmd, "--filters: more than %d filters", MAX_FILTERS - 2);
-  r->filters[r->filter_count++].name = name;
+  eval_filter *f = &r->filters[r->filter_count++];
+  f->name = name;
+  f->cls = cls && strcmp(cls, "noisy") != 0 ? cls : NULL;
+  f->color_layer = psf ? "psf" : "color";
+  r->psf |= psf;
   return 0;
 }
 
@@ -307,6 +326,11 @@ static int check_sets(eval_run *r) {
     int found = 0;
     for (uint32_t k = 1; k < r->filter_count && !found; k++)
       found = strlen(r->filters[k].name) == len && strncmp(s, r->filters[k].name, len) == 0;
+    if (!found && len == 3 && strncmp(s, "psf", 3) == 0 && r->psf) {
+      if (!r->o->scene)
+        return cli_error(r->cmd, "--set %s: psf parameters apply when rendering (--scene)", s);
+      found = 1;
+    }
     if (!found)
       return cli_error(r->cmd, "--set %s: '%.*s' is not one of the filters run", s, (int)len, s);
   }
@@ -319,9 +343,9 @@ static int setup_filter(eval_run *r, eval_filter *f) {
   f->luma = malloc(r->pixels * sizeof *f->luma);
   f->prev_luma = malloc(r->pixels * sizeof *f->prev_luma);
   if (!f->rows || !f->luma || !f->prev_luma) return cli_error(r->cmd, "out of memory");
-  if (strcmp(f->name, "noisy") == 0) return 0;
-  f->filter = hush_filter_new(r->device, f->name);
-  if (!f->filter) return cli_device_error(r->cmd, r->device, HUSH_ERROR_NOT_FOUND, f->name);
+  if (!f->cls) return 0;
+  f->filter = hush_filter_new(r->device, f->cls);
+  if (!f->filter) return cli_device_error(r->cmd, r->device, HUSH_ERROR_NOT_FOUND, f->cls);
   int rc = apply_sets(r, f);
   if (rc) return rc;
   f->out = hush_frame_new(r->device, r->width, r->height);
@@ -414,14 +438,15 @@ static int bind_inputs(eval_run *r, eval_filter *f, hush_frame frame, const char
     const hush_image_info *im = &cls->images[i];
     if (im->role != HUSH_IMAGE_INPUT) continue;
     hush_image_view view;
-    if (hush_frame_get_layer(frame, im->name, &view) != HUSH_OK) {
+    const char *layer = strcmp(im->name, "color") == 0 ? f->color_layer : im->name;
+    if (hush_frame_get_layer(frame, layer, &view) != HUSH_OK) {
       hush_device_get_error(r->device, NULL);
       if (im->required) {
         char channels[128];
         cli_layer_channels(im->name, im->channels, channels, sizeof channels);
         snprintf(f->message, sizeof f->message,
-                 "%s has no '%s' layer (channels %s), which filter '%s' requires", file, im->name,
-                 channels, cls->name);
+                 "%s has no '%s' layer (channels %s), which filter '%s' requires", file, layer,
+                 channels, f->name);
         return 1;
       }
       hush_filter_unset_image(f->filter, im->name);
@@ -515,10 +540,21 @@ static int filter_frame(eval_run *r, eval_filter *f, hush_frame frame, uint32_t 
   if (f->failed) return 0;
   double ms = NAN;
   hush_image_view out;
+  const int psf = strcmp(f->color_layer, "psf") == 0;
+  const double psf_ms = psf && r->psf_ms ? r->psf_ms[i] : NAN;
   if (!f->filter) {
-    if (get_color(r, frame, "color", file, "", &out)) return CLI_EXIT_RUNTIME;
+    if (get_color(r, frame, f->color_layer, file,
+                  psf ? " (render it with --scene, or hush render --psf)" : "", &out))
+      return CLI_EXIT_RUNTIME;
+    ms = psf_ms;
+    if (!isnan(ms)) record_stage(f, "total", ms, r->last - r->first);
   } else {
     if (execute(r, f, frame, i, file, &ms)) return 0;
+    if (!isnan(psf_ms)) {
+      /* psf+F: the time of both; the stages stay F's alone */
+      ms += psf_ms;
+      f->stages[f->stage_count - 1].ms[f->stages[f->stage_count - 1].count - 1] = ms;
+    }
     hush_frame_get_layer(f->out, "color", &out);
   }
   pack_rgb(&out, r->out_rgb);
@@ -806,6 +842,26 @@ static void print_summary(const eval_run *r) {
 
 /* ---- rendering first (--scene) -------------------------------------------------- */
 
+/* --scene with psf: the psf renderer from the psf.* settings of --set,
+ * installed in sf; REPORT_DIR/psf.csv receives the statistics. */
+static int open_psf(eval_run *r, scene_frames *sf, psf_cli *pc, FILE **csv) {
+  memset(pc, 0, sizeof *pc);
+  for (int i = 0; i < r->o->set_count; i++)
+    if (strncmp(r->o->sets[i], "psf.", 4) == 0) psf_cli_add_set(r->cmd, pc, r->o->sets[i] + 4);
+  int rc = psf_cli_open(pc, r->cmd, r->device, sf->width, sf->height, 1);
+  if (rc) return rc;
+  char path[HUSH_PATH_MAX];
+  if ((size_t)snprintf(path, sizeof path, "%s/psf.csv", r->o->out) >= sizeof path)
+    return cli_error(r->cmd, "--out: path too long");
+  *csv = fopen(path, "w");
+  if (!*csv) return cli_error(r->cmd, "%s: cannot write", path);
+  psf_cli_csv_header(*csv);
+  r->psf_ms = calloc(sf->frames, sizeof *r->psf_ms);
+  if (!r->psf_ms) return cli_error(r->cmd, "out of memory");
+  sf->psf = pc->renderer;
+  return 0;
+}
+
 static int render_sequence(eval_run *r, scene_frames *sf, const char *dir, uint32_t spp,
                            uint32_t seed) {
   hush_sequence seq;
@@ -824,9 +880,19 @@ static int render_sequence(eval_run *r, scene_frames *sf, const char *dir, uint3
   /* the per-row bar only on a terminal: in a log it would be a line per row */
   render_progress_begin(&p, sf->frames, r->tty, r->o->quiet, spp > 1 && r->tty);
   int rc = 0;
+  psf_cli pc;
+  memset(&pc, 0, sizeof pc);
+  FILE *csv = NULL;
+  sf->psf = NULL;
+  if (spp == 1 && r->psf) rc = open_psf(r, sf, &pc, &csv);
   for (uint32_t i = 0; !rc && i < sf->frames; i++) {
     hush_frame frame = NULL;
     rc = scene_frames_render(sf, i, &params, (int)r->o->threads, &p, &frame, &seq.cameras[i]);
+    if (!rc && sf->psf) {
+      psf_cli_csv_row(csv, &pc, i, &sf->psf_timings);
+      const hush_psf_timings *t = &sf->psf_timings;
+      r->psf_ms[i] = t->add + t->resolve + t->lookup;
+    }
     char path[HUSH_PATH_MAX];
     if (!rc) st = hush__sequence_frame_path(r->device, &seq, i, path, sizeof path);
     if (!rc && st == HUSH_OK) st = hush_frame_write_exr(frame, path, HUSH_EXR_FLOAT);
@@ -834,6 +900,9 @@ static int render_sequence(eval_run *r, scene_frames *sf, const char *dir, uint3
     hush_frame_release(frame);
   }
   render_progress_break(&p);
+  sf->psf = NULL;
+  if (csv && fclose(csv) != 0 && !rc) rc = cli_error(r->cmd, "psf.csv: write failed");
+  psf_cli_close(&pc);
   if (!rc) st = hush__sequence_write_cameras(r->device, &seq);
   if (!rc && st != HUSH_OK) rc = cli_device_error(r->cmd, r->device, st, dir);
   hush__sequence_free(&seq);
@@ -957,6 +1026,7 @@ static void run_free(eval_run *r) {
     free(f->rows);
     for (uint32_t s = 0; s < f->stage_count; s++) free(f->stages[s].ms);
   }
+  free(r->psf_ms);
   free(r->ref_rgb);
   free(r->out_rgb);
   free(r->ref_luma);

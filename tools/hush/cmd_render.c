@@ -7,6 +7,7 @@
  * (same frames, cameras and jitter policy), as in §6.
  */
 #include "cli.h"
+#include "psf_cli.h"
 #include "render_progress.h"
 
 #include "core/timer.h"
@@ -66,6 +67,18 @@ static const char *const help_text =
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
     "                       camera_matrices.h, the input of the published BMFR code\n"
     "  --half               write half-float EXRs (depth, position, id, vis stay float)\n"
+    "  --psf                also filter with hashed path-space filtering (docs/psf.md):\n"
+    "                       each frame gets a layer psf (the filtered radiance; color\n"
+    "                       stays the unfiltered one), DIR/psf.csv the per-frame\n"
+    "                       statistics, and with --png DIR/frame_NNNN_psf.png\n"
+    "  --psf-scale S        cell size in projected pixels (default 4)\n"
+    "  --psf-vertex 1|2     filter at the first or second diffuse vertex (default 1)\n"
+    "  --psf-table-size T   hash table slots per pixel (default 1)\n"
+    "  --psf-jitter J, --psf-probes N, --psf-max-samples N\n"
+    "  --psf-set KEY=VALUE  any psf parameter (docs/psf.md); each implies --psf\n"
+    "  --psf-bench N        filter each frame N times more and report the median\n"
+    "                       times (a benchmark: each repetition also enters the\n"
+    "                       history, so the output differs)\n"
     "  --threads N          worker threads, 0 = one per core (default 0)\n"
     "  --quiet              print only warnings and errors (default: progress per\n"
     "                       frame on stderr: time, Mrays/s, time left)\n"
@@ -83,6 +96,8 @@ typedef struct render_options {
   hush_progressive progressive;
   hush_exr_type exr_type;
   uint32_t threads;
+  psf_cli psf;
+  uint32_t psf_bench;      /* --psf-bench N */
 } render_options;
 
 static void list_builtins(void) {
@@ -185,6 +200,11 @@ static void parse_options(int argc, char **argv, render_options *o) {
       o->threads = cli_parse_uint(a.cmd, "--threads", v, 0, 1024);
     } else if (cli_switch(&a, arg, "--quiet")) {
       o->quiet = 1;
+    } else if (cli_option(&a, arg, "--psf-bench", &v)) {
+      o->psf_bench = cli_parse_uint(a.cmd, "--psf-bench", v, 1, 10000);
+      o->psf.on = 1;
+    } else if (psf_cli_option(&a, arg, &o->psf)) {
+      continue;
     } else if (cli_is_positional(&a, arg)) {
       cli_usage_error(a.cmd, "unexpected argument '%s' (the scene goes to --scene)", arg);
     } else {
@@ -222,6 +242,8 @@ typedef struct render_run {
   int tty;
   render_progress progress;
   char bmfr_dir[HUSH_PATH_MAX]; /* --export bmfr */
+  psf_cli psf;             /* --psf: the renderer, owned */
+  FILE *psf_csv;           /* DIR/psf.csv */
 } render_run;
 
 static int fail(render_run *r, hush_status st, const char *context) {
@@ -313,7 +335,7 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
           "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
           "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n  \"split_lobes\": %s,\n"
           "  \"spp_fraction\": %.9g,\n  \"progressive_block\": [%u, %u],\n  \"export\": %s,\n"
-          "  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
+          "  \"psf\": %s,\n  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
           "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
           r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
           p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
@@ -321,7 +343,8 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
           r->o->spp_fraction,
           r->o->spp_fraction < 1.0 ? r->o->progressive.k : 1u,
           r->o->spp_fraction < 1.0 ? r->o->progressive.m : 1u,
-          r->o->export_bmfr ? "\"bmfr\"" : "null", r->scene.triangle_count,
+          r->o->export_bmfr ? "\"bmfr\"" : "null", r->psf.on ? "true" : "false",
+          r->scene.triangle_count,
           r->scene.skipped_triangles, seconds, (unsigned long long)rays);
   cli_json_string(f, "hush");
   for (int i = 0; i < argc; i++) {
@@ -331,6 +354,60 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
   fprintf(f, "]\n}\n");
   const hush_status st = hush__atomic_commit(r->device, f, tmp, path);
   return st == HUSH_OK ? 0 : fail(r, st, path);
+}
+
+/* --psf: the statistics of frame f to psf.csv and, unless quiet, stderr. */
+static void psf_report(render_run *r, uint32_t f, const hush_psf_timings *t) {
+  psf_cli_csv_row(r->psf_csv, &r->psf, f, t);
+  if (r->o->quiet) return;
+  char line[512];
+  psf_cli_stats_line(&r->psf, t, line, sizeof line);
+  render_progress_break(&r->progress);
+  fprintf(stderr, "frame %u %s\n", f, line);
+}
+
+static int compare_ms(const void *a, const void *b) {
+  const double x = *(const double *)a, y = *(const double *)b;
+  return (x > y) - (x < y);
+}
+
+/* --psf-bench N: filters the frame N more times; *t receives the median of
+ * each stage over them. */
+static hush_status psf_bench(render_run *r, hush_frame frame, hush_psf_timings *t) {
+  const uint32_t n = r->o->psf_bench;
+  double *ms = malloc((size_t)n * 4 * sizeof *ms);
+  if (!ms) return HUSH_ERROR_OUT_OF_MEMORY;
+  hush_status st = HUSH_OK;
+  for (uint32_t k = 0; k < n && st == HUSH_OK; k++) {
+    st = hush__psf_renderer_repeat(r->psf.renderer);
+    hush_psf_timings one;
+    if (st == HUSH_OK) st = hush__psf_renderer_finish(r->psf.renderer, frame, &one);
+    ms[k] = one.add;
+    ms[n + k] = one.resolve;
+    ms[2 * n + k] = one.lookup;
+    ms[3 * n + k] = one.cpu;
+  }
+  if (st == HUSH_OK) {
+    double *out[4] = {&t->add, &t->resolve, &t->lookup, &t->cpu};
+    for (int c = 0; c < 4; c++) {
+      qsort(ms + (size_t)c * n, n, sizeof *ms, compare_ms);
+      *out[c] = ms[(size_t)c * n + n / 2];
+    }
+  }
+  free(ms);
+  return st;
+}
+
+/* --psf --png: frame_NNNN_psf.png next to frame_NNNN.png (png_path). */
+static hush_status write_psf_png(render_run *r, hush_frame frame, const char *png_path) {
+  char path[HUSH_PATH_MAX];
+  const size_t len = strlen(png_path);
+  if (len + 5 > sizeof path) return HUSH_ERROR_IO; /* cannot happen: frame paths are short */
+  memcpy(path, png_path, len - 4);
+  memcpy(path + len - 4, "_psf.png", 9);
+  hush_image_view view;
+  hush_frame_get_layer(frame, "psf", &view);
+  return hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
 }
 
 /* Renders frames first .. first + n - 1 into `frame` (reused: its layers
@@ -356,11 +433,22 @@ static int render_sequence(render_run *r, const hush_render_params *params,
     }
     hush_render_ctx ctx;
     hush__render_ctx_init(&ctx, &r->scene, &r->lights, params, &cam, have_prev ? &prev : NULL, f);
+    if (r->psf.on) {
+      st = hush__psf_renderer_begin(r->psf.renderer, &ctx,
+                                    i == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE);
+      if (st != HUSH_OK) return fail(r, st, "psf");
+    }
     const double start_ms = hush__now_ms(), start_cpu = hush__cpu_seconds();
     uint64_t rays = 0;
     st = hush__render_frame(r->device, &ctx, frame, progress, r, &rays);
     const double ms = hush__now_ms() - start_ms, cpu = hush__cpu_seconds() - start_cpu;
     *rays_total += rays;
+    hush_psf_timings psf_t;
+    if (st == HUSH_OK && r->psf.on) {
+      st = hush__psf_renderer_finish(r->psf.renderer, frame, &psf_t);
+      if (st == HUSH_OK && o->psf_bench) st = psf_bench(r, frame, &psf_t);
+      if (st == HUSH_OK) psf_report(r, f, &psf_t);
+    }
     char path[HUSH_PATH_MAX];
     if (st == HUSH_OK) st = hush__sequence_frame_path(r->device, &r->seq, i, path, sizeof path);
     if (st == HUSH_OK) st = hush_frame_write_exr(frame, path, o->exr_type);
@@ -370,6 +458,7 @@ static int render_sequence(render_run *r, const hush_render_params *params,
       hush_image_view view;
       hush_frame_get_layer(frame, "color", &view);
       st = hush_image_write_png(r->device, &view, path, 0.0f, HUSH_TONEMAP_ACES);
+      if (st == HUSH_OK && r->psf.on) st = write_psf_png(r, frame, path);
     }
     if (st == HUSH_OK && o->export_bmfr)
       st = hush__bmfr_write_frame(r->device, r->bmfr_dir, i, frame);
@@ -419,6 +508,17 @@ static int render_frames(render_run *r, int argc, char **argv) {
   if (o->spp_fraction < 1.0) params.progressive = &o->progressive;
   hush_camera_move_setup moves;
   hush__camera_move_init(&moves, &r->scene, r->move, r->path, W, H, params.jitter, o->first);
+  if (r->psf.on) {
+    const int rc = psf_cli_open(&r->psf, "render", r->device, W, H, params.spp);
+    if (rc) return rc;
+    char csv[HUSH_PATH_MAX];
+    if ((size_t)snprintf(csv, sizeof csv, "%s/psf.csv", o->out) >= sizeof csv)
+      return cli_error("render", "--out: path too long");
+    r->psf_csv = fopen(csv, "w");
+    if (!r->psf_csv) return cli_error("render", "%s: cannot write", csv);
+    psf_cli_csv_header(r->psf_csv);
+    hush__psf_renderer_hook(r->psf.renderer, &params);
+  }
 
   const double t0 = hush__now_ms();
   uint64_t rays_total = 0;
@@ -448,6 +548,7 @@ int cmd_render(int argc, char **argv) {
   render_run r;
   memset(&r, 0, sizeof r);
   r.o = &o;
+  r.psf = o.psf;
   r.tty = isatty(fileno(stderr));
   r.device = cli_device_new("render", o.threads);
   if (!r.device) return CLI_EXIT_RUNTIME;
@@ -455,6 +556,8 @@ int cmd_render(int argc, char **argv) {
   if (!rc) rc = choose_camera(&r);
   if (!rc) rc = render_frames(&r, argc, argv);
   if (r.have_seq) hush__sequence_free(&r.seq);
+  if (r.psf_csv && fclose(r.psf_csv) != 0 && !rc) rc = cli_error("render", "psf.csv: write failed");
+  psf_cli_close(&r.psf);
   free(r.file_path.frames);
   if (r.have_lights) hush__lights_free(&r.lights);
   if (r.have_scene) hush__scene_free(&r.scene);

@@ -112,14 +112,20 @@ int scene_frames_render(scene_frames *s, uint32_t i, const hush_render_params *p
   if (!hush__camera_move_frame(&moves, i, &cam, &prev, &have_prev))
     return cli_error(s->cmd, "frame %u: degenerate camera (eye on target, or up along the view)",
                      i);
+  if (s->psf) hush__psf_renderer_hook(s->psf, &p);
   hush_render_ctx ctx;
   hush__render_ctx_init(&ctx, &s->scene, &s->lights, &p, &cam, have_prev ? &prev : NULL, i);
+  if (s->psf) {
+    st = hush__psf_renderer_begin(s->psf, &ctx, i == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE);
+    if (st != HUSH_OK) return fail(s, st, "psf");
+  }
   hush_frame frame = hush_frame_new(s->device, s->width, s->height);
   if (!frame) return fail(s, HUSH_ERROR_OUT_OF_MEMORY, "frame");
   if (progress) render_progress_frame_start(progress, i);
   const double t0 = hush__now_ms();
   uint64_t rays = 0;
   st = hush__render_frame(s->device, &ctx, frame, progress ? rows_progress : NULL, progress, &rays);
+  if (st == HUSH_OK && s->psf) st = hush__psf_renderer_finish(s->psf, frame, &s->psf_timings);
   if (st != HUSH_OK) {
     hush_frame_release(frame);
     if (progress) render_progress_break(progress);

@@ -12,6 +12,7 @@
 #include "render_progress.h"
 
 #include "io/sequence.h"
+#include "psf/psf_render.h"
 #include "render/camera.h"
 #include "render/lights.h"
 #include "render/render.h"
@@ -30,6 +31,8 @@ typedef struct scene_frames {
   uint32_t width, height;   /* resolved */
   uint32_t frames;          /* resolved: what the caller asked, or the path's length, or 16 */
   hush_motion_source motion; /* VECTORS when an object or sphere light moves */
+  hush_psf_renderer *psf;   /* not NULL: also filter with psf into layer "psf" (not owned) */
+  hush_psf_timings psf_timings; /* of the last frame rendered with psf */
 } scene_frames;
 
 /*

@@ -1,0 +1,310 @@
+/*
+ * psf_render.c — hashed path-space filtering in hush's path tracer: path
+ * hooks that record each camera sample's selected vertex, then the
+ * add / resolve / lookup passes of the hush_psf object (see psf_render.h;
+ * hashed-path-space-filtering-binder-2019.md §3).
+ */
+#include "psf/psf_render.h"
+
+#include "core/device.h"
+#include "core/timer.h"
+#include "render/bsdf.h"
+
+#include <math.h>
+#include <omp.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* What the hooks keep for one camera sample, written only by the thread
+ * tracing it, in two arrays: the state of the path being traced, and what
+ * composing the layer reads (so that pass streams 36 bytes per sample). */
+typedef struct sample_trace {
+  float last[3];           /* the previous vertex (the eye at first) */
+  float distance;          /* path length to last */
+  uint32_t epoch;          /* frame counter of the last write; stale otherwise */
+  uint8_t seen;            /* sufficiently diffuse vertices so far */
+  uint8_t selected;        /* vertices[] holds this sample's vertex */
+} sample_trace;
+
+typedef struct sample_result {
+  float prefix[3];
+  float throughput[3];
+  float total[3];
+} sample_result;
+
+/* has[] values, per sample. */
+enum { NOT_TRACED = 0, NO_VERTEX = 1, WITH_VERTEX = 2 };
+
+struct hush_psf_renderer {
+  hush_device device;
+  hush_psf psf;
+  int vertex;              /* 1 or 2 */
+  uint32_t width, height, spp;
+  size_t samples;          /* width * height * spp */
+  sample_trace *traces;
+  sample_result *results;
+  hush_psf_vertex *vertices;
+  uint32_t *tickets;
+  float *filtered;         /* 3 per sample: the cell average (lookup) */
+  uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
+  const hush_scene *scene; /* of the frame being rendered */
+  float eye[3];
+  uint32_t epoch;          /* 1 + frames begun */
+  uint64_t frame;          /* of the last begin */
+  float pixel_angle;
+};
+
+/* Albedo floor of the demodulation: dark channels would amplify noise. */
+#define MIN_ALBEDO 0.02f
+/* Conductors at least this rough count as sufficiently diffuse (glossy). */
+#define GLOSSY_MIN_ROUGHNESS 0.1f
+
+hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t height,
+                                   uint32_t spp, int vertex, hush_psf_renderer **out) {
+  *out = NULL;
+  if (vertex != 1 && vertex != 2)
+    return hush__fail(device, HUSH_ERROR_OUT_OF_RANGE, "psf: vertex %d is not 1 or 2", vertex);
+  if (spp == 0) spp = 1;
+  hush_psf_renderer *r = calloc(1, sizeof *r);
+  if (!r) return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory");
+  r->device = device;
+  r->vertex = vertex;
+  r->width = width;
+  r->height = height;
+  r->spp = spp;
+  r->samples = (size_t)width * height * spp;
+  r->psf = hush_psf_new(device, width, height);
+  r->traces = calloc(r->samples, sizeof *r->traces);
+  r->results = calloc(r->samples, sizeof *r->results);
+  r->vertices = calloc(r->samples, sizeof *r->vertices);
+  r->tickets = calloc(r->samples, sizeof *r->tickets);
+  r->filtered = calloc(r->samples * 3, sizeof *r->filtered);
+  r->has = calloc(r->samples, 1);
+  if (!r->psf || !r->traces || !r->results || !r->vertices || !r->tickets || !r->filtered || !r->has) {
+    const int had_psf = r->psf != NULL;
+    hush__psf_renderer_free(r);
+    return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
+                   : HUSH_ERROR_OUT_OF_MEMORY;
+  }
+  *out = r;
+  return HUSH_OK;
+}
+
+void hush__psf_renderer_free(hush_psf_renderer *r) {
+  if (!r) return;
+  hush_psf_release(r->psf);
+  free(r->traces);
+  free(r->results);
+  free(r->vertices);
+  free(r->tickets);
+  free(r->filtered);
+  free(r->has);
+  free(r);
+}
+
+hush_psf hush__psf_renderer_psf(hush_psf_renderer *r) { return r->psf; }
+
+hush_status hush__psf_renderer_set(hush_psf_renderer *r, const char *name, const char *value) {
+  if (name && strcmp(name, "vertex") == 0) {
+    if (value && (strcmp(value, "1") == 0 || strcmp(value, "2") == 0)) {
+      r->vertex = value[0] - '0';
+      return HUSH_OK;
+    }
+    return hush__fail(r->device, HUSH_ERROR_OUT_OF_RANGE, "psf.vertex: '%s' is not 1 or 2",
+                      value ? value : "(null)");
+  }
+  return hush_psf_set_string(r->psf, name, value);
+}
+
+/* ---- hooks (worker threads) ------------------------------------------------------ */
+
+static size_t sample_index(const hush_psf_renderer *r, uint32_t x, uint32_t y, uint32_t s) {
+  return ((size_t)y * r->width + x) * r->spp + s;
+}
+
+static void reset(const hush_psf_renderer *r, sample_trace *tr, sample_result *res) {
+  memset(tr, 0, sizeof *tr);
+  memset(res, 0, sizeof *res);
+  memcpy(tr->last, r->eye, sizeof tr->last);
+  tr->epoch = r->epoch;
+}
+
+/* 0: passed through (smooth specular, glass, emitters), 1: diffuse,
+ * 2: glossy (a rough conductor). */
+static int vertex_kind(const hush_material *m) {
+  if (m->emission[0] > 0.0f || m->emission[1] > 0.0f || m->emission[2] > 0.0f) return 0;
+  switch (m->type) {
+  case HUSH_MAT_DIFFUSE:
+  case HUSH_MAT_PLASTIC: return 1;
+  case HUSH_MAT_CONDUCTOR: return m->roughness >= GLOSSY_MIN_ROUGHNESS ? 2 : 0;
+  default: return 0;
+  }
+}
+
+static void select_vertex(hush_psf_renderer *r, size_t idx, sample_trace *tr,
+                          sample_result *res, const hush_path_vertex *v, const hush_material *m,
+                          int kind) {
+  hush_psf_vertex *pv = &r->vertices[idx];
+  memcpy(pv->position, &v->p, sizeof pv->position);
+  memcpy(pv->normal, &v->n, sizeof pv->normal);
+  memcpy(pv->origin, tr->last, sizeof pv->origin);
+  pv->distance = tr->distance;
+  pv->seed = (uint32_t)idx;
+  pv->flags = kind == 2 ? HUSH_PSF_GLOSSY : 0u;
+  float albedo[3];
+  hush__bsdf_albedo(m, v->surface, albedo);
+  for (int c = 0; c < 3; c++)
+    res->throughput[c] = v->throughput[c] * fmaxf(albedo[c], MIN_ALBEDO);
+  tr->selected = 1;
+}
+
+static void on_vertex(void *user, const hush_path_vertex *v) {
+  hush_psf_renderer *r = user;
+  const size_t idx = sample_index(r, v->x, v->y, v->sample);
+  sample_trace *tr = &r->traces[idx];
+  sample_result *res = &r->results[idx];
+  if (v->depth == 0) reset(r, tr, res);
+  if (tr->selected) return;
+  const hush_material *m = &r->scene->materials[v->material];
+  const int kind = vertex_kind(m);
+  if (kind && ++tr->seen == r->vertex) {
+    select_vertex(r, idx, tr, res, v, m, kind);
+    return;
+  }
+  for (int c = 0; c < 3; c++) res->prefix[c] += v->contribution[c];
+  const float p[3] = {v->p.x, v->p.y, v->p.z};
+  const float dx = p[0] - tr->last[0], dy = p[1] - tr->last[1], dz = p[2] - tr->last[2];
+  tr->distance += sqrtf(dx * dx + dy * dy + dz * dz);
+  memcpy(tr->last, p, sizeof p);
+}
+
+static void on_path_end(void *user, uint32_t x, uint32_t y, uint32_t sample,
+                        const float radiance[3]) {
+  hush_psf_renderer *r = user;
+  const size_t idx = sample_index(r, x, y, sample);
+  sample_trace *tr = &r->traces[idx];
+  sample_result *res = &r->results[idx];
+  if (tr->epoch != r->epoch) reset(r, tr, res); /* no surface: the sky or a light */
+  memcpy(res->total, radiance, sizeof res->total);
+  r->has[idx] = tr->selected ? WITH_VERTEX : NO_VERTEX;
+  if (!tr->selected) return;
+  float *own = r->vertices[idx].radiance;
+  for (int c = 0; c < 3; c++) {
+    const float t = res->throughput[c];
+    own[c] = t > 1e-20f ? (radiance[c] - res->prefix[c]) / t : 0.0f;
+  }
+}
+
+void hush__psf_renderer_hook(hush_psf_renderer *r, hush_render_params *params) {
+  params->vertex_fn = on_vertex;
+  params->path_end_fn = on_path_end;
+  params->vertex_user = r;
+}
+
+hush_status hush__psf_renderer_begin(hush_psf_renderer *r, const hush_render_ctx *ctx,
+                                     hush_history_mode history) {
+  const hush_render_params *p = &ctx->params;
+  if (p->width != r->width || p->height != r->height || p->spp != r->spp ||
+      p->vertex_user != r)
+    return hush__fail(r->device, HUSH_ERROR_INVALID_ARGUMENT,
+                      "psf: the frame (%ux%u, %u spp) is not the renderer's (%ux%u, %u spp) or "
+                      "its hooks are not installed",
+                      p->width, p->height, p->spp, r->width, r->height, r->spp);
+  r->scene = ctx->scene;
+  r->eye[0] = ctx->cam.eye.x;
+  r->eye[1] = ctx->cam.eye.y;
+  r->eye[2] = ctx->cam.eye.z;
+  r->epoch++;
+  memset(r->has, 0, r->samples);
+  r->frame = ctx->frame;
+  r->pixel_angle = 2.0f * ctx->cam.tan_half_y / (float)r->height;
+  return hush_psf_begin_frame(r->psf, r->frame, r->pixel_angle, history);
+}
+
+hush_status hush__psf_renderer_repeat(hush_psf_renderer *r) {
+  return hush_psf_begin_frame(r->psf, r->frame, r->pixel_angle, HUSH_HISTORY_CONTINUE);
+}
+
+/* ---- after the frame ---------------------------------------------------------------- */
+
+/* has[] is cleared at begin and set at each path's end, so it is
+ * NOT_TRACED for the holes of a progressive frame. */
+static int has_vertex(const hush_psf_renderer *r, size_t i) { return r->has[i] == WITH_VERTEX; }
+
+/* Adds (lookup 0) or looks up (1) the selected vertices of rows [y0, y1)
+ * in screen order: each run of consecutive samples with a vertex goes in
+ * place, without a copy. */
+static void vertex_runs(hush_psf_renderer *r, uint32_t y0, uint32_t y1, int lookup) {
+  const size_t end = (size_t)y1 * r->width * r->spp;
+  size_t i = (size_t)y0 * r->width * r->spp;
+  while (i < end) {
+    while (i < end && !has_vertex(r, i)) i++;
+    const size_t start = i;
+    while (i < end && has_vertex(r, i)) i++;
+    const uint32_t n = (uint32_t)(i - start);
+    if (n && !lookup) hush_psf_add_vertices(r->psf, r->vertices + start, n, r->tickets + start);
+    if (n && lookup)
+      hush_psf_lookup(r->psf, r->vertices + start, r->tickets + start, n, r->filtered + 3 * start);
+  }
+}
+
+/* The "psf" layer of rows [y0, y1). */
+static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *out) {
+  vertex_runs(r, y0, y1, 1);
+  for (uint32_t y = y0; y < y1; y++)
+    for (uint32_t x = 0; x < r->width; x++) {
+      float sum[3] = {0.0f, 0.0f, 0.0f};
+      for (uint32_t s = 0; s < r->spp; s++) {
+        const size_t i = sample_index(r, x, y, s);
+        const sample_result *rec = &r->results[i];
+        if (r->has[i] == NOT_TRACED) continue; /* a hole of a progressive frame */
+        if (r->has[i] == NO_VERTEX) {
+          for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
+          continue;
+        }
+        const float *f = r->filtered + 3 * i;
+        for (int c = 0; c < 3; c++) {
+          const float v = rec->prefix[c] + rec->throughput[c] * f[c];
+          sum[c] += isfinite(v) ? v : rec->total[c];
+        }
+      }
+      float *o = out + 3 * ((size_t)y * r->width + x);
+      for (int c = 0; c < 3; c++) o[c] = sum[c] / (float)r->spp;
+    }
+}
+
+/* Rows per band of the parallel passes. */
+#define BAND 4u
+
+hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
+                                      hush_psf_timings *timings) {
+  hush_image_view view;
+  hush_status st = hush_frame_add_layer(frame, "psf", 3, &view);
+  if (st != HUSH_OK) return st;
+  const int threads = hush_device_threads(r->device);
+  const int64_t bands = (r->height + BAND - 1) / BAND;
+  const double t0 = hush__now_ms(), cpu0 = hush__cpu_seconds();
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int64_t b = 0; b < bands; b++) {
+    const uint32_t y0 = (uint32_t)b * BAND;
+    vertex_runs(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, 0);
+  }
+  const double t1 = hush__now_ms();
+  st = hush_psf_resolve(r->psf);
+  if (st != HUSH_OK) return st;
+  const double t2 = hush__now_ms();
+  float *out = view.data;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int64_t b = 0; b < bands; b++) {
+    const uint32_t y0 = (uint32_t)b * BAND;
+    compose_rows(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, out);
+  }
+  const double t3 = hush__now_ms();
+  if (timings) {
+    timings->cpu = (hush__cpu_seconds() - cpu0) * 1e3;
+    timings->add = t1 - t0;
+    timings->resolve = t2 - t1;
+    timings->lookup = t3 - t2;
+  }
+  return HUSH_OK;
+}
