@@ -66,6 +66,8 @@ part_synthetic() {
 part_scenes() {
   [ -d ../shared/scenes ] || { echo "results: ../shared/scenes absent, scenes part skipped" >&2; return 0; }
   local size=${SCENE_SIZE:-640x360} frames=${SCENE_FRAMES:-16} spp=${SCENE_REF_SPP:-64}
+  # The path-space filter runs inside the renderer, so only rendered scenes can have it.
+  local filters="$filters,psf,psf+svgf,psf+bmfr"
   {
     echo "## Quality: the shared scenes ($today)"
     echo
