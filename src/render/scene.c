@@ -405,21 +405,6 @@ static void set_ray(struct RTCRay *ray, const float o[3], const float d[3], floa
   ray->flags = 0;
 }
 
-/* An incoherent hit's shading record is almost never in cache: start
- * fetching its two lines as soon as the triangle is known, so the miss
- * overlaps the caller's work before hush__scene_surface reads it. */
-static void prefetch_record(const hush_scene *scene, uint32_t tri) {
-  const rtc_state *rs = scene->rtc_data;
-  if (!rs || tri >= scene->triangle_count) return;
-#if defined(__GNUC__)
-  const char *r = (const char *)&rs->records[tri];
-  __builtin_prefetch(r);
-  __builtin_prefetch(r + 64);
-#else
-  (void)rs;
-#endif
-}
-
 int hush__scene_intersect(const hush_scene *scene, const float o[3], const float d[3], float tnear,
                           float tfar, hush_hit *hit) {
   hit->triangle = UINT32_MAX;
@@ -442,7 +427,6 @@ int hush__scene_intersect(const hush_scene *scene, const float o[3], const float
   hit->u = rh.hit.u;
   hit->v = rh.hit.v;
   hit->t = rh.ray.tfar;
-  prefetch_record(scene, hit->triangle);
   return 1;
 }
 
