@@ -14,7 +14,6 @@
 #include "render/camera.h"
 #include "render/integrator.h"
 #include "render/lights.h"
-#include "render/sincos.h"
 #include "render/render.h"
 #include "render/scene.h"
 
@@ -283,27 +282,6 @@ static void test_envmap_shortcuts(void) {
   for (int i = 0; i < 1000; i++) bad += hush__envmap_pdf(&m, uniform_sphere(rnd(30, i), rnd(31, i))) != 0.0f;
   CHECK(bad == 0);
   hush__envmap_free(&m);
-}
-
-/* The samplers' inline sincos agrees with libm to a few ulps over the
- * angles they pass ([0, 2 pi]) and beyond, quadrant signs included. */
-static void test_sincos(void) {
-  double worst = 0.0;
-  int bad_sign = 0;
-  for (int i = 0; i <= 400000; i++) {
-    const float x = -8.0f + 16.0f * (float)i / 400000.0f;
-    float s, c;
-    hush_sincosf(x, &s, &c);
-    const double es = fabs((double)s - sin((double)x)), ec = fabs((double)c - cos((double)x));
-    worst = fmax(worst, fmax(es, ec));
-    if ((s < 0.0f) != (sin((double)x) < 0.0) && fabs(sin((double)x)) > 1e-6) bad_sign++;
-    if ((c < 0.0f) != (cos((double)x) < 0.0) && fabs(cos((double)x)) > 1e-6) bad_sign++;
-  }
-  CHECK_MSG(worst < 2.5e-7, "sincos: max abs error %.3g", worst);
-  CHECK(bad_sign == 0);
-  float s, c;
-  hush_sincosf(0.0f, &s, &c);
-  CHECK(s == 0.0f && c == 1.0f);
 }
 
 /* ---- rendering helpers -------------------------------------------------------------- */
@@ -834,7 +812,6 @@ int main(void) {
   test_bsdfs();
   test_envmap();
   test_envmap_shortcuts();
-  test_sincos();
   test_furnace();
   test_motion("cornell-moving", HUSH_MOVE_ORBIT, 1);
   test_motion("courtyard", HUSH_MOVE_DOLLY, 1);

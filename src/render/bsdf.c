@@ -8,7 +8,6 @@
  */
 #include "render/bsdf.h"
 #include "render/fminmax.h"
-#include "render/sincos.h"
 
 #include <math.h>
 #include <string.h>
@@ -103,10 +102,8 @@ static hush_vec3 ggx_sample_vndf(float alpha, hush_vec3 wo, float u1, float u2) 
                                    : hush_v3(1.0f, 0.0f, 0.0f);
   const hush_vec3 t2 = hush_v3_cross(vh, t1);
   const float r = sqrtf(u1), phi = 2.0f * BSDF_PI * u2;
-  float sp, cp;
-  hush_sincosf(phi, &sp, &cp);
-  const float p1 = r * cp;
-  float p2 = r * sp;
+  const float p1 = r * cosf(phi);
+  float p2 = r * sinf(phi);
   const float s = 0.5f * (1.0f + vh.z);
   p2 = (1.0f - s) * sqrtf(hush_fmaxf(0.0f, 1.0f - p1 * p1)) + s * p2;
   const float p3 = sqrtf(hush_fmaxf(0.0f, 1.0f - p1 * p1 - p2 * p2));
@@ -126,9 +123,7 @@ static hush_vec3 reflect_local(hush_vec3 wo, hush_vec3 h) {
 
 static hush_vec3 cosine_hemisphere(float u1, float u2) {
   const float r = sqrtf(u1), phi = 2.0f * BSDF_PI * u2;
-  float sp, cp;
-  hush_sincosf(phi, &sp, &cp);
-  return hush_v3(r * cp, r * sp, sqrtf(hush_fmaxf(0.0f, 1.0f - u1)));
+  return hush_v3(r * cosf(phi), r * sinf(phi), sqrtf(hush_fmaxf(0.0f, 1.0f - u1)));
 }
 
 /* ---- set-up ---------------------------------------------------------------------- */

@@ -11,7 +11,6 @@
 
 #include "core/device.h"
 #include "render/fminmax.h"
-#include "render/sincos.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -99,9 +98,7 @@ static hush_vec3 sample_cone_frame(hush_vec3 t, hush_vec3 b, hush_vec3 axis, flo
   const float cos_t = 1.0f - u1 * one_minus_cos;
   const float sin_t = sqrtf(hush_fmaxf(0.0f, 1.0f - cos_t * cos_t));
   const float phi = 2.0f * L_PI * u2;
-  float sp, cp;
-  hush_sincosf(phi, &sp, &cp);
-  const float lx = sin_t * cp, ly = sin_t * sp;
+  const float lx = sin_t * cosf(phi), ly = sin_t * sinf(phi);
   return hush_v3_normalize(hush_v3_add(hush_v3_add(hush_v3_scale(t, lx), hush_v3_scale(b, ly)),
                                        hush_v3_scale(axis, cos_t)));
 }
@@ -169,10 +166,8 @@ void hush__envmap_dir_to_uv(hush_vec3 d, float *u, float *v) {
 
 hush_vec3 hush__envmap_uv_to_dir(float u, float v) {
   const float theta = v * L_PI, phi = 2.0f * L_PI * u;
-  float s, ct, sp, cp;
-  hush_sincosf(theta, &s, &ct);
-  hush_sincosf(phi, &sp, &cp);
-  return hush_v3(s * sp, ct, -s * cp);
+  const float s = sinf(theta);
+  return hush_v3(s * sinf(phi), cosf(theta), -s * cosf(phi));
 }
 
 /* The sky's map has no rotation: its directions pass through unchanged
@@ -873,9 +868,7 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
     } else {
       const float z = 1.0f - 2.0f * u[1], r = sqrtf(hush_fmaxf(0.0f, 1.0f - z * z));
       const float phi = 2.0f * L_PI * u[2];
-      float sp, cp;
-      hush_sincosf(phi, &sp, &cp);
-      s->wi = hush_v3(r * cp, r * sp, z);
+      s->wi = hush_v3(r * cosf(phi), r * sinf(phi), z);
     }
     s->pdf = hush__lights_env_eval(L, s->wi, s->radiance);
     return s->pdf > 0.0f;
