@@ -232,6 +232,58 @@ static void test_envmap(void) {
   hush__envmap_free(&m);
 }
 
+/* The map's shortcuts are exact: the density stored with each texel is the
+ * product of its CDF steps (0 for a black map), and a map without rotation
+ * (the sky) that skips the 3x3 products evaluates, weighs and samples
+ * exactly as with them. */
+static void test_envmap_shortcuts(void) {
+  enum { W = 24, H = 12 };
+  float rgb[W * H * 3];
+  for (int i = 0; i < W * H * 3; i++) rgb[i] = 0.05f + (float)((i * 7) % 11) * 0.1f;
+  float rot[16];
+  hush_m4_identity(rot);
+  rot[0] = 0.0f, rot[8] = 1.0f, rot[2] = -1.0f, rot[10] = 0.0f;
+  hush_envmap m, r;
+  REQUIRE(hush__envmap_build(NULL, &m, rgb, W, H, 3, 1.0f, NULL) == HUSH_OK);
+  REQUIRE(hush__envmap_build(NULL, &r, rgb, W, H, 3, 1.0f, rot) == HUSH_OK);
+  CHECK(m.identity == 1);
+  CHECK(r.identity == 0);
+  int bad = 0;
+  for (uint32_t y = 0; y < H; y++)
+    for (uint32_t x = 0; x < W; x++) {
+      const float p_row = m.row_cdf[y + 1] - m.row_cdf[y];
+      const float p_col = m.col_cdf[y * (W + 1) + x + 1] - m.col_cdf[y * (W + 1) + x];
+      if (m.texels[4 * (y * W + x) + 3] != p_row * p_col * (float)W * (float)H) bad++;
+    }
+  CHECK_MSG(bad == 0, "%d texels whose stored density is not their CDF steps' product", bad);
+  hush_envmap slow = m; /* the same tables, through the 3x3 products */
+  slow.identity = 0;
+  int differ = 0;
+  for (int i = 0; i < 20000; i++) {
+    const hush_vec3 d = uniform_sphere(rnd(26, i), rnd(27, i));
+    float a[3], b[3];
+    hush__envmap_eval(&m, d, a);
+    hush__envmap_eval(&slow, d, b);
+    if (a[0] != b[0] || a[1] != b[1] || a[2] != b[2]) differ++;
+    if (hush__envmap_pdf(&m, d) != hush__envmap_pdf(&slow, d)) differ++;
+    float pa, pb;
+    const hush_vec3 sa = hush__envmap_sample(&m, rnd(28, i), rnd(29, i), &pa);
+    const hush_vec3 sb = hush__envmap_sample(&slow, rnd(28, i), rnd(29, i), &pb);
+    if (pa != pb || sa.x != sb.x || sa.y != sb.y || sa.z != sb.z) differ++;
+  }
+  CHECK_MSG(differ == 0, "%d lookups differ with and without the identity shortcut", differ);
+  hush__envmap_free(&m);
+  hush__envmap_free(&r);
+  /* a black map: every stored density 0, so every pdf 0 */
+  float black[W * H * 3] = {0};
+  REQUIRE(hush__envmap_build(NULL, &m, black, W, H, 3, 1.0f, NULL) == HUSH_OK);
+  bad = 0;
+  for (int i = 0; i < W * H; i++) bad += m.texels[4 * i + 3] != 0.0f;
+  for (int i = 0; i < 1000; i++) bad += hush__envmap_pdf(&m, uniform_sphere(rnd(30, i), rnd(31, i))) != 0.0f;
+  CHECK(bad == 0);
+  hush__envmap_free(&m);
+}
+
 /* ---- rendering helpers -------------------------------------------------------------- */
 
 typedef struct rig {
@@ -759,6 +811,7 @@ int main(void) {
   test_sky_table();
   test_bsdfs();
   test_envmap();
+  test_envmap_shortcuts();
   test_furnace();
   test_motion("cornell-moving", HUSH_MOVE_ORBIT, 1);
   test_motion("courtyard", HUSH_MOVE_DOLLY, 1);

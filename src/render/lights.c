@@ -80,22 +80,34 @@ static double build_cdf(const double *w, uint32_t n, float *cdf) {
   return sum;
 }
 
-static hush_vec3 frame_to_world(hush_vec3 axis, hush_vec3 local) {
+/* Tangents t, b completing the unit vector axis to an orthonormal frame
+ * (Duff et al. 2017). */
+static void axis_frame(hush_vec3 axis, hush_vec3 *t, hush_vec3 *b) {
   const float sign = copysignf(1.0f, axis.z);
   const float a = -1.0f / (sign + axis.z);
   const float c = axis.x * axis.y * a;
-  const hush_vec3 t = hush_v3(1.0f + sign * axis.x * axis.x * a, sign * c, -sign * axis.x);
-  const hush_vec3 b = hush_v3(c, sign + axis.y * axis.y * a, -axis.y);
-  return hush_v3_add(hush_v3_add(hush_v3_scale(t, local.x), hush_v3_scale(b, local.y)),
-                     hush_v3_scale(axis, local.z));
+  *t = hush_v3(1.0f + sign * axis.x * axis.x * a, sign * c, -sign * axis.x);
+  *b = hush_v3(c, sign + axis.y * axis.y * a, -axis.y);
+}
+
+/* A direction in the cone around axis (frame t, b, axis) whose half-angle
+ * has cosine 1 - one_minus_cos. The sun's frame and 1 - cos are computed
+ * once per scene; the result is the same as computing them here. */
+static hush_vec3 sample_cone_frame(hush_vec3 t, hush_vec3 b, hush_vec3 axis, float one_minus_cos,
+                                   float u1, float u2) {
+  const float cos_t = 1.0f - u1 * one_minus_cos;
+  const float sin_t = sqrtf(hush_fmaxf(0.0f, 1.0f - cos_t * cos_t));
+  const float phi = 2.0f * L_PI * u2;
+  const float lx = sin_t * cosf(phi), ly = sin_t * sinf(phi);
+  return hush_v3_normalize(hush_v3_add(hush_v3_add(hush_v3_scale(t, lx), hush_v3_scale(b, ly)),
+                                       hush_v3_scale(axis, cos_t)));
 }
 
 /* A direction in the cone of half-angle acos(cos_max) around axis. */
 static hush_vec3 sample_cone(hush_vec3 axis, float cos_max, float u1, float u2) {
-  const float cos_t = 1.0f - u1 * (1.0f - cos_max);
-  const float sin_t = sqrtf(hush_fmaxf(0.0f, 1.0f - cos_t * cos_t));
-  const float phi = 2.0f * L_PI * u2;
-  return hush_v3_normalize(frame_to_world(axis, hush_v3(sin_t * cosf(phi), sin_t * sinf(phi), cos_t)));
+  hush_vec3 t, b;
+  axis_frame(axis, &t, &b);
+  return sample_cone_frame(t, b, axis, 1.0f - cos_max, u1, u2);
 }
 
 /* 1 - cos_max without cancellation, for tiny cones. */
@@ -158,13 +170,17 @@ hush_vec3 hush__envmap_uv_to_dir(float u, float v) {
   return hush_v3(s * sinf(phi), cosf(theta), -s * cosf(phi));
 }
 
+/* The sky's map has no rotation: its directions pass through unchanged
+ * (the 3x3 product would only turn a -0 into +0). */
 static hush_vec3 map_to_local(const hush_envmap *m, hush_vec3 d) {
+  if (m->identity) return d;
   const float *r = m->to_world; /* local -> world; its transpose goes back */
   return hush_v3(r[0] * d.x + r[3] * d.y + r[6] * d.z, r[1] * d.x + r[4] * d.y + r[7] * d.z,
                  r[2] * d.x + r[5] * d.y + r[8] * d.z);
 }
 
 static hush_vec3 map_to_world(const hush_envmap *m, hush_vec3 d) {
+  if (m->identity) return d;
   const float *r = m->to_world;
   return hush_v3(r[0] * d.x + r[1] * d.y + r[2] * d.z, r[3] * d.x + r[4] * d.y + r[5] * d.z,
                  r[6] * d.x + r[7] * d.y + r[8] * d.z);
@@ -179,7 +195,7 @@ static void texel_of(const hush_envmap *m, float u, float v, uint32_t *x, uint32
 }
 
 void hush__envmap_free(hush_envmap *m) {
-  free(m->rgb);
+  free(m->texels);
   free(m->row_cdf);
   free(m->col_cdf);
   free(m->row_guide);
@@ -207,6 +223,16 @@ static hush_status envmap_tables(hush_device device, hush_envmap *m, const doubl
   m->total = (float)build_cdf(rows, H, m->row_cdf);
   build_guide(m->row_cdf, H, m->row_guide);
   free(rows);
+  /* each texel's density in (u, v), next to its radiance (texel_pdf) */
+  for (uint32_t y = 0; y < H; y++) {
+    const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
+    const float *cc = m->col_cdf + (size_t)y * (W + 1);
+    for (uint32_t x = 0; x < W; x++) {
+      const float p_col = cc[x + 1] - cc[x];
+      m->texels[4 * ((size_t)y * W + x) + 3] =
+          m->total > 0.0f ? p_row * p_col * (float)W * (float)H : 0.0f;
+    }
+  }
   return HUSH_OK;
 }
 
@@ -219,10 +245,12 @@ hush_status hush__envmap_build(hush_device device, hush_envmap *m, const float *
   m->height = height;
   for (int r = 0; r < 3; r++)
     for (int c = 0; c < 3; c++) m->to_world[r * 3 + c] = tw ? tw[c * 4 + r] : (r == c ? 1.0f : 0.0f);
+  m->identity = 1;
+  for (int k = 0; k < 9; k++) m->identity &= m->to_world[k] == ((k % 4 == 0) ? 1.0f : 0.0f);
   const size_t n = (size_t)width * height;
-  m->rgb = malloc(n * 3 * sizeof(float));
+  m->texels = malloc(n * 4 * sizeof(float));
   double *w = malloc(n * sizeof(double));
-  if (!m->rgb || !w) {
+  if (!m->texels || !w) {
     free(w);
     hush__envmap_free(m);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the environment map");
@@ -231,7 +259,7 @@ hush_status hush__envmap_build(hush_device device, hush_envmap *m, const float *
     const double sin_t = sin(((double)y + 0.5) / height * 3.14159265358979);
     for (uint32_t x = 0; x < width; x++) {
       const size_t i = (size_t)y * width + x;
-      float *o = m->rgb + 3 * i;
+      float *o = m->texels + 4 * i;
       const float *s = src + i * (size_t)channels;
       for (int k = 0; k < 3; k++) {
         const float v = s[channels >= 3 ? k : 0] * scale;
@@ -247,16 +275,13 @@ hush_status hush__envmap_build(hush_device device, hush_envmap *m, const float *
 }
 
 /* The density (solid angle) with which envmap_sample draws a direction in
- * texel (x, y), at local polar cosine cos_t. */
-static float texel_pdf(const hush_envmap *m, uint32_t x, uint32_t y, float cos_t) {
-  if (!(m->total > 0.0f)) return 0.0f;
-  const float p_row = m->row_cdf[y + 1] - m->row_cdf[y];
-  const float *cc = m->col_cdf + (size_t)y * (m->width + 1);
-  const float p_col = cc[x + 1] - cc[x];
+ * the texel whose 4 floats start at t, at local polar cosine cos_t. Its
+ * density in (u, v) was stored with its radiance (envmap_tables): no read
+ * of the CDF tables here. */
+static float texel_pdf(const float *t, float cos_t) {
   const float sin_t = sqrtf(hush_fmaxf(0.0f, 1.0f - cos_t * cos_t));
   if (sin_t <= 0.0f) return 0.0f;
-  const float pdf_uv = p_row * p_col * (float)m->width * (float)m->height;
-  return pdf_uv / (2.0f * L_PI * L_PI * sin_t);
+  return t[3] / (2.0f * L_PI * L_PI * sin_t);
 }
 
 /* The texel along world direction d, and the density (solid angle) with
@@ -267,8 +292,8 @@ static float envmap_lookup(const hush_envmap *m, hush_vec3 d, const float **texe
   const hush_vec3 l = map_to_local(m, d);
   hush__envmap_dir_to_uv(l, &u, &v);
   texel_of(m, u, v, &x, &y);
-  *texel = m->rgb + 3 * ((size_t)y * m->width + x);
-  return texel_pdf(m, x, y, l.y);
+  *texel = m->texels + 4 * ((size_t)y * m->width + x);
+  return texel_pdf(*texel, l.y);
 }
 
 void hush__envmap_eval(const hush_envmap *m, hush_vec3 d, float out[3]) {
@@ -296,8 +321,8 @@ static hush_vec3 envmap_sample_texel(const hush_envmap *m, float u1, float u2, f
   const float fx = pc > 0.0f ? hush_fminf(0.999999f, hush_fmaxf(0.0f, (u1 - cc[x]) / pc)) : 0.5f;
   const float u = ((float)x + fx) / (float)m->width, v = ((float)y + fy) / (float)m->height;
   const hush_vec3 l = hush__envmap_uv_to_dir(u, v);
-  *pdf = texel_pdf(m, x, y, l.y);
-  *texel = m->rgb + 3 * ((size_t)y * m->width + x);
+  *texel = m->texels + 4 * ((size_t)y * m->width + x);
+  *pdf = texel_pdf(*texel, l.y);
   return map_to_world(m, l);
 }
 
@@ -426,9 +451,10 @@ static hush_status sky_build(hush_device device, hush_lights *L, const hush_envi
   m->width = W;
   m->height = H;
   for (int k = 0; k < 9; k++) m->to_world[k] = (k % 4 == 0) ? 1.0f : 0.0f;
-  m->rgb = malloc((size_t)W * H * 3 * sizeof(float));
+  m->identity = 1;
+  m->texels = malloc((size_t)W * H * 4 * sizeof(float));
   double *w = malloc((size_t)W * H * sizeof(double));
-  if (!m->rgb || !w) {
+  if (!m->texels || !w) {
     free(w);
     hush__envmap_free(m);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the sky");
@@ -447,7 +473,7 @@ static hush_status sky_build(hush_device device, hush_lights *L, const hush_envi
     for (uint32_t x = 0; x < W; x++) {
       const size_t i = (size_t)y * W + x;
       const hush_vec3 d = hush__envmap_uv_to_dir(((float)x + 0.5f) / W, ((float)y + 0.5f) / H);
-      float *o = m->rgb + 3 * i;
+      float *o = m->texels + 4 * i;
       hush__sky_model_eval(&L->sky, d, o);
       for (int k = 0; k < 3; k++) o[k] *= env->sky_scale;
       w[i] = (double)lum3(o) * sin(((double)y + 0.5) / H * 3.14159265358979);
@@ -492,6 +518,8 @@ static hush_status env_init(hush_device device, hush_lights *L, const hush_scene
     const float scale = env->sun_radius_scale > 0.0f ? env->sun_radius_scale : 1.0f;
     const float theta = hush_fminf(theta0 * scale, 0.5f * L_PI);
     L->sun_cos_max = cosf(theta);
+    L->sun_one_minus_cos = 1.0f - L->sun_cos_max;
+    axis_frame(L->sun_dir, &L->sun_t, &L->sun_b);
     const float theta_s = acosf(hush_fminf(1.0f, hush_fmaxf(-1.0f, L->sun_dir.y)));
     sun_radiance(hush_fminf(theta_s, 0.5f * L_PI), env->turbidity, L->sun_radiance);
     /* Mitsuba keeps the sun's power when its radius is scaled */
@@ -569,6 +597,7 @@ hush_status hush__lights_init(hush_device device, hush_lights *L, const hush_sce
     L->scene_radius = 0.5f * hush_v3_length(hush_v3(hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]));
   }
   if (!(L->scene_radius > 0.0f) || !isfinite(L->scene_radius)) L->scene_radius = 1.0f;
+  L->sphere_count = scene->sphere_count;
   if (scene->sphere_count) {
     L->p_sphere = calloc(scene->sphere_count, sizeof(float));
     if (!L->p_sphere) return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory");
@@ -750,8 +779,8 @@ float hush__lights_sphere_pdf(const hush_lights *L, uint32_t i, hush_vec3 p) {
   return L->p_sphere[i] / omega;
 }
 
-uint32_t hush__lights_intersect_sphere(const hush_lights *L, hush_vec3 o, hush_vec3 d, float tnear,
-                                       float tfar, float *t) {
+uint32_t hush__lights_intersect_sphere_any(const hush_lights *L, hush_vec3 o, hush_vec3 d,
+                                           float tnear, float tfar, float *t) {
   uint32_t found = 0;
   for (uint32_t i = 0; i < L->scene->sphere_count; i++) {
     float c[3];
@@ -835,7 +864,7 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
   s->dist = INFINITY;
   if (sun || L->env_type == HUSH_ENV_CONSTANT) {
     if (sun) {
-      s->wi = sample_cone(L->sun_dir, L->sun_cos_max, u[1], u[2]);
+      s->wi = sample_cone_frame(L->sun_t, L->sun_b, L->sun_dir, L->sun_one_minus_cos, u[1], u[2]);
     } else {
       const float z = 1.0f - 2.0f * u[1], r = sqrtf(hush_fmaxf(0.0f, 1.0f - z * z));
       const float phi = 2.0f * L_PI * u[2];

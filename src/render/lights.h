@@ -29,13 +29,17 @@
  * tabulated sky). Texel (x, y), row 0 at the top (theta = 0: local +Y). */
 typedef struct hush_envmap {
   uint32_t width, height;
-  float *rgb;              /* width * height * 3, radiance (scale applied) */
+  /* width * height * 4: radiance r, g, b (scale applied) and the texel's
+   * sampling density in (u, v) (p_row * p_col * width * height; 0 for a
+   * black map), side by side so that a lookup reads one cache line */
+  float *texels;
   float *row_cdf;          /* height + 1 */
   float *col_cdf;          /* height * (width + 1) */
   uint32_t *row_guide;     /* height: where to start looking in row_cdf for u in [k/h, (k+1)/h) */
   uint32_t *col_guide;     /* height * width: the same for each row's col_cdf */
   float total;             /* sum of the weights (0: a black map) */
   float to_world[9];       /* local -> world rotation, row-major 3x3 */
+  int identity;            /* to_world is the identity (the sky): no rotation */
 } hush_envmap;
 
 /* Preetham sky for one sun position and turbidity: everything of the model
@@ -73,6 +77,8 @@ typedef struct hush_lights {
   float env_color[3];      /* CONSTANT */
   hush_envmap map;         /* MAP, or the sky of SUNSKY */
   hush_vec3 sun_dir;       /* SUNSKY: towards the sun (world) */
+  hush_vec3 sun_t, sun_b;  /* SUNSKY: tangent frame around sun_dir (cone samples) */
+  float sun_one_minus_cos; /* SUNSKY: 1 - sun_cos_max */
   hush_sky_model sky;      /* SUNSKY: the sky (sky_scale not applied) */
   hush_sky_table *sky_table; /* SUNSKY: the same, tabulated (owned) */
   float sky_scale;
@@ -84,6 +90,7 @@ typedef struct hush_lights {
   uint32_t group_count;    /* 0: no light */
   float p_tris, p_env, p_sun;
   float *p_sphere;         /* per sphere light */
+  uint32_t sphere_count;   /* the scene's, kept here: the hot path reads no scene field */
   const hush_scene *scene;
   uint32_t frame;
 } hush_lights;
@@ -128,9 +135,17 @@ float hush__lights_sphere_pdf(const hush_lights *lights, uint32_t i, hush_vec3 p
 float hush__lights_triangle_area(const hush_scene *scene, uint32_t tri);
 
 /* Closest sphere light (on at this frame) hit by o + t d, t in (tnear, tfar):
- * returns its index + 1 and sets *t, or 0. */
-uint32_t hush__lights_intersect_sphere(const hush_lights *lights, hush_vec3 o, hush_vec3 d,
-                                       float tnear, float tfar, float *t);
+ * returns its index + 1 and sets *t, or 0. Inline so that the common case,
+ * a scene without sphere lights, costs one compare instead of a call (it is
+ * asked after every ray). */
+uint32_t hush__lights_intersect_sphere_any(const hush_lights *lights, hush_vec3 o, hush_vec3 d,
+                                           float tnear, float tfar, float *t);
+static inline uint32_t hush__lights_intersect_sphere(const hush_lights *lights, hush_vec3 o,
+                                                     hush_vec3 d, float tnear, float tfar,
+                                                     float *t) {
+  if (lights->sphere_count == 0) return 0;
+  return hush__lights_intersect_sphere_any(lights, o, d, tnear, tfar, t);
+}
 
 /* Envmap pieces, exposed for tests: direction <-> (u, v) in the map's local
  * frame (Mitsuba's convention), texel lookup, sampling and density (solid

@@ -54,7 +54,8 @@ typedef struct rtc_state {
   float *vertices;       /* padded copies of the positions and indices: Embree */
   uint32_t *indices;     /* may read 16 bytes at the last element of a buffer  */
   mask_data *masks;      /* per object */
-  tri_record *records;   /* per triangle (64-byte aligned) */
+  tri_record *records;   /* per triangle, 128-byte aligned: a record is one pair of
+                            lines that the adjacent-line prefetcher fetches together */
   char error[512];       /* the first Embree error, for messages */
 } rtc_state;
 
@@ -315,7 +316,7 @@ static hush_status build(hush_device device, rtc_state *rs, hush_scene *scene) {
   rs->masks = calloc(scene->object_count ? scene->object_count : 1, sizeof *rs->masks);
   scene->object_to_world =
       malloc((scene->object_count ? scene->object_count : 1) * 16 * sizeof(float));
-  rs->records = aligned_alloc(64, ((size_t)scene->triangle_count + 1) * sizeof *rs->records);
+  rs->records = aligned_alloc(128, ((size_t)scene->triangle_count + 1) * sizeof *rs->records);
   if (!rs->vertices || !rs->indices || !rs->sub || !rs->masks || !scene->object_to_world ||
       !rs->records)
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "scene '%s': out of memory for Embree",
