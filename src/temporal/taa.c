@@ -95,20 +95,21 @@ static inline float clip_to(float h, float lo, float hi, float f) {
  * itself at the border); has: the history (hr, hg, hb, linear) is valid.
  * Everything is computed and selected, without branches, so the interior
  * loop vectorises. */
-static HUSH_ALWAYS_INLINE void resolve_pixel(const taa_row *t, int x, int xl, int xr, int has, float hr,
-                                 float hg, float hb) {
+static HUSH_ALWAYS_INLINE void resolve_pixel(const taa_row *t, const int clip, const int tonemap,
+                                             int x, int xl, int xr, int has, float hr, float hg,
+                                             float hb) {
   const float c0 = t->mid[0][x], c1 = t->mid[1][x], c2 = t->mid[2][x];
   const float lo0 = box_min(t, 0, x, xl, xr), lo1 = box_min(t, 1, x, xl, xr),
               lo2 = box_min(t, 2, x, xl, xr);
   const float hi0 = box_max(t, 0, x, xl, xr), hi1 = box_max(t, 1, x, xl, xr),
               hi2 = box_max(t, 2, x, xl, xr);
   /* the history is stored linear: map it like the current frame */
-  const float s = t->tonemap ? tonemap_scale(hr, hg, hb) : 1.0f;
+  const float s = tonemap ? tonemap_scale(hr, hg, hb) : 1.0f;
   hr *= s;
   hg *= s;
   hb *= s;
   float h0 = ycocg_y(hr, hg, hb), h1 = ycocg_co(hr, hg, hb), h2 = ycocg_cg(hr, hg, hb);
-  if (t->clip) {
+  if (clip) {
     const float f = minf(minf(clip_fraction(h0, lo0, hi0), clip_fraction(h1, lo1, hi1)),
                          minf(clip_fraction(h2, lo2, hi2), 1.0f));
     h0 = clip_to(h0, lo0, hi0, f);
@@ -123,7 +124,7 @@ static HUSH_ALWAYS_INLINE void resolve_pixel(const taa_row *t, int x, int xl, in
   const float m0 = has ? h0 + a * (c0 - h0) : c0, m1 = has ? h1 + a * (c1 - h1) : c1,
               m2 = has ? h2 + a * (c2 - h2) : c2;
   const float r = m0 + m1 - m2, g = m0 + m2, b = m0 - m1 - m2;
-  const float u = t->tonemap ? untonemap_scale(r, g, b) : 1.0f;
+  const float u = tonemap ? untonemap_scale(r, g, b) : 1.0f;
   t->out[0][x] = r * u;
   t->out[1][x] = g * u;
   t->out[2][x] = b * u;
@@ -141,7 +142,42 @@ static void resolve_taps(const taa_row *t, const hush_reproject_plan *plan, cons
     n = hush__reproject_taps(plan, (size_t)y * W + x, idx, w);
     for (int k = 0; k < 3 && n; k++) h[k] = hush__reproject_apply(prev[k], idx, w, n);
   }
-  resolve_pixel(t, x, x > 0 ? x - 1 : 0, x + 1 < W ? x + 1 : W - 1, n > 0, h[0], h[1], h[2]);
+  resolve_pixel(t, t->clip, t->tonemap, x, x > 0 ? x - 1 : 0, x + 1 < W ? x + 1 : W - 1, n > 0,
+                h[0], h[1], h[2]);
+}
+
+/* The interior columns 1..W-2 of a row at offset row: every pixel as a
+ * 2x2 block (weights 0 and no history unless BILINEAR), vectorised; clip
+ * and tonemap are constants in each instantiation, so the loop computes
+ * only the variant asked for. */
+static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproject_plan *plan,
+                                             const float *const *prev, size_t row, int W,
+                                             const int clip, const int tonemap) {
+  const int32_t Wi = (int32_t)W;
+  const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
+  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row, *w2 = plan->w[2] + row,
+              *w3 = plan->w[3] + row;
+  const uint8_t *kind = plan->kind + row;
+#pragma omp simd
+  for (int x = 1; x < W - 1; x++) {
+    const int32_t j = hush__reproject_block_origin(plan, row + (size_t)x);
+    const float hr = w0[x] * p0[j] + w1[x] * p0[j + 1] + w2[x] * p0[j + Wi] + w3[x] * p0[j + Wi + 1];
+    const float hg = w0[x] * p1[j] + w1[x] * p1[j + 1] + w2[x] * p1[j + Wi] + w3[x] * p1[j + Wi + 1];
+    const float hb = w0[x] * p2[j] + w1[x] * p2[j + 1] + w2[x] * p2[j + Wi] + w3[x] * p2[j + Wi + 1];
+    resolve_pixel(t, clip, tonemap, x, x - 1, x + 1, kind[x] == HUSH_FOOTPRINT_BILINEAR, hr, hg,
+                  hb);
+  }
+}
+
+static void interior_row(const taa_row *t, const hush_reproject_plan *plan,
+                         const float *const *prev, size_t row, int W) {
+  if (t->clip) {
+    if (t->tonemap) interior_span(t, plan, prev, row, W, 1, 1);
+    else interior_span(t, plan, prev, row, W, 1, 0);
+  } else {
+    if (t->tonemap) interior_span(t, plan, prev, row, W, 0, 1);
+    else interior_span(t, plan, prev, row, W, 0, 0);
+  }
 }
 
 void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
@@ -210,26 +246,12 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
         for (int x = 0; x < W; x++) resolve_taps(&t, use_history ? plan : NULL, prev, x, y, W);
         continue;
       }
-      const int32_t Wi = (int32_t)W;
-      const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
-      const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row, *w2 = plan->w[2] + row,
-                  *w3 = plan->w[3] + row;
-      const uint8_t *kind = plan->kind + row;
-      /* interior columns: every pixel as a 2x2 block (weights 0 and no
-       * history unless BILINEAR) */
-#pragma omp simd
-      for (int x = 1; x < W - 1; x++) {
-        const int32_t j = hush__reproject_block_origin(plan, row + (size_t)x);
-        const float hr = w0[x] * p0[j] + w1[x] * p0[j + 1] + w2[x] * p0[j + Wi] + w3[x] * p0[j + Wi + 1];
-        const float hg = w0[x] * p1[j] + w1[x] * p1[j + 1] + w2[x] * p1[j + Wi] + w3[x] * p1[j + Wi + 1];
-        const float hb = w0[x] * p2[j] + w1[x] * p2[j + 1] + w2[x] * p2[j + Wi] + w3[x] * p2[j + Wi + 1];
-        resolve_pixel(&t, x, x - 1, x + 1, kind[x] == HUSH_FOOTPRINT_BILINEAR, hr, hg, hb);
-      }
+      interior_row(&t, plan, prev, row, W);
       /* the border columns and the 3X3 footprints, through the taps */
       resolve_taps(&t, plan, prev, 0, y, W);
       if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
       for (int x = 1; x < W - 1; x++)
-        if (kind[x] == HUSH_FOOTPRINT_3X3) resolve_taps(&t, plan, prev, x, y, W);
+        if (plan->kind[row + (size_t)x] == HUSH_FOOTPRINT_3X3) resolve_taps(&t, plan, prev, x, y, W);
     }
   }
   taa->latest = 1 - taa->latest;
