@@ -1,8 +1,17 @@
 /*
  * taa.c — temporal anti-aliasing resolve; see taa.h. Karis 2014 (neighbourhood
  * clamp/clip in YCoCg, constant blend), as papers/NOTES.md summarises it.
+ *
+ * Two passes over memory: (1) this frame, modulated and tone-mapped if
+ * asked, to YCoCg planes; (2) per row, the history gathered through the
+ * plan's 2x2 blocks, the 3x3 box of (1), clamp or clip, blend and inverse
+ * tone mapping, in one vectorised loop over the interior columns (the two
+ * border columns and the rare 3X3-footprint pixels go through the same
+ * per-pixel function afterwards).
  */
 #include "temporal/taa.h"
+
+#include "filters/albedo.h"
 
 #include <string.h>
 
@@ -10,7 +19,6 @@ hush_status hush__taa_init(hush_device device, hush_taa *taa, uint32_t width, ui
   memset(taa, 0, sizeof *taa);
   hush_status s = hush__planar_init(device, &taa->history[0], 3, width, height);
   if (!s) s = hush__planar_init(device, &taa->history[1], 3, width, height);
-  if (!s) s = hush__planar_init(device, &taa->gathered, 3, width, height);
   if (!s) s = hush__planar_init(device, &taa->current, 3, width, height);
   if (s) hush__taa_free(taa);
   return s;
@@ -19,7 +27,6 @@ hush_status hush__taa_init(hush_device device, hush_taa *taa, uint32_t width, ui
 void hush__taa_free(hush_taa *taa) {
   hush__planar_free(&taa->history[0]);
   hush__planar_free(&taa->history[1]);
-  hush__planar_free(&taa->gathered);
   hush__planar_free(&taa->current);
   memset(taa, 0, sizeof *taa);
 }
@@ -40,103 +47,218 @@ static inline float untonemap_scale(float r, float g, float b) {
 
 /* YCoCg (not normalised: Y = (r + 2g + b) / 4, Co = (r - b) / 2,
  * Cg = (-r + 2g - b) / 4) and back; a linear map, so a blend in either
- * space is the same. */
-static inline void to_ycocg(float r, float g, float b, float v[3]) {
-  v[0] = 0.25f * r + 0.5f * g + 0.25f * b;
-  v[1] = 0.5f * r - 0.5f * b;
-  v[2] = -0.25f * r + 0.5f * g - 0.25f * b;
+ * space is the same. Scalars, not arrays: a per-lane array keeps a simd
+ * loop from vectorising. */
+static inline float ycocg_y(float r, float g, float b) { return 0.25f * r + 0.5f * g + 0.25f * b; }
+static inline float ycocg_co(float r, float g, float b) { (void)g; return 0.5f * r - 0.5f * b; }
+static inline float ycocg_cg(float r, float g, float b) { return -0.25f * r + 0.5f * g - 0.25f * b; }
+
+static inline float minf(float a, float b) { return b < a ? b : a; }
+static inline float maxf(float a, float b) { return b > a ? b : a; }
+static inline float clampf(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
+
+/* What the per-pixel resolve of one row reads: the YCoCg planes' rows
+ * above, at and below (clamped at the image border), the output rows. */
+typedef struct taa_row {
+  const float *up[3], *mid[3], *dn[3];
+  float *out[3];
+  float alpha;
+  int tonemap, clip;
+} taa_row;
+
+/* The 3x3 box of component k around x (xl, xr its neighbours). */
+static HUSH_ALWAYS_INLINE float box_min(const taa_row *t, int k, int x, int xl, int xr) {
+  const float *u = t->up[k], *m = t->mid[k], *d = t->dn[k];
+  return minf(minf(minf(u[xl], u[x]), minf(u[xr], m[xl])),
+              minf(minf(m[x], m[xr]), minf(minf(d[xl], d[x]), d[xr])));
 }
-static inline void from_ycocg(const float v[3], float *r, float *g, float *b) {
-  *r = v[0] + v[1] - v[2];
-  *g = v[0] + v[2];
-  *b = v[0] - v[1] - v[2];
+static HUSH_ALWAYS_INLINE float box_max(const taa_row *t, int k, int x, int xl, int xr) {
+  const float *u = t->up[k], *m = t->mid[k], *d = t->dn[k];
+  return maxf(maxf(maxf(u[xl], u[x]), maxf(u[xr], m[xl])),
+              maxf(maxf(m[x], m[xr]), maxf(maxf(d[xl], d[x]), d[xr])));
 }
 
-static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
+/* Karis's clip_aabb, one axis: the fraction of the way from the box
+ * centre to h that stays inside [lo, hi] (1: inside). */
+static inline float clip_fraction(float h, float lo, float hi) {
+  const float c = 0.5f * (lo + hi), e = 0.5f * (hi - lo) + 1e-7f;
+  const float d = h - c;
+  const float a = d > 0.0f ? d : -d;
+  return a > e ? e / a : 1.0f;
+}
+static inline float clip_to(float h, float lo, float hi, float f) {
+  const float c = 0.5f * (lo + hi);
+  return c + (h - c) * f;
+}
 
-/* Clips h towards the box centre c (Karis's clip_aabb): the point of the
- * segment c..h closest to h inside the box [lo, hi]. */
-static void clip_box(float h[3], const float lo[3], const float hi[3]) {
-  float t = 1.0f;
-  for (int k = 0; k < 3; k++) {
-    const float c = 0.5f * (lo[k] + hi[k]), e = 0.5f * (hi[k] - lo[k]) + 1e-7f;
-    const float d = h[k] - c;
-    const float a = d > 0.0f ? d : -d;
-    if (a > e) {
-      const float tk = e / a;
-      t = tk < t ? tk : t;
+/* One pixel x of the row, its left and right neighbours xl and xr (x
+ * itself at the border); has: the history (hr, hg, hb, linear) is valid.
+ * Everything is computed and selected, without branches, so the interior
+ * loop vectorises. */
+static HUSH_ALWAYS_INLINE void resolve_pixel(const taa_row *t, const int clip, const int tonemap,
+                                             int x, int xl, int xr, int has, float hr, float hg,
+                                             float hb) {
+  const float c0 = t->mid[0][x], c1 = t->mid[1][x], c2 = t->mid[2][x];
+  const float lo0 = box_min(t, 0, x, xl, xr), lo1 = box_min(t, 1, x, xl, xr),
+              lo2 = box_min(t, 2, x, xl, xr);
+  const float hi0 = box_max(t, 0, x, xl, xr), hi1 = box_max(t, 1, x, xl, xr),
+              hi2 = box_max(t, 2, x, xl, xr);
+  /* the history is stored linear: map it like the current frame */
+  const float s = tonemap ? tonemap_scale(hr, hg, hb) : 1.0f;
+  hr *= s;
+  hg *= s;
+  hb *= s;
+  float h0 = ycocg_y(hr, hg, hb), h1 = ycocg_co(hr, hg, hb), h2 = ycocg_cg(hr, hg, hb);
+  if (clip) {
+    const float f = minf(minf(clip_fraction(h0, lo0, hi0), clip_fraction(h1, lo1, hi1)),
+                         minf(clip_fraction(h2, lo2, hi2), 1.0f));
+    h0 = clip_to(h0, lo0, hi0, f);
+    h1 = clip_to(h1, lo1, hi1, f);
+    h2 = clip_to(h2, lo2, hi2, f);
+  } else {
+    h0 = clampf(h0, lo0, hi0);
+    h1 = clampf(h1, lo1, hi1);
+    h2 = clampf(h2, lo2, hi2);
+  }
+  const float a = t->alpha;
+  const float m0 = has ? h0 + a * (c0 - h0) : c0, m1 = has ? h1 + a * (c1 - h1) : c1,
+              m2 = has ? h2 + a * (c2 - h2) : c2;
+  const float r = m0 + m1 - m2, g = m0 + m2, b = m0 - m1 - m2;
+  const float u = tonemap ? untonemap_scale(r, g, b) : 1.0f;
+  t->out[0][x] = r * u;
+  t->out[1][x] = g * u;
+  t->out[2][x] = b * u;
+}
+
+/* Pixel x of row y through the plan's taps (any footprint; NULL plan or
+ * no taps: no history). */
+static void resolve_taps(const taa_row *t, const hush_reproject_plan *plan, const float *const *prev,
+                         int x, int y, int W) {
+  float h[3] = {0.0f, 0.0f, 0.0f};
+  int n = 0;
+  if (plan) {
+    int32_t idx[9];
+    float w[9];
+    n = hush__reproject_taps(plan, (size_t)y * W + x, idx, w);
+    for (int k = 0; k < 3 && n; k++) h[k] = hush__reproject_apply(prev[k], idx, w, n);
+  }
+  resolve_pixel(t, t->clip, t->tonemap, x, x > 0 ? x - 1 : 0, x + 1 < W ? x + 1 : W - 1, n > 0,
+                h[0], h[1], h[2]);
+}
+
+/* The interior columns 1..W-2 of a row at offset row: every pixel as a
+ * 2x2 block (weights 0 and no history unless BILINEAR), vectorised; clip
+ * and tonemap are constants in each instantiation, so the loop computes
+ * only the variant asked for. */
+static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproject_plan *plan,
+                                             const float *const *prev, size_t row, int W,
+                                             const int clip, const int tonemap) {
+  const int32_t Wi = (int32_t)W;
+  const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
+  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row, *w2 = plan->w[2] + row,
+              *w3 = plan->w[3] + row;
+  const uint8_t *kind = plan->kind + row;
+#pragma omp simd
+  for (int x = 1; x < W - 1; x++) {
+    const int32_t j = hush__reproject_block_origin(plan, row + (size_t)x);
+    const float hr = w0[x] * p0[j] + w1[x] * p0[j + 1] + w2[x] * p0[j + Wi] + w3[x] * p0[j + Wi + 1];
+    const float hg = w0[x] * p1[j] + w1[x] * p1[j + 1] + w2[x] * p1[j + Wi] + w3[x] * p1[j + Wi + 1];
+    const float hb = w0[x] * p2[j] + w1[x] * p2[j + 1] + w2[x] * p2[j + Wi] + w3[x] * p2[j + Wi + 1];
+    resolve_pixel(t, clip, tonemap, x, x - 1, x + 1, kind[x] == HUSH_FOOTPRINT_BILINEAR, hr, hg,
+                  hb);
+  }
+}
+
+static void interior_row(const taa_row *t, const hush_reproject_plan *plan,
+                         const float *const *prev, size_t row, int W) {
+  if (t->clip) {
+    if (t->tonemap) interior_span(t, plan, prev, row, W, 1, 1);
+    else interior_span(t, plan, prev, row, W, 1, 0);
+  } else {
+    if (t->tonemap) interior_span(t, plan, prev, row, W, 0, 1);
+    else interior_span(t, plan, prev, row, W, 0, 0);
+  }
+}
+
+void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
+                                 const float *const *color, const float *const *albedo,
+                                 const hush_taa_params *params, int threads) {
+  hush_planar *cur = &taa->current;
+  const int W = (int)cur->width, H = (int)cur->height;
+  const int tonemap = params->tonemap;
+  const int use_history = taa->has_history && plan;
+  const float *const *prev = (const float *const *)taa->history[taa->latest].plane;
+  hush_planar *out = &taa->history[1 - taa->latest];
+  if (threads < 1) threads = 1;
+
+#pragma omp parallel num_threads(threads)
+  {
+    /* (1) this frame, modulated and tone-mapped, to YCoCg */
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; y++) {
+      const size_t row = (size_t)y * W;
+      const float *restrict cr = color[0] + row, *restrict cg = color[1] + row,
+                            *restrict cb = color[2] + row;
+      float *restrict v0 = cur->plane[0] + row, *restrict v1 = cur->plane[1] + row,
+                      *restrict v2 = cur->plane[2] + row;
+      if (albedo) {
+        const float *restrict ar = albedo[0] + row, *restrict ag = albedo[1] + row,
+                              *restrict ab = albedo[2] + row;
+        /* as hush__remodulate: filtered * max(albedo, eps) */
+#pragma omp simd
+        for (int x = 0; x < W; x++) {
+          const float r = cr[x] * maxf(ar[x], HUSH_ALBEDO_EPS),
+                      g = cg[x] * maxf(ag[x], HUSH_ALBEDO_EPS),
+                      b = cb[x] * maxf(ab[x], HUSH_ALBEDO_EPS);
+          const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
+          v0[x] = ycocg_y(r * s, g * s, b * s);
+          v1[x] = ycocg_co(r * s, g * s, b * s);
+          v2[x] = ycocg_cg(r * s, g * s, b * s);
+        }
+      } else {
+#pragma omp simd
+        for (int x = 0; x < W; x++) {
+          const float r = cr[x], g = cg[x], b = cb[x];
+          const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
+          v0[x] = ycocg_y(r * s, g * s, b * s);
+          v1[x] = ycocg_co(r * s, g * s, b * s);
+          v2[x] = ycocg_cg(r * s, g * s, b * s);
+        }
+      }
+    }
+
+    /* (2) gather, box, clamp, blend, per row */
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; y++) {
+      const size_t row = (size_t)y * W;
+      const size_t rup = (size_t)(y > 0 ? y - 1 : 0) * W, rdn = (size_t)(y + 1 < H ? y + 1 : y) * W;
+      taa_row t;
+      for (int k = 0; k < 3; k++) {
+        t.up[k] = cur->plane[k] + rup;
+        t.mid[k] = cur->plane[k] + row;
+        t.dn[k] = cur->plane[k] + rdn;
+        t.out[k] = out->plane[k] + row;
+      }
+      t.alpha = params->alpha;
+      t.tonemap = tonemap;
+      t.clip = params->box == HUSH_TAA_CLIP;
+      if (!use_history || !plan->blocks) {
+        for (int x = 0; x < W; x++) resolve_taps(&t, use_history ? plan : NULL, prev, x, y, W);
+        continue;
+      }
+      interior_row(&t, plan, prev, row, W);
+      /* the border columns and the 3X3 footprints, through the taps */
+      resolve_taps(&t, plan, prev, 0, y, W);
+      if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
+      for (int x = 1; x < W - 1; x++)
+        if (plan->kind[row + (size_t)x] == HUSH_FOOTPRINT_3X3) resolve_taps(&t, plan, prev, x, y, W);
     }
   }
-  for (int k = 0; k < 3; k++) {
-    const float c = 0.5f * (lo[k] + hi[k]);
-    h[k] = c + (h[k] - c) * t;
-  }
+  taa->latest = 1 - taa->latest;
+  taa->has_history = 1;
 }
 
 void hush__taa_resolve(hush_taa *taa, const hush_reproject_plan *plan, const float *const *color,
                        const hush_taa_params *params, int threads) {
-  hush_planar *cur = &taa->current;
-  const int W = (int)cur->width, H = (int)cur->height;
-  const int tonemap = params->tonemap;
-  const float alpha = params->alpha;
-
-  /* this frame, tone-mapped if asked, into planes the 3x3 box is read from */
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++)
-    for (int x = 0; x < W; x++) {
-      const size_t i = (size_t)y * W + x;
-      const float r = color[0][i], g = color[1][i], b = color[2][i];
-      const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
-      cur->plane[0][i] = r * s;
-      cur->plane[1][i] = g * s;
-      cur->plane[2][i] = b * s;
-    }
-
-  const int use_history = taa->has_history && plan;
-  if (use_history)
-    hush__reproject_gather(plan, (const float *const *)taa->history[taa->latest].plane, 3,
-                           taa->gathered.plane, 0.0f, threads);
-  hush_planar *out = &taa->history[1 - taa->latest];
-
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++)
-    for (int x = 0; x < W; x++) {
-      const size_t i = (size_t)y * W + x;
-      float c[3], lo[3], hi[3];
-      to_ycocg(cur->plane[0][i], cur->plane[1][i], cur->plane[2][i], c);
-      float r = cur->plane[0][i], g = cur->plane[1][i], b = cur->plane[2][i];
-      if (use_history && plan->kind[i] != HUSH_FOOTPRINT_NONE) {
-        /* the history is stored linear: map it like the current frame */
-        float hr = taa->gathered.plane[0][i], hg = taa->gathered.plane[1][i],
-              hb = taa->gathered.plane[2][i];
-        const float s = tonemap ? tonemap_scale(hr, hg, hb) : 1.0f;
-        float h[3];
-        to_ycocg(hr * s, hg * s, hb * s, h);
-        for (int k = 0; k < 3; k++) lo[k] = hi[k] = c[k];
-        for (int j = -1; j <= 1; j++)
-          for (int l = -1; l <= 1; l++) {
-            const size_t q = (size_t)clampi(y + j, 0, H - 1) * W + (size_t)clampi(x + l, 0, W - 1);
-            float v[3];
-            to_ycocg(cur->plane[0][q], cur->plane[1][q], cur->plane[2][q], v);
-            for (int k = 0; k < 3; k++) {
-              lo[k] = v[k] < lo[k] ? v[k] : lo[k];
-              hi[k] = v[k] > hi[k] ? v[k] : hi[k];
-            }
-          }
-        if (params->box == HUSH_TAA_CLIP) {
-          clip_box(h, lo, hi);
-        } else {
-          for (int k = 0; k < 3; k++) h[k] = h[k] < lo[k] ? lo[k] : h[k] > hi[k] ? hi[k] : h[k];
-        }
-        float m[3];
-        for (int k = 0; k < 3; k++) m[k] = h[k] + alpha * (c[k] - h[k]);
-        from_ycocg(m, &r, &g, &b);
-      }
-      const float s = tonemap ? untonemap_scale(r, g, b) : 1.0f;
-      out->plane[0][i] = r * s;
-      out->plane[1][i] = g * s;
-      out->plane[2][i] = b * s;
-    }
-  taa->latest = 1 - taa->latest;
-  taa->has_history = 1;
+  hush__taa_resolve_modulated(taa, plan, color, NULL, params, threads);
 }

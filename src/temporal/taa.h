@@ -31,8 +31,7 @@ typedef struct hush_taa_params {
 
 typedef struct hush_taa {
   hush_planar history[2]; /* 3 planes: the last outputs */
-  hush_planar gathered;   /* 3 planes: history reprojected to this frame */
-  hush_planar current;    /* 3 planes: this frame, tone-mapped when asked */
+  hush_planar current;    /* 3 planes: this frame (tone-mapped when asked) in YCoCg */
   int latest;
   int has_history;
 } hush_taa;
@@ -45,6 +44,13 @@ void hush__taa_free(hush_taa *taa);
  * frame's history. */
 void hush__taa_resolve(hush_taa *taa, const hush_reproject_plan *plan, const float *const *color,
                        const hush_taa_params *params, int threads);
+
+/* As hush__taa_resolve, the colour being color * max(albedo, HUSH_ALBEDO_EPS)
+ * per channel (albedo NULL: color), the remodulation of albedo.h fused
+ * into the resolve's first pass. */
+void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
+                                 const float *const *color, const float *const *albedo,
+                                 const hush_taa_params *params, int threads);
 
 static inline const hush_planar *hush__taa_output(const hush_taa *taa) {
   return &taa->history[taa->latest];

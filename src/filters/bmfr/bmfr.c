@@ -531,12 +531,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   st->flatest = cur;
   hush__filter_timing_stage(f, "accumulate_fitted");
 
-  /* ---- remodulate, TAA, export */
+  /* ---- remodulate, TAA, export: with TAA, the remodulation is fused into
+   * its first pass (one read of the fit and the albedo) */
   const hush_planar *result = &st->fhist[cur];
-  if (demod) {
-    hush__remodulate(&st->albedo, result, threads);
-    result = &st->albedo;
-  }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
   if (with_taa) {
@@ -544,8 +541,13 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;
     tp.tonemap = 1;
-    hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
+    hush__taa_resolve_modulated(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
+                                demod ? (const float *const *)st->albedo.plane : NULL, &tp,
+                                threads);
     rgb = *hush__taa_output(&st->taa);
+  } else if (demod) {
+    hush__remodulate(&st->albedo, result, threads);
+    rgb = st->albedo;
   }
   hush__filter_timing_stage(f, "taa");
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
