@@ -19,6 +19,7 @@ typedef struct tap_pair {
   int dx, dy;   /* tap a = (x + dx, y + dy), tap b = (x - dx, y - dy) */
   float fdx, fdy;
   float h;      /* kernel weight, the same for both */
+  svgf_exp2_poly poly; /* 2^f times h (weights.h) */
 } tap_pair;
 
 /* The taps other than the centre, one of each mirrored pair: dy > 0, or
@@ -35,6 +36,7 @@ static int tap_pairs(const svgf_kernel *k, int step, tap_pair *pairs) {
       t->fdx = (float)t->dx;
       t->fdy = (float)t->dy;
       t->h = k->h[r + i] * k->h[r + j];
+      t->poly = svgf_exp2_poly_scaled(t->h);
     }
   return n;
 }
@@ -67,10 +69,13 @@ static inline rows rows_at(const svgf_guide *g, const svgf_padded *in, int y, in
  * base register and keeps the general registers for the 9 tap planes. */
 typedef struct block_acc {
   float sw[BLOCK], s0[BLOCK], s1[BLOCK], s2[BLOCK], sv[BLOCK];
-  float inv_l[BLOCK]; /* 1 / (sigma_l sqrt(g3x3(var_p)) + eps_l) */
+  float inv_l[BLOCK]; /* log2 e / (sigma_l sqrt(g3x3(var_p)) + eps_l) */
   float z[BLOCK], l[BLOCK], n0[BLOCK], n1[BLOCK], n2[BLOCK];
-  float rdd[MAX_PAIRS][BLOCK]; /* 1 / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
+  float rdd[MAX_PAIRS][BLOCK]; /* log2 e / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
 } block_acc;
+
+/* Exponents are in base 2 (weights.h): log2 e joins the reciprocals. */
+#define LOG2E 1.44269504f
 
 /* inv_l for pixels [x0, x0 + n) of row y: the 3x3 Gaussian (1 2 1)/4 x
  * (1 2 1)/4 of the variance, rows clamped, columns by the padding. */
@@ -88,7 +93,8 @@ static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma
       const float hu = 0.25f * up[x - 1] + 0.5f * up[x] + 0.25f * up[x + 1];
       const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
       const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
-      inv_l[x] = 1.0f / (sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + eps[x]);
+      const float d = sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + eps[x];
+      inv_l[x] = LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   } else {
 #pragma omp simd
@@ -96,7 +102,8 @@ static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma
       const float hu = 0.25f * up[x - 1] + 0.5f * up[x] + 0.25f * up[x + 1];
       const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
       const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
-      inv_l[x] = 1.0f / (sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + SVGF_EPS_L);
+      const float d = sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + SVGF_EPS_L;
+      inv_l[x] = LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   }
 }
@@ -123,25 +130,43 @@ static HUSH_ALWAYS_INLINE void block_p_side(const svgf_guide *g, const svgf_padd
     const float fdx = pairs[k].fdx, fdy = pairs[k].fdy;
     float *restrict rdd = acc->rdd[k];
 #pragma omp simd
-    for (int x = 0; x < n; x++)
-      rdd[x] = zon[x] / (sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z);
+    for (int x = 0; x < n; x++) {
+      const float d = sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z;
+      rdd[x] = zon[x] * LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
+    }
   }
 }
 
-/* Adds the tap (x + dx, y + dy) with kernel weight h to the accumulators of
+/* Per level: how the normal weight is raised (weights.h). */
+typedef struct level_consts {
+  float sigma_n_log2e; /* sigma_n log2 e: the normal power through the exp */
+  float dot_floor;     /* 2^(SVGF_T_MIN / sigma_n): the power by squarings */
+} level_consts;
+
+static level_consts level_consts_of(const svgf_normal_power *np) {
+  level_consts lc;
+  lc.sigma_n_log2e = np->sigma_n * LOG2E;
+  lc.dot_floor = np->squarings >= 0 ? exp2f(SVGF_T_MIN / np->sigma_n) : 0.0f;
+  return lc;
+}
+
+/* Adds the tap (x + dx, y + dy) with kernel weight h (in poly) to the accumulators of
  * pixels [x0, x0 + n) of row y; rdd is its pair's depth denominator. */
 static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded *in, int dx,
-                                         int dy, float h, const float *rdd_pair, int y, int x0,
-                                         int n, const int squarings, const int validity,
+                                         int dy, const svgf_exp2_poly *poly,
+                                         const level_consts *lc, const float *rdd_pair, int y,
+                                         int x0, int n, const int squarings, const int validity,
                                          block_acc *acc) {
   const rows q = rows_at(g, in, clampi(y + dy, 0, g->height - 1), x0 + dx);
-  const float sigma_n = g->np.sigma_n, dot_floor = g->np.dot_floor;
+  /* locals: the stores to acc must not make the loop reload them */
+  const svgf_exp2_poly p = *poly;
+  const float sigma_n_log2e = lc->sigma_n_log2e, dot_floor = lc->dot_floor;
   const float *restrict rdd = rdd_pair;
 #pragma omp simd
   for (int x = 0; x < n; x++) {
-    const float e = -fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
+    const float t = -fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
     const float dot = fmaf(acc->n0[x], q.n0[x], fmaf(acc->n1[x], q.n1[x], acc->n2[x] * q.n2[x]));
-    float w = h * svgf_weight(e, dot, squarings, sigma_n, dot_floor);
+    float w = svgf_atrous_weight(t, dot, squarings, sigma_n_log2e, dot_floor, &p);
     if (validity) w *= q.ok[x]; /* a constant: resolved at compile time */
     acc->sw[x] += w;
     acc->s0[x] = fmaf(w, q.c0[x], acc->s0[x]);
@@ -156,9 +181,9 @@ static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded 
  * outside the parallel region for the constant to reach the vector loop. */
 static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_params *lp,
                                          const svgf_padded *in, const svgf_level_out *out,
-                                         const tap_pair *pairs, int npairs, int y,
-                                         const int squarings, const int validity,
-                                         block_acc *acc) {
+                                         const tap_pair *pairs, int npairs,
+                                         const level_consts *lc, int y, const int squarings,
+                                         const int validity, block_acc *acc) {
   const int W = g->width;
   const float hc = lp->kernel->h[lp->kernel->radius];
   const float h0 = hc * hc;
@@ -187,8 +212,10 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
     block_p_side(g, in, pairs, npairs, y, x0, n, acc);
     for (int k = 0; k < npairs; k++) {
       const tap_pair *t = &pairs[k];
-      block_tap(g, in, t->dx, t->dy, t->h, acc->rdd[k], y, x0, n, squarings, validity, acc);
-      block_tap(g, in, -t->dx, -t->dy, t->h, acc->rdd[k], y, x0, n, squarings, validity, acc);
+      block_tap(g, in, t->dx, t->dy, &t->poly, lc, acc->rdd[k], y, x0, n, squarings, validity,
+                acc);
+      block_tap(g, in, -t->dx, -t->dy, &t->poly, lc, acc->rdd[k], y, x0, n, squarings, validity,
+                acc);
     }
     const size_t o = (size_t)y * out->stride + (size_t)x0;
     float *restrict r = out->plane[SVGF_R] + o, *restrict gr = out->plane[SVGF_G] + o,
@@ -235,10 +262,11 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
                    const svgf_level_out *out, int threads) {                                 \
     tap_pair pairs[MAX_PAIRS];                                                                \
     const int npairs = tap_pairs(lp->kernel, lp->step, pairs);                                \
+    const level_consts lc = level_consts_of(&g->np);                                          \
     _Pragma("omp parallel num_threads(threads)") {                                           \
       block_acc acc __attribute__((aligned(64)));                                             \
       _Pragma("omp for schedule(static)") for (int y = 0; y < g->height; y++)                 \
-          level_row(g, lp, in, out, pairs, npairs, y, SQUARINGS, VALIDITY, &acc);             \
+          level_row(g, lp, in, out, pairs, npairs, &lc, y, SQUARINGS, VALIDITY, &acc);             \
     }                                                                                         \
   }
 LEVEL_ROWS(level_rows_pow64, 6, 0)

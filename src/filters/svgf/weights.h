@@ -100,6 +100,96 @@ static HUSH_ALWAYS_INLINE float svgf_log_pos(float d) {
   return e * 0.693147181f + 2.0f * sv * series;
 }
 
+/* 1/x for x in [1e-30, 1e30] (the callers clamp): the bit-level first
+ * guess (relative error <= 12 %) and three Newton steps with fmaf, within
+ * 6e-8 relative of 1/x. vdivps costs 10-16 cycles per vector; this is 7
+ * arithmetic instructions that pipeline (a-trous: 12 divisions per pixel
+ * and level before). */
+static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
+  uint32_t bits;
+  memcpy(&bits, &x, sizeof bits);
+  bits = 0x7EF311C3u - bits;
+  float y;
+  memcpy(&y, &bits, sizeof y);
+  y = fmaf(y, fmaf(-x, y, 1.0f), y);
+  y = fmaf(y, fmaf(-x, y, 1.0f), y);
+  return fmaf(y, fmaf(-x, y, 1.0f), y);
+}
+
+/* The a-trous taps work in base 2: their exponents come pre-multiplied by
+ * log2 e (folded into the per-pixel reciprocal denominators), so no tap
+ * multiplies by it. The exponent of w_z w_l is clamped at SVGF_T_MIN and
+ * the normal power at 2^SVGF_T_MIN (its dot at 2^(SVGF_T_MIN / sigma_n)),
+ * so that a weight w >= h 2^(2 SVGF_T_MIN) and w^2 (the variance) stay
+ * normal floats: subnormals cost x86 a microcode assist each (measured 3x
+ * slower on frames with background). This replaces the compare-and-zero
+ * of SVGF_WEIGHT_FLOOR in the hot loop; the weights it leaves (below
+ * 2^-26 relative to the centre's) shift outputs by under 1e-7 relative. */
+#define SVGF_T_MIN -26.0f
+#define SVGF_T_MIN_ANY -52.0f /* w_n joins the exponent: both clamps at once */
+
+/* Coefficients c0..c5 of the degree-5 minimax polynomial of 2^f on
+ * [-1/2, 1/2] (relative error 7.5e-8, 2.3e-7 in float arithmetic),
+ * pre-multiplied by the kernel weight h of a tap, so that the tap's
+ * weight h 2^t costs no multiply by h. */
+typedef struct svgf_exp2_poly {
+  float c[6];
+} svgf_exp2_poly;
+
+static inline svgf_exp2_poly svgf_exp2_poly_scaled(float h) {
+  static const float c[6] = {1.0000001192092896f, 0.6931469440460205f, 0.24022120237350464f,
+                             0.05550713092088699f, 0.009675540961325169f,
+                             0.0013276472454890609f};
+  svgf_exp2_poly p;
+  for (int k = 0; k < 6; k++) p.c[k] = h * c[k];
+  return p;
+}
+
+/* h 2^t for t in [t_min, 0] (t below is taken as t_min, t_min >= -60):
+ * t = n + f with n = round(t) by the 1.5 * 2^23 trick, the polynomial of
+ * 2^f times h, and n added straight into its exponent bits (h 2^f is in
+ * [2^-9, 2], so the result stays normal). */
+static HUSH_ALWAYS_INLINE float svgf_exp2_h(float t, float t_min, const svgf_exp2_poly *p) {
+  t = t > t_min ? t : t_min; /* a max */
+  const float magic = 12582912.0f; /* 1.5 * 2^23 */
+  const float big = t + magic;
+  const float f = t - (big - magic);
+  float y = fmaf(f, p->c[5], p->c[4]);
+  y = fmaf(f, y, p->c[3]);
+  y = fmaf(f, y, p->c[2]);
+  y = fmaf(f, y, p->c[1]);
+  y = fmaf(f, y, p->c[0]);
+  uint32_t nb, yb;
+  memcpy(&nb, &big, sizeof nb);
+  memcpy(&yb, &y, sizeof yb);
+  yb += nb << 23; /* the low bits of big are n; 0x4B400000 << 23 wraps to 0 */
+  memcpy(&y, &yb, sizeof y);
+  return y;
+}
+
+/* The weight h w_n w_z w_l of one a-trous tap from t_zl = -(|dz| / dd +
+ * |dl| / dl_max) log2 e (<= 0) and the normals' `dot`; SQUARINGS as in
+ * svgf_weight (a literal at every call). sigma_n_log2e = sigma_n log2 e is
+ * used only when squarings < 0. */
+static HUSH_ALWAYS_INLINE float svgf_atrous_weight(float t_zl, float dot, const int squarings,
+                                                   float sigma_n_log2e, float dot_floor,
+                                                   const svgf_exp2_poly *p) {
+  if (squarings < 0)
+    return svgf_exp2_h(fmaf(sigma_n_log2e, svgf_log_pos(dot), t_zl), SVGF_T_MIN_ANY, p);
+  float d = dot > dot_floor ? dot : dot_floor; /* a max */
+  if (squarings > 0) d *= d;
+  if (squarings > 1) d *= d;
+  if (squarings > 2) d *= d;
+  if (squarings > 3) d *= d;
+  if (squarings > 4) d *= d;
+  if (squarings > 5) d *= d;
+  if (squarings > 6) d *= d;
+  if (squarings > 7) d *= d;
+  if (squarings > 8) d *= d;
+  if (squarings > 9) d *= d;
+  return d * svgf_exp2_h(t_zl, SVGF_T_MIN, p);
+}
+
 /* How sigma_n is applied: squarings >= 0 when sigma_n = 2^squarings (then
  * dots are raised to at least dot_floor = e^(-21 / sigma_n) first, so no
  * square goes subnormal; such a dot's power is below the weight floor, and
