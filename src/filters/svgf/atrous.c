@@ -74,9 +74,6 @@ typedef struct block_acc {
   float rdd[MAX_PAIRS][BLOCK]; /* log2 e / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
 } block_acc;
 
-/* Exponents are in base 2 (weights.h): log2 e joins the reciprocals. */
-#define LOG2E 1.44269504f
-
 /* inv_l for pixels [x0, x0 + n) of row y: the 3x3 Gaussian (1 2 1)/4 x
  * (1 2 1)/4 of the variance, rows clamped, columns by the padding. */
 static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma_l,
@@ -94,7 +91,7 @@ static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma
       const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
       const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
       const float d = sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + eps[x];
-      inv_l[x] = LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
+      inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   } else {
 #pragma omp simd
@@ -103,7 +100,7 @@ static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma
       const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
       const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
       const float d = sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + SVGF_EPS_L;
-      inv_l[x] = LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
+      inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   }
 }
@@ -132,41 +129,28 @@ static HUSH_ALWAYS_INLINE void block_p_side(const svgf_guide *g, const svgf_padd
 #pragma omp simd
     for (int x = 0; x < n; x++) {
       const float d = sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z;
-      rdd[x] = zon[x] * LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
+      rdd[x] = zon[x] * SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   }
-}
-
-/* Per level: how the normal weight is raised (weights.h). */
-typedef struct level_consts {
-  float sigma_n_log2e; /* sigma_n log2 e: the normal power through the exp */
-  float dot_floor;     /* 2^(SVGF_T_MIN / sigma_n): the power by squarings */
-} level_consts;
-
-static level_consts level_consts_of(const svgf_normal_power *np) {
-  level_consts lc;
-  lc.sigma_n_log2e = np->sigma_n * LOG2E;
-  lc.dot_floor = np->squarings >= 0 ? exp2f(SVGF_T_MIN / np->sigma_n) : 0.0f;
-  return lc;
 }
 
 /* Adds the tap (x + dx, y + dy) with kernel weight h (in poly) to the accumulators of
  * pixels [x0, x0 + n) of row y; rdd is its pair's depth denominator. */
 static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded *in, int dx,
                                          int dy, const svgf_exp2_poly *poly,
-                                         const level_consts *lc, const float *rdd_pair, int y,
+                                         const float *rdd_pair, int y,
                                          int x0, int n, const int squarings, const int validity,
                                          block_acc *acc) {
   const rows q = rows_at(g, in, clampi(y + dy, 0, g->height - 1), x0 + dx);
   /* locals: the stores to acc must not make the loop reload them */
   const svgf_exp2_poly p = *poly;
-  const float sigma_n_log2e = lc->sigma_n_log2e, dot_floor = lc->dot_floor;
+  const float sigma_n_log2e = g->np.sigma_n_log2e, dot_floor = g->np.dot_floor;
   const float *restrict rdd = rdd_pair;
 #pragma omp simd
   for (int x = 0; x < n; x++) {
     const float t = -fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
     const float dot = fmaf(acc->n0[x], q.n0[x], fmaf(acc->n1[x], q.n1[x], acc->n2[x] * q.n2[x]));
-    float w = svgf_atrous_weight(t, dot, squarings, sigma_n_log2e, dot_floor, &p);
+    float w = svgf_tap_weight(t, dot, squarings, sigma_n_log2e, dot_floor, &p);
     if (validity) w *= q.ok[x]; /* a constant: resolved at compile time */
     acc->sw[x] += w;
     acc->s0[x] = fmaf(w, q.c0[x], acc->s0[x]);
@@ -182,7 +166,7 @@ static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded 
 static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_params *lp,
                                          const svgf_padded *in, const svgf_level_out *out,
                                          const tap_pair *pairs, int npairs,
-                                         const level_consts *lc, int y, const int squarings,
+                                         int y, const int squarings,
                                          const int validity, block_acc *acc) {
   const int W = g->width;
   const float hc = lp->kernel->h[lp->kernel->radius];
@@ -212,9 +196,9 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
     block_p_side(g, in, pairs, npairs, y, x0, n, acc);
     for (int k = 0; k < npairs; k++) {
       const tap_pair *t = &pairs[k];
-      block_tap(g, in, t->dx, t->dy, &t->poly, lc, acc->rdd[k], y, x0, n, squarings, validity,
+      block_tap(g, in, t->dx, t->dy, &t->poly, acc->rdd[k], y, x0, n, squarings, validity,
                 acc);
-      block_tap(g, in, -t->dx, -t->dy, &t->poly, lc, acc->rdd[k], y, x0, n, squarings, validity,
+      block_tap(g, in, -t->dx, -t->dy, &t->poly, acc->rdd[k], y, x0, n, squarings, validity,
                 acc);
     }
     const size_t o = (size_t)y * out->stride + (size_t)x0;
@@ -262,11 +246,10 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
                    const svgf_level_out *out, int threads) {                                 \
     tap_pair pairs[MAX_PAIRS];                                                                \
     const int npairs = tap_pairs(lp->kernel, lp->step, pairs);                                \
-    const level_consts lc = level_consts_of(&g->np);                                          \
     _Pragma("omp parallel num_threads(threads)") {                                           \
       block_acc acc __attribute__((aligned(64)));                                             \
       _Pragma("omp for schedule(static)") for (int y = 0; y < g->height; y++)                 \
-          level_row(g, lp, in, out, pairs, npairs, &lc, y, SQUARINGS, VALIDITY, &acc);             \
+          level_row(g, lp, in, out, pairs, npairs, y, SQUARINGS, VALIDITY, &acc);             \
     }                                                                                         \
   }
 LEVEL_ROWS(level_rows_pow64, 6, 0)

@@ -8,17 +8,20 @@
  *   w_l = exp(-|l_p - l_q| / (sigma_l sqrt(g3x3(var_p)) + eps_l))
  *
  * (Dundr 2018 §4.1.4.2-4.1.4.5; Schied et al. 2017 in papers/NOTES.md.)
- * One exp per tap: the depth and luminance exponents are summed; w_n is a
- * power of two by repeated squaring (sigma_n = 128: 7 multiplies) or, for
- * any other sigma_n, joins the exp as sigma_n ln(dot).
+ * One exp per tap, in base 2: the depth and luminance exponents are summed,
+ * log2 e is folded into their per-pixel reciprocal denominators (computed
+ * by Newton steps, not divisions), the kernel weight h into the polynomial
+ * of 2^f; w_n is a power of two by repeated squaring (sigma_n = 128: 7
+ * multiplies) or, for any other sigma_n, joins the exponent as
+ * sigma_n log2(dot).
  *
- * Every product w = w_n w_z w_l below e^-20 is made exactly 0: such a tap
- * weighs under 2e-9 of the centre, and its tiny weights (squared for the
- * variance) would otherwise produce subnormal floats, which cost x86 a
- * microcode assist each (measured: 3x slower a-trous on frames with
- * background). Branch-free so loops over them vectorise without
- * -ffast-math; fmaf is exact per IEEE, so results do not depend on the
- * vector width.
+ * Tiny weights are clamped, not zeroed: the exponent of w_z w_l at
+ * SVGF_T_MIN and w_n at 2^SVGF_T_MIN, so every w >= h 2^-52 and w^2 (the
+ * variance) stay normal floats; subnormals cost x86 a microcode assist each
+ * (measured: 3x slower a-trous on frames with background). Such a tap
+ * weighs under 2^-26 of the centre. Branch-free so loops over them
+ * vectorise without -ffast-math; fmaf is exact per IEEE, so results do not
+ * depend on the vector width.
  */
 #ifndef HUSH_FILTERS_SVGF_WEIGHTS_H
 #define HUSH_FILTERS_SVGF_WEIGHTS_H
@@ -33,8 +36,6 @@
  * facing plane (zero gradient) or zero variance must not divide by 0. */
 #define SVGF_EPS_Z 1e-3f
 #define SVGF_EPS_L 1e-4f
-/* Weights at or below e^-20 are 0 (see above). */
-#define SVGF_WEIGHT_FLOOR 2.0611536e-9f /* e^-20 */
 
 /* sqrt(x) for x >= 0 in a loop that must vectorise (with the default
  * -fmath-errno gcc keeps a branch to the library sqrtf for errno, which
@@ -53,32 +54,6 @@ static HUSH_ALWAYS_INLINE float svgf_sqrt_pos(float x) {
   y = y * fmaf(-hx * y, y, 1.5f);
   const float s = x * y;
   return fmaf(0.5f * y, fmaf(-s, s, x), s);
-}
-
-/* e^x for x <= 0 (x above 0 is not needed); x below -21 is taken as -21
- * (the callers zero every weight below e^-20 anyway): 2^n * 2^f with
- * n = round(x log2 e) by the 1.5 * 2^23 trick (its low mantissa bits are n
- * as an integer), |f| <= 1/2, and a degree-6 Taylor polynomial of e^(f ln 2)
- * (relative error about 1e-7). */
-static HUSH_ALWAYS_INLINE float svgf_exp_neg(float x) {
-  x = x > -21.0f ? x : -21.0f; /* a max: 1 instruction */
-  const float t = x * 1.44269504f;
-  const float magic = 12582912.0f; /* 1.5 * 2^23 */
-  const float big = t + magic;     /* rounds t to an integer */
-  const float n = big - magic;
-  const float f = (t - n) * 0.693147181f; /* 2^(t-n) = e^f */
-  float p = fmaf(f, 1.0f / 720, 1.0f / 120);
-  p = fmaf(f, p, 1.0f / 24);
-  p = fmaf(f, p, 1.0f / 6);
-  p = fmaf(f, p, 0.5f);
-  p = fmaf(f, p, 1.0f);
-  p = fmaf(f, p, 1.0f);
-  int32_t bits;
-  memcpy(&bits, &big, sizeof bits);
-  bits = (bits - 0x4B400000 + 127) << 23; /* 2^n */
-  float scale;
-  memcpy(&scale, &bits, sizeof scale);
-  return p * scale;
 }
 
 /* ln(d) for d > 0 (d <= 0 is taken as 1e-30): d = m 2^e with m in
@@ -116,15 +91,9 @@ static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
   return fmaf(y, fmaf(-x, y, 1.0f), y);
 }
 
-/* The a-trous taps work in base 2: their exponents come pre-multiplied by
- * log2 e (folded into the per-pixel reciprocal denominators), so no tap
- * multiplies by it. The exponent of w_z w_l is clamped at SVGF_T_MIN and
- * the normal power at 2^SVGF_T_MIN (its dot at 2^(SVGF_T_MIN / sigma_n)),
- * so that a weight w >= h 2^(2 SVGF_T_MIN) and w^2 (the variance) stay
- * normal floats: subnormals cost x86 a microcode assist each (measured 3x
- * slower on frames with background). This replaces the compare-and-zero
- * of SVGF_WEIGHT_FLOOR in the hot loop; the weights it leaves (below
- * 2^-26 relative to the centre's) shift outputs by under 1e-7 relative. */
+/* Exponents are in base 2 (see the top): log2 e joins the reciprocals. */
+#define SVGF_LOG2E 1.44269504f
+/* The clamps that keep weights and their squares normal (see the top). */
 #define SVGF_T_MIN -26.0f
 #define SVGF_T_MIN_ANY -52.0f /* w_n joins the exponent: both clamps at once */
 
@@ -167,16 +136,18 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_h(float t, float t_min, const svgf_exp
   return y;
 }
 
-/* The weight h w_n w_z w_l of one a-trous tap from t_zl = -(|dz| / dd +
- * |dl| / dl_max) log2 e (<= 0) and the normals' `dot`; SQUARINGS as in
- * svgf_weight (a literal at every call). sigma_n_log2e = sigma_n log2 e is
- * used only when squarings < 0. */
-static HUSH_ALWAYS_INLINE float svgf_atrous_weight(float t_zl, float dot, const int squarings,
-                                                   float sigma_n_log2e, float dot_floor,
-                                                   const svgf_exp2_poly *p) {
+/* The weight h w_n w_z w_l of one tap from t_zl = -(|dz| / dd + |dl| /
+ * dl_max) log2 e (<= 0) and the normals' `dot`. SQUARINGS is a
+ * compile-time constant at every call (the caller dispatches once per
+ * level), so this is straight-line code; sigma_n_log2e and dot_floor are
+ * those of svgf_normal_power, read once per loop by the caller. */
+static HUSH_ALWAYS_INLINE float svgf_tap_weight(float t_zl, float dot, const int squarings,
+                                                float sigma_n_log2e, float dot_floor,
+                                                const svgf_exp2_poly *p) {
   if (squarings < 0)
     return svgf_exp2_h(fmaf(sigma_n_log2e, svgf_log_pos(dot), t_zl), SVGF_T_MIN_ANY, p);
   float d = dot > dot_floor ? dot : dot_floor; /* a max */
+  /* spelled out: gcc does not vectorise a loop around an inner loop */
   if (squarings > 0) d *= d;
   if (squarings > 1) d *= d;
   if (squarings > 2) d *= d;
@@ -191,49 +162,22 @@ static HUSH_ALWAYS_INLINE float svgf_atrous_weight(float t_zl, float dot, const 
 }
 
 /* How sigma_n is applied: squarings >= 0 when sigma_n = 2^squarings (then
- * dots are raised to at least dot_floor = e^(-21 / sigma_n) first, so no
- * square goes subnormal; such a dot's power is below the weight floor, and
- * the weight becomes 0 as it should), else -1: through the exp. */
+ * dots are raised to at least dot_floor = 2^(SVGF_T_MIN / sigma_n) first,
+ * so no square goes subnormal), else -1: through the exponent, as
+ * sigma_n_log2e log(dot). */
 typedef struct svgf_normal_power {
   int squarings;
-  float sigma_n, dot_floor;
+  float sigma_n, sigma_n_log2e, dot_floor;
 } svgf_normal_power;
 
 static inline svgf_normal_power svgf_normal_power_of(float sigma_n) {
-  svgf_normal_power np = {-1, sigma_n, 0.0f};
-  for (int k = 0; k <= 10; k++) /* as many squarings as svgf_weight spells out */
+  svgf_normal_power np = {-1, sigma_n, sigma_n * SVGF_LOG2E, 0.0f};
+  for (int k = 0; k <= 10; k++) /* as many squarings as svgf_tap_weight spells out */
     if (sigma_n == (float)(1 << k)) {
       np.squarings = k;
-      np.dot_floor = expf(-21.0f / sigma_n);
+      np.dot_floor = exp2f(SVGF_T_MIN / sigma_n);
     }
   return np;
-}
-
-/* The weight of one tap: exponent e_zl = -(|dz| / dd + |dl| / dl_max)
- * (passed pre-summed, <= 0) times the normal weight of `dot`. SQUARINGS is
- * a compile-time constant at every call (the caller dispatches once per
- * level), so this is straight-line code. */
-static HUSH_ALWAYS_INLINE float svgf_weight(float e_zl, float dot, const int squarings,
-                                            float sigma_n, float dot_floor) {
-  float w;
-  if (squarings >= 0) {
-    float d = dot > dot_floor ? dot : dot_floor; /* a max */
-    /* spelled out: gcc does not vectorise a loop around an inner loop */
-    if (squarings > 0) d *= d;
-    if (squarings > 1) d *= d;
-    if (squarings > 2) d *= d;
-    if (squarings > 3) d *= d;
-    if (squarings > 4) d *= d;
-    if (squarings > 5) d *= d;
-    if (squarings > 6) d *= d;
-    if (squarings > 7) d *= d;
-    if (squarings > 8) d *= d;
-    if (squarings > 9) d *= d;
-    w = d * svgf_exp_neg(e_zl);
-  } else {
-    w = svgf_exp_neg(fmaf(sigma_n, svgf_log_pos(dot), e_zl));
-  }
-  return hush__select_bits(w > SVGF_WEIGHT_FLOOR, w, 0.0f);
 }
 
 #endif
