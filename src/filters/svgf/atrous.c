@@ -148,9 +148,9 @@ static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded 
   const float *restrict rdd = rdd_pair;
 #pragma omp simd
   for (int x = 0; x < n; x++) {
-    const float t = -fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
+    const float sz = fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
     const float dot = fmaf(acc->n0[x], q.n0[x], fmaf(acc->n1[x], q.n1[x], acc->n2[x] * q.n2[x]));
-    float w = svgf_tap_weight(t, dot, squarings, sigma_n_log2e, dot_floor, &p);
+    float w = svgf_tap_weight(sz, dot, squarings, sigma_n_log2e, dot_floor, &p);
     if (validity) w *= q.ok[x]; /* a constant: resolved at compile time */
     acc->sw[x] += w;
     acc->s0[x] = fmaf(w, q.c0[x], acc->s0[x]);

@@ -49,9 +49,9 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
     const float da = fmaf(n0p[x], n0a[x], fmaf(n1p[x], n1a[x], n2p[x] * n2a[x]));
     const float db = fmaf(n0p[x], n0b[x], fmaf(n1p[x], n1b[x], n2p[x] * n2b[x]));
     const float wa =
-        svgf_tap_weight(-fabsf(zp[x] - za[x]) * rdd, da, squarings, sigma_n_log2e, dot_floor, &p);
+        svgf_tap_weight(fabsf(zp[x] - za[x]) * rdd, da, squarings, sigma_n_log2e, dot_floor, &p);
     const float wb =
-        svgf_tap_weight(-fabsf(zp[x] - zb[x]) * rdd, db, squarings, sigma_n_log2e, dot_floor, &p);
+        svgf_tap_weight(fabsf(zp[x] - zb[x]) * rdd, db, squarings, sigma_n_log2e, dot_floor, &p);
     sw[x] += wa + wb;
     s1[x] = fmaf(wa, m1a[x], fmaf(wb, m1b[x], s1[x]));
     s2[x] = fmaf(wa, m2a[x], fmaf(wb, m2b[x], s2[x]));

@@ -16,7 +16,7 @@
  * sigma_n log2(dot).
  *
  * Tiny weights are clamped, not zeroed: the exponent of w_z w_l at
- * SVGF_T_MIN and w_n at 2^SVGF_T_MIN, so every w >= h 2^-52 and w^2 (the
+ * -SVGF_S_MAX and w_n at 2^-SVGF_S_MAX, so every w >= h 2^-52 and w^2 (the
  * variance) stay normal floats; subnormals cost x86 a microcode assist each
  * (measured: 3x slower a-trous on frames with background). Such a tap
  * weighs under 2^-26 of the centre. Branch-free so loops over them
@@ -94,40 +94,43 @@ static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
 /* Exponents are in base 2 (see the top): log2 e joins the reciprocals. */
 #define SVGF_LOG2E 1.44269504f
 /* The clamps that keep weights and their squares normal (see the top). */
-#define SVGF_T_MIN -26.0f
-#define SVGF_T_MIN_ANY -52.0f /* w_n joins the exponent: both clamps at once */
+#define SVGF_S_MAX 26.0f     /* the largest exponent magnitude s of 2^-s */
+#define SVGF_S_MAX_ANY 52.0f /* w_n joins the exponent: both clamps at once */
 
 /* Coefficients c0..c5 of the degree-5 minimax polynomial of 2^f on
- * [-1/2, 1/2] (relative error 7.5e-8, 2.3e-7 in float arithmetic),
- * pre-multiplied by the kernel weight h of a tap, so that the tap's
- * weight h 2^t costs no multiply by h. */
+ * [-1/2, 1/2] (relative error 7.5e-8, 2.3e-7 in float arithmetic), as a
+ * polynomial of g = -f (odd coefficients negated), pre-multiplied by the
+ * kernel weight h of a tap, so that the tap's weight h 2^-s costs no
+ * negation and no multiply by h. */
 typedef struct svgf_exp2_poly {
   float c[6];
 } svgf_exp2_poly;
 
 static inline svgf_exp2_poly svgf_exp2_poly_scaled(float h) {
-  static const float c[6] = {1.0000001192092896f, 0.6931469440460205f, 0.24022120237350464f,
-                             0.05550713092088699f, 0.009675540961325169f,
-                             0.0013276472454890609f};
+  static const float c[6] = {1.0000001192092896f, -0.6931469440460205f, 0.24022120237350464f,
+                             -0.05550713092088699f, 0.009675540961325169f,
+                             -0.0013276472454890609f};
   svgf_exp2_poly p;
   for (int k = 0; k < 6; k++) p.c[k] = h * c[k];
   return p;
 }
 
-/* h 2^t for t in [t_min, 0] (t below is taken as t_min, t_min >= -60):
- * t = n + f with n = round(t) by the 1.5 * 2^23 trick, the polynomial of
- * 2^f times h, and n added straight into its exponent bits (h 2^f is in
- * [2^-9, 2], so the result stays normal). */
-static HUSH_ALWAYS_INLINE float svgf_exp2_h(float t, float t_min, const svgf_exp2_poly *p) {
-  t = t > t_min ? t : t_min; /* a max */
+/* h 2^-s for s in [0, s_max] (s above is taken as s_max, s_max <= 60):
+ * -s = n + f with n = round(-s) by the 1.5 * 2^23 trick, the polynomial
+ * of 2^f times h in g = -f = s + n, and n added straight into its exponent
+ * bits (h 2^f is in [2^-9, 2], so the result stays normal). The clamp is a
+ * min of the non-negative s (one vminps; a max of -s made gcc mask the
+ * following operations instead). */
+static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf_exp2_poly *p) {
+  s = s < s_max ? s : s_max;       /* a min */
   const float magic = 12582912.0f; /* 1.5 * 2^23 */
-  const float big = t + magic;
-  const float f = t - (big - magic);
-  float y = fmaf(f, p->c[5], p->c[4]);
-  y = fmaf(f, y, p->c[3]);
-  y = fmaf(f, y, p->c[2]);
-  y = fmaf(f, y, p->c[1]);
-  y = fmaf(f, y, p->c[0]);
+  const float big = magic - s;     /* rounds -s to an integer n */
+  const float g = s + (big - magic);
+  float y = fmaf(g, p->c[5], p->c[4]);
+  y = fmaf(g, y, p->c[3]);
+  y = fmaf(g, y, p->c[2]);
+  y = fmaf(g, y, p->c[1]);
+  y = fmaf(g, y, p->c[0]);
   uint32_t nb, yb;
   memcpy(&nb, &big, sizeof nb);
   memcpy(&yb, &y, sizeof yb);
@@ -136,16 +139,16 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_h(float t, float t_min, const svgf_exp
   return y;
 }
 
-/* The weight h w_n w_z w_l of one tap from t_zl = -(|dz| / dd + |dl| /
- * dl_max) log2 e (<= 0) and the normals' `dot`. SQUARINGS is a
+/* The weight h w_n w_z w_l of one tap from s_zl = (|dz| / dd + |dl| /
+ * dl_max) log2 e (>= 0) and the normals' `dot`. SQUARINGS is a
  * compile-time constant at every call (the caller dispatches once per
  * level), so this is straight-line code; sigma_n_log2e and dot_floor are
  * those of svgf_normal_power, read once per loop by the caller. */
-static HUSH_ALWAYS_INLINE float svgf_tap_weight(float t_zl, float dot, const int squarings,
+static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int squarings,
                                                 float sigma_n_log2e, float dot_floor,
                                                 const svgf_exp2_poly *p) {
   if (squarings < 0)
-    return svgf_exp2_h(fmaf(sigma_n_log2e, svgf_log_pos(dot), t_zl), SVGF_T_MIN_ANY, p);
+    return svgf_exp2_neg_h(fmaf(-sigma_n_log2e, svgf_log_pos(dot), s_zl), SVGF_S_MAX_ANY, p);
   float d = dot > dot_floor ? dot : dot_floor; /* a max */
   /* spelled out: gcc does not vectorise a loop around an inner loop */
   if (squarings > 0) d *= d;
@@ -158,11 +161,11 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float t_zl, float dot, const int
   if (squarings > 7) d *= d;
   if (squarings > 8) d *= d;
   if (squarings > 9) d *= d;
-  return d * svgf_exp2_h(t_zl, SVGF_T_MIN, p);
+  return d * svgf_exp2_neg_h(s_zl, SVGF_S_MAX, p);
 }
 
 /* How sigma_n is applied: squarings >= 0 when sigma_n = 2^squarings (then
- * dots are raised to at least dot_floor = 2^(SVGF_T_MIN / sigma_n) first,
+ * dots are raised to at least dot_floor = 2^(-SVGF_S_MAX / sigma_n) first,
  * so no square goes subnormal), else -1: through the exponent, as
  * sigma_n_log2e log(dot). */
 typedef struct svgf_normal_power {
@@ -175,7 +178,7 @@ static inline svgf_normal_power svgf_normal_power_of(float sigma_n) {
   for (int k = 0; k <= 10; k++) /* as many squarings as svgf_tap_weight spells out */
     if (sigma_n == (float)(1 << k)) {
       np.squarings = k;
-      np.dot_floor = exp2f(SVGF_T_MIN / sigma_n);
+      np.dot_floor = exp2f(-SVGF_S_MAX / sigma_n);
     }
   return np;
 }
