@@ -738,7 +738,8 @@ static void test_taa_smooths(hush_device dev) {
 
 /* The vectorisable math of the a-trous taps (filters/svgf/weights.h)
  * against libm in double: the Newton reciprocal, h 2^-s with its clamp,
- * and the whole tap weight, whose square must never be subnormal. */
+ * and the whole tap weight: exactly 0 at or below h e^-20, else accurate,
+ * and never with a subnormal square. */
 static void test_weight_math(void) {
   double worst = 0.0;
   for (int i = 0; i <= 20000; i++) { /* 1e-30 .. 1e30, log-spaced */
@@ -781,14 +782,14 @@ static void test_weight_math(void) {
         const float dot = -1.0f + 2.0f * (float)i / 400.0f, s = 0.4f * (float)j;
         const float w = k == 0 ? svgf_tap_weight(s, dot, 7, np.sigma_n_log2e, np.dot_floor, &p)
                                : svgf_tap_weight(s, dot, -1, np.sigma_n_log2e, np.dot_floor, &p);
-        CHECK(isfinite(w) && w > 0.0f && w <= h * 1.0001f);
-        smallest_sq = w * w < smallest_sq ? w * w : smallest_sq;
+        CHECK(isfinite(w) && w >= 0.0f && w <= h * 1.0001f);
+        if (w > 0.0f) smallest_sq = w * w < smallest_sq ? w * w : smallest_sq;
         const double ref = h * pow(dot > 0.0f ? dot : 0.0, sigmas[k]) * exp2(-(double)s);
-        if (ref > h * exp2(-20.0)) { /* above the clamps */
+        if (ref > h * exp(-19.99)) { /* above the floor */
           const double e = fabs(w / ref - 1.0);
           worst = e > worst ? e : worst;
-        } else {
-          CHECK(w <= h * exp2(-19.0)); /* negligible, not 0 */
+        } else if (ref < h * exp(-20.01)) {
+          CHECK(w == 0.0f); /* below: exactly 0 */
         }
       }
     /* 7 squarings double the float rounding of the dot's power each time:

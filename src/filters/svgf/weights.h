@@ -15,12 +15,16 @@
  * multiplies) or, for any other sigma_n, joins the exponent as
  * sigma_n log2(dot).
  *
- * Tiny weights are clamped, not zeroed: the exponent of w_z w_l at
- * -SVGF_S_MAX and w_n at 2^-SVGF_S_MAX, so every w >= h 2^-52 and w^2 (the
- * variance) stay normal floats; subnormals cost x86 a microcode assist each
- * (measured: 3x slower a-trous on frames with background). Such a tap
- * weighs under 2^-26 of the centre. Branch-free so loops over them
- * vectorise without -ffast-math; fmaf is exact per IEEE, so results do not
+ * Every weight w = w_n w_z w_l at or below e^-20 is made exactly 0 (one
+ * compare and a zero-masked operation): such a tap weighs under 2e-9 of
+ * the centre, yet with a 1-spp firefly of 1e5 (or a demodulated one) next
+ * to it that is still visible, and its tiny weights (squared for the
+ * variance) would produce subnormal floats, which cost x86 a microcode
+ * assist each (measured: 3x slower a-trous on frames with background). The
+ * exponent is clamped at SVGF_S_MAX and the dot at 2^(-SVGF_S_MAX /
+ * sigma_n) so no intermediate goes subnormal either; a clamped weight is
+ * below the floor, hence 0. Branch-free so loops over them vectorise
+ * without -ffast-math; fmaf is exact per IEEE, so results do not
  * depend on the vector width.
  */
 #ifndef HUSH_FILTERS_SVGF_WEIGHTS_H
@@ -93,17 +97,19 @@ static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
 
 /* Exponents are in base 2 (see the top): log2 e joins the reciprocals. */
 #define SVGF_LOG2E 1.44269504f
-/* The clamps that keep weights and their squares normal (see the top). */
-#define SVGF_S_MAX 26.0f     /* the largest exponent magnitude s of 2^-s */
-#define SVGF_S_MAX_ANY 52.0f /* w_n joins the exponent: both clamps at once */
+/* Weights at or below e^-20 are 0 (see the top). */
+#define SVGF_WEIGHT_FLOOR 2.0611536e-9f /* e^-20 */
+/* The clamp of the exponent magnitude s of 2^-s: 2^-29 is below the floor. */
+#define SVGF_S_MAX 29.0f
 
 /* Coefficients c0..c5 of the degree-5 minimax polynomial of 2^f on
  * [-1/2, 1/2] (relative error 7.5e-8, 2.3e-7 in float arithmetic), as a
  * polynomial of g = -f (odd coefficients negated), pre-multiplied by the
  * kernel weight h of a tap, so that the tap's weight h 2^-s costs no
- * negation and no multiply by h. */
+ * negation and no multiply by h; and the weight floor times h. */
 typedef struct svgf_exp2_poly {
   float c[6];
+  float floor; /* h SVGF_WEIGHT_FLOOR */
 } svgf_exp2_poly;
 
 static inline svgf_exp2_poly svgf_exp2_poly_scaled(float h) {
@@ -112,15 +118,15 @@ static inline svgf_exp2_poly svgf_exp2_poly_scaled(float h) {
                              -0.0013276472454890609f};
   svgf_exp2_poly p;
   for (int k = 0; k < 6; k++) p.c[k] = h * c[k];
+  p.floor = h * SVGF_WEIGHT_FLOOR;
   return p;
 }
 
 /* h 2^-s for s in [0, s_max] (s above is taken as s_max, s_max <= 60):
  * -s = n + f with n = round(-s) by the 1.5 * 2^23 trick, the polynomial
  * of 2^f times h in g = -f = s + n, and n added straight into its exponent
- * bits (h 2^f is in [2^-9, 2], so the result stays normal). The clamp is a
- * min of the non-negative s (one vminps; a max of -s made gcc mask the
- * following operations instead). */
+ * bits (h 2^f is in [2^-9, 2], so the result stays normal). NaN is taken
+ * as s_max. */
 static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf_exp2_poly *p) {
   s = s < s_max ? s : s_max;       /* a min */
   const float magic = 12582912.0f; /* 1.5 * 2^23 */
@@ -147,8 +153,11 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf
 static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int squarings,
                                                 float sigma_n_log2e, float dot_floor,
                                                 const svgf_exp2_poly *p) {
-  if (squarings < 0)
-    return svgf_exp2_neg_h(fmaf(-sigma_n_log2e, svgf_log_pos(dot), s_zl), SVGF_S_MAX_ANY, p);
+  float w;
+  if (squarings < 0) {
+    w = svgf_exp2_neg_h(fmaf(-sigma_n_log2e, svgf_log_pos(dot), s_zl), SVGF_S_MAX, p);
+    return w > p->floor ? w : 0.0f;
+  }
   float d = dot > dot_floor ? dot : dot_floor; /* a max */
   /* spelled out: gcc does not vectorise a loop around an inner loop */
   if (squarings > 0) d *= d;
@@ -161,7 +170,8 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
   if (squarings > 7) d *= d;
   if (squarings > 8) d *= d;
   if (squarings > 9) d *= d;
-  return d * svgf_exp2_neg_h(s_zl, SVGF_S_MAX, p);
+  w = d * svgf_exp2_neg_h(s_zl, SVGF_S_MAX, p);
+  return w > p->floor ? w : 0.0f;
 }
 
 /* How sigma_n is applied: squarings >= 0 when sigma_n = 2^squarings (then
