@@ -71,6 +71,7 @@ typedef struct block_acc {
   float sw[BLOCK], s0[BLOCK], s1[BLOCK], s2[BLOCK], sv[BLOCK];
   float inv_l[BLOCK]; /* log2 e / (sigma_l sqrt(g3x3(var_p)) + eps_l) */
   float z[BLOCK], l[BLOCK], n0[BLOCK], n1[BLOCK], n2[BLOCK];
+  float sgx[BLOCK], sgy[BLOCK], zl[BLOCK]; /* sigma_z grad z (clamped), zon log2 e */
   float rdd[MAX_PAIRS][BLOCK]; /* log2 e / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
 } block_acc;
 
@@ -123,14 +124,25 @@ static HUSH_ALWAYS_INLINE void block_p_side(const svgf_guide *g, const svgf_padd
   const size_t pi = (size_t)y * g->width + x0;
   const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
   const float sigma_z = g->sigma_z;
+  /* once per pixel what every pair needs: the gradient within +-1e20 (NaN
+   * taken as 1e20), so that a denominator, at most 1e20 times the largest
+   * offset, is in the range of svgf_rcp_pos without a clamp per pair */
+  float *restrict sgx = acc->sgx, *restrict sgy = acc->sgy, *restrict zl = acc->zl;
+#pragma omp simd
+  for (int x = 0; x < n; x++) {
+    const float ax = sigma_z * gx[x], ay = sigma_z * gy[x];
+    const float cx = ax < 1e20f ? ax : 1e20f, cy = ay < 1e20f ? ay : 1e20f;
+    sgx[x] = cx > -1e20f ? cx : -1e20f;
+    sgy[x] = cy > -1e20f ? cy : -1e20f;
+    zl[x] = zon[x] * SVGF_LOG2E;
+  }
   for (int k = 0; k < npairs; k++) {
     const float fdx = pairs[k].fdx, fdy = pairs[k].fdy;
     float *restrict rdd = acc->rdd[k];
+    /* fmaf spelled out: ISO C mode does not contract a * b + c */
 #pragma omp simd
-    for (int x = 0; x < n; x++) {
-      const float d = sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z;
-      rdd[x] = zon[x] * SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
-    }
+    for (int x = 0; x < n; x++)
+      rdd[x] = zl[x] * svgf_rcp_pos(fabsf(fmaf(sgx[x], fdx, sgy[x] * fdy)) + SVGF_EPS_Z);
   }
 }
 

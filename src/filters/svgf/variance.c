@@ -44,7 +44,7 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
 #pragma omp simd
   for (int x = 0; x < n; x++) {
     /* the mirrored taps see the same |grad z . (q - p)| */
-    const float dd = sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z;
+    const float dd = fmaf(sigma_z, fabsf(fmaf(gx[x], fdx, gy[x] * fdy)), SVGF_EPS_Z);
     const float rdd = zon[x] * SVGF_LOG2E * svgf_rcp_pos(dd < 1e30f ? dd : 1e30f);
     const float da = fmaf(n0p[x], n0a[x], fmaf(n1p[x], n1a[x], n2p[x] * n2a[x]));
     const float db = fmaf(n0p[x], n0b[x], fmaf(n1p[x], n1b[x], n2p[x] * n2b[x]));
