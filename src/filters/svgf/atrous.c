@@ -76,7 +76,8 @@ typedef struct block_acc {
 } block_acc;
 
 /* inv_l for pixels [x0, x0 + n) of row y: the 3x3 Gaussian (1 2 1)/4 x
- * (1 2 1)/4 of the variance, rows clamped, columns by the padding. */
+ * (1 2 1)/4 of the variance, rows clamped, columns by the padding (fmaf
+ * spelled out: ISO C does not contract a * b + c). */
 static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma_l,
                         const float *eps_l, block_acc *acc) {
   const int H = in->height;
@@ -88,19 +89,21 @@ static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma
     const float *restrict eps = eps_l + (size_t)y * in->width + x0;
 #pragma omp simd
     for (int x = 0; x < n; x++) {
-      const float hu = 0.25f * up[x - 1] + 0.5f * up[x] + 0.25f * up[x + 1];
-      const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
-      const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
-      const float d = sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + eps[x];
+      const float hu = fmaf(0.5f, up[x], 0.25f * (up[x - 1] + up[x + 1]));
+      const float hm = fmaf(0.5f, mid[x], 0.25f * (mid[x - 1] + mid[x + 1]));
+      const float hd = fmaf(0.5f, dn[x], 0.25f * (dn[x - 1] + dn[x + 1]));
+      const float v = fmaf(0.5f, hm, 0.25f * (hu + hd));
+      const float d = fmaf(sigma_l, svgf_sqrt_pos(v), eps[x]);
       inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   } else {
 #pragma omp simd
     for (int x = 0; x < n; x++) {
-      const float hu = 0.25f * up[x - 1] + 0.5f * up[x] + 0.25f * up[x + 1];
-      const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
-      const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
-      const float d = sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + SVGF_EPS_L;
+      const float hu = fmaf(0.5f, up[x], 0.25f * (up[x - 1] + up[x + 1]));
+      const float hm = fmaf(0.5f, mid[x], 0.25f * (mid[x - 1] + mid[x + 1]));
+      const float hd = fmaf(0.5f, dn[x], 0.25f * (dn[x - 1] + dn[x + 1]));
+      const float v = fmaf(0.5f, hm, 0.25f * (hu + hd));
+      const float d = fmaf(sigma_l, svgf_sqrt_pos(v), SVGF_EPS_L);
       inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   }
