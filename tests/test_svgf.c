@@ -9,6 +9,9 @@
 #include "check.h"
 #include "core/half.h"
 #include "core/hmath.h"
+#include "filters/svgf/weights.h"
+
+#include <float.h>
 
 #include <math.h>
 #include <stdint.h>
@@ -733,9 +736,74 @@ static void test_taa_smooths(hush_device dev) {
   hush_filter_release(f);
 }
 
+/* The vectorisable math of the a-trous taps (filters/svgf/weights.h)
+ * against libm in double: the Newton reciprocal, h 2^-s with its clamp,
+ * and the whole tap weight: exactly 0 at or below h e^-20, else accurate,
+ * and never with a subnormal square. */
+static void test_weight_math(void) {
+  double worst = 0.0;
+  for (int i = 0; i <= 20000; i++) { /* 1e-30 .. 1e30, log-spaced */
+    const float x = (float)pow(10.0, -30.0 + 60.0 * i / 20000.0);
+    const double e = fabs((double)svgf_rcp_pos(x) * x - 1.0);
+    worst = e > worst ? e : worst;
+  }
+  CHECK_MSG(worst < 2e-7, "rcp: worst relative error %g", worst);
+
+  const float hs[3] = {1.0f, 0.375f * 0.375f, 1.0f / 256};
+  for (int k = 0; k < 3; k++) {
+    const svgf_exp2_poly p = svgf_exp2_poly_scaled(hs[k]);
+    worst = 0.0;
+    for (int i = 0; i <= 26000; i++) {
+      const float si = (float)i * (SVGF_S_MAX / 26000.0f);
+      const float s = si < SVGF_S_MAX ? si : SVGF_S_MAX; /* no rounding past the clamp */
+      const double ref = hs[k] * exp2(-(double)s);
+      const double e = fabs(svgf_exp2_neg_h(s, SVGF_S_MAX, &p) / ref - 1.0);
+      worst = e > worst ? e : worst;
+    }
+    CHECK_MSG(worst < 1e-6, "exp2: worst relative error %g (h %g)", worst, hs[k]);
+    /* beyond the clamp, and NaN, give the clamp's value */
+    const float at_max = svgf_exp2_neg_h(SVGF_S_MAX, SVGF_S_MAX, &p);
+    CHECK(svgf_exp2_neg_h(1e30f, SVGF_S_MAX, &p) == at_max);
+    CHECK(svgf_exp2_neg_h(NAN, SVGF_S_MAX, &p) == at_max);
+    CHECK(svgf_exp2_neg_h(INFINITY, SVGF_S_MAX, &p) == at_max);
+  }
+
+  /* the tap weight: h dot^sigma_n 2^-s for both ways of raising the dot */
+  const float sigmas[2] = {128.0f, 100.0f};
+  for (int k = 0; k < 2; k++) {
+    const svgf_normal_power np = svgf_normal_power_of(sigmas[k]);
+    CHECK(np.squarings == (k == 0 ? 7 : -1));
+    const float h = 1.0f / 16;
+    const svgf_exp2_poly p = svgf_exp2_poly_scaled(h);
+    worst = 0.0;
+    float smallest_sq = FLT_MAX;
+    for (int i = 0; i <= 400; i++)
+      for (int j = 0; j <= 100; j++) {
+        const float dot = -1.0f + 2.0f * (float)i / 400.0f, s = 0.4f * (float)j;
+        const float w = k == 0 ? svgf_tap_weight(s, dot, 7, np.sigma_n_log2e, np.dot_floor, &p)
+                               : svgf_tap_weight(s, dot, -1, np.sigma_n_log2e, np.dot_floor, &p);
+        CHECK(isfinite(w) && w >= 0.0f && w <= h * 1.0001f);
+        if (w > 0.0f) smallest_sq = w * w < smallest_sq ? w * w : smallest_sq;
+        const double ref = h * pow(dot > 0.0f ? dot : 0.0, sigmas[k]) * exp2(-(double)s);
+        if (ref > h * exp(-19.99)) { /* above the floor */
+          const double e = fabs(w / ref - 1.0);
+          worst = e > worst ? e : worst;
+        } else if (ref < h * exp(-20.01)) {
+          CHECK(w == 0.0f); /* below: exactly 0 */
+        }
+      }
+    /* 7 squarings double the float rounding of the dot's power each time:
+     * up to 2^7 x 6e-8 (as before this exp; inherent to the squarings) */
+    CHECK_MSG(worst < 1e-5, "tap weight: worst relative error %g (sigma_n %g)", worst,
+              sigmas[k]);
+    CHECK_MSG(smallest_sq >= FLT_MIN, "tap weight squared %g is subnormal", smallest_sq);
+  }
+}
+
 int main(void) {
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);
+  test_weight_math();
   test_constant(dev, 0);
   test_constant(dev, 1);
   test_edges(dev);

@@ -19,6 +19,7 @@ typedef struct tap_pair {
   int dx, dy;   /* tap a = (x + dx, y + dy), tap b = (x - dx, y - dy) */
   float fdx, fdy;
   float h;      /* kernel weight, the same for both */
+  svgf_exp2_poly poly; /* 2^f times h (weights.h) */
 } tap_pair;
 
 /* The taps other than the centre, one of each mirrored pair: dy > 0, or
@@ -35,6 +36,7 @@ static int tap_pairs(const svgf_kernel *k, int step, tap_pair *pairs) {
       t->fdx = (float)t->dx;
       t->fdy = (float)t->dy;
       t->h = k->h[r + i] * k->h[r + j];
+      t->poly = svgf_exp2_poly_scaled(t->h);
     }
   return n;
 }
@@ -67,13 +69,15 @@ static inline rows rows_at(const svgf_guide *g, const svgf_padded *in, int y, in
  * base register and keeps the general registers for the 9 tap planes. */
 typedef struct block_acc {
   float sw[BLOCK], s0[BLOCK], s1[BLOCK], s2[BLOCK], sv[BLOCK];
-  float inv_l[BLOCK]; /* 1 / (sigma_l sqrt(g3x3(var_p)) + eps_l) */
+  float inv_l[BLOCK]; /* log2 e / (sigma_l sqrt(g3x3(var_p)) + eps_l) */
   float z[BLOCK], l[BLOCK], n0[BLOCK], n1[BLOCK], n2[BLOCK];
-  float rdd[MAX_PAIRS][BLOCK]; /* 1 / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
+  float sgx[BLOCK], sgy[BLOCK], zl[BLOCK]; /* sigma_z grad z (clamped), zon log2 e */
+  float rdd[MAX_PAIRS][BLOCK]; /* log2 e / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
 } block_acc;
 
 /* inv_l for pixels [x0, x0 + n) of row y: the 3x3 Gaussian (1 2 1)/4 x
- * (1 2 1)/4 of the variance, rows clamped, columns by the padding. */
+ * (1 2 1)/4 of the variance, rows clamped, columns by the padding (fmaf
+ * spelled out: ISO C does not contract a * b + c). */
 static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma_l,
                         const float *eps_l, block_acc *acc) {
   const int H = in->height;
@@ -85,18 +89,22 @@ static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma
     const float *restrict eps = eps_l + (size_t)y * in->width + x0;
 #pragma omp simd
     for (int x = 0; x < n; x++) {
-      const float hu = 0.25f * up[x - 1] + 0.5f * up[x] + 0.25f * up[x + 1];
-      const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
-      const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
-      inv_l[x] = 1.0f / (sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + eps[x]);
+      const float hu = fmaf(0.5f, up[x], 0.25f * (up[x - 1] + up[x + 1]));
+      const float hm = fmaf(0.5f, mid[x], 0.25f * (mid[x - 1] + mid[x + 1]));
+      const float hd = fmaf(0.5f, dn[x], 0.25f * (dn[x - 1] + dn[x + 1]));
+      const float v = fmaf(0.5f, hm, 0.25f * (hu + hd));
+      const float d = fmaf(sigma_l, svgf_sqrt_pos(v), eps[x]);
+      inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   } else {
 #pragma omp simd
     for (int x = 0; x < n; x++) {
-      const float hu = 0.25f * up[x - 1] + 0.5f * up[x] + 0.25f * up[x + 1];
-      const float hm = 0.25f * mid[x - 1] + 0.5f * mid[x] + 0.25f * mid[x + 1];
-      const float hd = 0.25f * dn[x - 1] + 0.5f * dn[x] + 0.25f * dn[x + 1];
-      inv_l[x] = 1.0f / (sigma_l * svgf_sqrt_pos(0.25f * hu + 0.5f * hm + 0.25f * hd) + SVGF_EPS_L);
+      const float hu = fmaf(0.5f, up[x], 0.25f * (up[x - 1] + up[x + 1]));
+      const float hm = fmaf(0.5f, mid[x], 0.25f * (mid[x - 1] + mid[x + 1]));
+      const float hd = fmaf(0.5f, dn[x], 0.25f * (dn[x - 1] + dn[x + 1]));
+      const float v = fmaf(0.5f, hm, 0.25f * (hu + hd));
+      const float d = fmaf(sigma_l, svgf_sqrt_pos(v), SVGF_EPS_L);
+      inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
     }
   }
 }
@@ -119,29 +127,45 @@ static HUSH_ALWAYS_INLINE void block_p_side(const svgf_guide *g, const svgf_padd
   const size_t pi = (size_t)y * g->width + x0;
   const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
   const float sigma_z = g->sigma_z;
+  /* once per pixel what every pair needs: the gradient within +-1e20 (NaN
+   * taken as 1e20), so that a denominator, at most 1e20 times the largest
+   * offset, is in the range of svgf_rcp_pos without a clamp per pair */
+  float *restrict sgx = acc->sgx, *restrict sgy = acc->sgy, *restrict zl = acc->zl;
+#pragma omp simd
+  for (int x = 0; x < n; x++) {
+    const float ax = sigma_z * gx[x], ay = sigma_z * gy[x];
+    const float cx = ax < 1e20f ? ax : 1e20f, cy = ay < 1e20f ? ay : 1e20f;
+    sgx[x] = cx > -1e20f ? cx : -1e20f;
+    sgy[x] = cy > -1e20f ? cy : -1e20f;
+    zl[x] = zon[x] * SVGF_LOG2E;
+  }
   for (int k = 0; k < npairs; k++) {
     const float fdx = pairs[k].fdx, fdy = pairs[k].fdy;
     float *restrict rdd = acc->rdd[k];
+    /* fmaf spelled out: ISO C mode does not contract a * b + c */
 #pragma omp simd
     for (int x = 0; x < n; x++)
-      rdd[x] = zon[x] / (sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z);
+      rdd[x] = zl[x] * svgf_rcp_pos(fabsf(fmaf(sgx[x], fdx, sgy[x] * fdy)) + SVGF_EPS_Z);
   }
 }
 
-/* Adds the tap (x + dx, y + dy) with kernel weight h to the accumulators of
+/* Adds the tap (x + dx, y + dy) with kernel weight h (in poly) to the accumulators of
  * pixels [x0, x0 + n) of row y; rdd is its pair's depth denominator. */
 static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded *in, int dx,
-                                         int dy, float h, const float *rdd_pair, int y, int x0,
-                                         int n, const int squarings, const int validity,
+                                         int dy, const svgf_exp2_poly *poly,
+                                         const float *rdd_pair, int y,
+                                         int x0, int n, const int squarings, const int validity,
                                          block_acc *acc) {
   const rows q = rows_at(g, in, clampi(y + dy, 0, g->height - 1), x0 + dx);
-  const float sigma_n = g->np.sigma_n, dot_floor = g->np.dot_floor;
+  /* locals: the stores to acc must not make the loop reload them */
+  const svgf_exp2_poly p = *poly;
+  const float sigma_n_log2e = g->np.sigma_n_log2e, dot_floor = g->np.dot_floor;
   const float *restrict rdd = rdd_pair;
 #pragma omp simd
   for (int x = 0; x < n; x++) {
-    const float e = -fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
+    const float sz = fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
     const float dot = fmaf(acc->n0[x], q.n0[x], fmaf(acc->n1[x], q.n1[x], acc->n2[x] * q.n2[x]));
-    float w = h * svgf_weight(e, dot, squarings, sigma_n, dot_floor);
+    float w = svgf_tap_weight(sz, dot, squarings, sigma_n_log2e, dot_floor, &p);
     if (validity) w *= q.ok[x]; /* a constant: resolved at compile time */
     acc->sw[x] += w;
     acc->s0[x] = fmaf(w, q.c0[x], acc->s0[x]);
@@ -156,9 +180,9 @@ static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded 
  * outside the parallel region for the constant to reach the vector loop. */
 static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_params *lp,
                                          const svgf_padded *in, const svgf_level_out *out,
-                                         const tap_pair *pairs, int npairs, int y,
-                                         const int squarings, const int validity,
-                                         block_acc *acc) {
+                                         const tap_pair *pairs, int npairs,
+                                         int y, const int squarings,
+                                         const int validity, block_acc *acc) {
   const int W = g->width;
   const float hc = lp->kernel->h[lp->kernel->radius];
   const float h0 = hc * hc;
@@ -187,8 +211,10 @@ static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_p
     block_p_side(g, in, pairs, npairs, y, x0, n, acc);
     for (int k = 0; k < npairs; k++) {
       const tap_pair *t = &pairs[k];
-      block_tap(g, in, t->dx, t->dy, t->h, acc->rdd[k], y, x0, n, squarings, validity, acc);
-      block_tap(g, in, -t->dx, -t->dy, t->h, acc->rdd[k], y, x0, n, squarings, validity, acc);
+      block_tap(g, in, t->dx, t->dy, &t->poly, acc->rdd[k], y, x0, n, squarings, validity,
+                acc);
+      block_tap(g, in, -t->dx, -t->dy, &t->poly, acc->rdd[k], y, x0, n, squarings, validity,
+                acc);
     }
     const size_t o = (size_t)y * out->stride + (size_t)x0;
     float *restrict r = out->plane[SVGF_R] + o, *restrict gr = out->plane[SVGF_G] + o,

@@ -16,8 +16,8 @@ typedef struct block_acc {
 /* Adds the taps (x + dx, y + dy) and (x - dx, y - dy) for pixels
  * [x0, x0 + n) of row y. */
 static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded *m, int dx,
-                                          int dy, int y, int x0, int n, const int squarings,
-                                          block_acc *acc) {
+                                          int dy, int y, int x0, int n, const svgf_exp2_poly *poly,
+                                          const int squarings, block_acc *acc) {
   const int H = g->height;
   const size_t gs = g->zn->stride, ms = m->stride;
   const int ya = clampi(y + dy, 0, H - 1), yb = clampi(y - dy, 0, H - 1);
@@ -38,16 +38,20 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
   const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
   float *restrict sw = acc->sw, *restrict s1 = acc->s1, *restrict s2 = acc->s2;
   const float fdx = (float)dx, fdy = (float)dy, sigma_z = g->sigma_z;
-  const float sigma_n = g->np.sigma_n, dot_floor = g->np.dot_floor;
+  /* locals: the stores to acc must not make the loop reload them */
+  const svgf_exp2_poly p = *poly;
+  const float sigma_n_log2e = g->np.sigma_n_log2e, dot_floor = g->np.dot_floor;
 #pragma omp simd
   for (int x = 0; x < n; x++) {
     /* the mirrored taps see the same |grad z . (q - p)| */
-    const float dd = sigma_z * fabsf(gx[x] * fdx + gy[x] * fdy) + SVGF_EPS_Z;
-    const float rdd = zon[x] / dd;
+    const float dd = fmaf(sigma_z, fabsf(fmaf(gx[x], fdx, gy[x] * fdy)), SVGF_EPS_Z);
+    const float rdd = zon[x] * SVGF_LOG2E * svgf_rcp_pos(dd < 1e30f ? dd : 1e30f);
     const float da = fmaf(n0p[x], n0a[x], fmaf(n1p[x], n1a[x], n2p[x] * n2a[x]));
     const float db = fmaf(n0p[x], n0b[x], fmaf(n1p[x], n1b[x], n2p[x] * n2b[x]));
-    const float wa = svgf_weight(-fabsf(zp[x] - za[x]) * rdd, da, squarings, sigma_n, dot_floor);
-    const float wb = svgf_weight(-fabsf(zp[x] - zb[x]) * rdd, db, squarings, sigma_n, dot_floor);
+    const float wa =
+        svgf_tap_weight(fabsf(zp[x] - za[x]) * rdd, da, squarings, sigma_n_log2e, dot_floor, &p);
+    const float wb =
+        svgf_tap_weight(fabsf(zp[x] - zb[x]) * rdd, db, squarings, sigma_n_log2e, dot_floor, &p);
     sw[x] += wa + wb;
     s1[x] = fmaf(wa, m1a[x], fmaf(wb, m1b[x], s1[x]));
     s2[x] = fmaf(wa, m2a[x], fmaf(wb, m2b[x], s2[x]));
@@ -57,7 +61,8 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
 /* Row y (see atrous.c on why SQUARINGS is dispatched outside the region). */
 static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padded *m,
                                             const float *age, float min_age, float *var, int y,
-                                            const int squarings, block_acc *acc) {
+                                            const svgf_exp2_poly *poly, const int squarings,
+                                            block_acc *acc) {
   const int W = g->width;
   for (int x0 = 0; x0 < W; x0 += BLOCK) {
     const int n = W - x0 < BLOCK ? W - x0 : BLOCK;
@@ -75,7 +80,7 @@ static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padd
     }
     for (int dy = 0; dy <= R; dy++)
       for (int dx = -R; dx <= R; dx++)
-        if (dy > 0 || dx > 0) block_pair(g, m, dx, dy, y, x0, n, squarings, acc);
+        if (dy > 0 || dx > 0) block_pair(g, m, dx, dy, y, x0, n, poly, squarings, acc);
     float *restrict v = var + (size_t)y * W + x0;
 #pragma omp simd
     for (int x = 0; x < n; x++) {
@@ -92,10 +97,11 @@ static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padd
 #define VARIANCE_ROWS(NAME, SQUARINGS)                                                       \
   static void NAME(const svgf_guide *g, const svgf_padded *m, const float *age,              \
                    float min_age, float *var, int threads) {                                 \
+    const svgf_exp2_poly poly = svgf_exp2_poly_scaled(1.0f); /* the weights are 2^t */      \
     _Pragma("omp parallel num_threads(threads)") {                                          \
       block_acc acc __attribute__((aligned(64)));                                            \
       _Pragma("omp for schedule(dynamic, 8)") for (int y = 0; y < g->height; y++)            \
-          variance_row(g, m, age, min_age, var, y, SQUARINGS, &acc);                         \
+          variance_row(g, m, age, min_age, var, y, &poly, SQUARINGS, &acc);                    \
     }                                                                                        \
   }
 VARIANCE_ROWS(variance_rows_pow64, 6)

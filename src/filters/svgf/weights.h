@@ -8,17 +8,24 @@
  *   w_l = exp(-|l_p - l_q| / (sigma_l sqrt(g3x3(var_p)) + eps_l))
  *
  * (Dundr 2018 §4.1.4.2-4.1.4.5; Schied et al. 2017 in papers/NOTES.md.)
- * One exp per tap: the depth and luminance exponents are summed; w_n is a
- * power of two by repeated squaring (sigma_n = 128: 7 multiplies) or, for
- * any other sigma_n, joins the exp as sigma_n ln(dot).
+ * One exp per tap, in base 2: the depth and luminance exponents are summed,
+ * log2 e is folded into their per-pixel reciprocal denominators (computed
+ * by Newton steps, not divisions), the kernel weight h into the polynomial
+ * of 2^f; w_n is a power of two by repeated squaring (sigma_n = 128: 7
+ * multiplies) or, for any other sigma_n, joins the exponent as
+ * sigma_n log2(dot).
  *
- * Every product w = w_n w_z w_l below e^-20 is made exactly 0: such a tap
- * weighs under 2e-9 of the centre, and its tiny weights (squared for the
- * variance) would otherwise produce subnormal floats, which cost x86 a
- * microcode assist each (measured: 3x slower a-trous on frames with
- * background). Branch-free so loops over them vectorise without
- * -ffast-math; fmaf is exact per IEEE, so results do not depend on the
- * vector width.
+ * Every weight w = w_n w_z w_l at or below e^-20 is made exactly 0 (one
+ * compare and a zero-masked operation): such a tap weighs under 2e-9 of
+ * the centre, yet with a 1-spp firefly of 1e5 (or a demodulated one) next
+ * to it that is still visible, and its tiny weights (squared for the
+ * variance) would produce subnormal floats, which cost x86 a microcode
+ * assist each (measured: 3x slower a-trous on frames with background). The
+ * exponent is clamped at SVGF_S_MAX and the dot at 2^(-SVGF_S_MAX /
+ * sigma_n) so no intermediate goes subnormal either; a clamped weight is
+ * below the floor, hence 0. Branch-free so loops over them vectorise
+ * without -ffast-math; fmaf is exact per IEEE, so results do not
+ * depend on the vector width.
  */
 #ifndef HUSH_FILTERS_SVGF_WEIGHTS_H
 #define HUSH_FILTERS_SVGF_WEIGHTS_H
@@ -33,8 +40,6 @@
  * facing plane (zero gradient) or zero variance must not divide by 0. */
 #define SVGF_EPS_Z 1e-3f
 #define SVGF_EPS_L 1e-4f
-/* Weights at or below e^-20 are 0 (see above). */
-#define SVGF_WEIGHT_FLOOR 2.0611536e-9f /* e^-20 */
 
 /* sqrt(x) for x >= 0 in a loop that must vectorise (with the default
  * -fmath-errno gcc keeps a branch to the library sqrtf for errno, which
@@ -53,32 +58,6 @@ static HUSH_ALWAYS_INLINE float svgf_sqrt_pos(float x) {
   y = y * fmaf(-hx * y, y, 1.5f);
   const float s = x * y;
   return fmaf(0.5f * y, fmaf(-s, s, x), s);
-}
-
-/* e^x for x <= 0 (x above 0 is not needed); x below -21 is taken as -21
- * (the callers zero every weight below e^-20 anyway): 2^n * 2^f with
- * n = round(x log2 e) by the 1.5 * 2^23 trick (its low mantissa bits are n
- * as an integer), |f| <= 1/2, and a degree-6 Taylor polynomial of e^(f ln 2)
- * (relative error about 1e-7). */
-static HUSH_ALWAYS_INLINE float svgf_exp_neg(float x) {
-  x = x > -21.0f ? x : -21.0f; /* a max: 1 instruction */
-  const float t = x * 1.44269504f;
-  const float magic = 12582912.0f; /* 1.5 * 2^23 */
-  const float big = t + magic;     /* rounds t to an integer */
-  const float n = big - magic;
-  const float f = (t - n) * 0.693147181f; /* 2^(t-n) = e^f */
-  float p = fmaf(f, 1.0f / 720, 1.0f / 120);
-  p = fmaf(f, p, 1.0f / 24);
-  p = fmaf(f, p, 1.0f / 6);
-  p = fmaf(f, p, 0.5f);
-  p = fmaf(f, p, 1.0f);
-  p = fmaf(f, p, 1.0f);
-  int32_t bits;
-  memcpy(&bits, &big, sizeof bits);
-  bits = (bits - 0x4B400000 + 127) << 23; /* 2^n */
-  float scale;
-  memcpy(&scale, &bits, sizeof scale);
-  return p * scale;
 }
 
 /* ln(d) for d > 0 (d <= 0 is taken as 1e-30): d = m 2^e with m in
@@ -100,50 +79,118 @@ static HUSH_ALWAYS_INLINE float svgf_log_pos(float d) {
   return e * 0.693147181f + 2.0f * sv * series;
 }
 
+/* 1/x for x in [1e-30, 1e30] (the callers clamp): the bit-level first
+ * guess (relative error <= 12 %) and three Newton steps with fmaf, within
+ * 6e-8 relative of 1/x. vdivps costs 10-16 cycles per vector; this is 7
+ * arithmetic instructions that pipeline (a-trous: 12 divisions per pixel
+ * and level before). */
+static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
+  uint32_t bits;
+  memcpy(&bits, &x, sizeof bits);
+  bits = 0x7EF311C3u - bits;
+  float y;
+  memcpy(&y, &bits, sizeof y);
+  y = fmaf(y, fmaf(-x, y, 1.0f), y);
+  y = fmaf(y, fmaf(-x, y, 1.0f), y);
+  return fmaf(y, fmaf(-x, y, 1.0f), y);
+}
+
+/* Exponents are in base 2 (see the top): log2 e joins the reciprocals. */
+#define SVGF_LOG2E 1.44269504f
+/* Weights at or below e^-20 are 0 (see the top). */
+#define SVGF_WEIGHT_FLOOR 2.0611536e-9f /* e^-20 */
+/* The clamp of the exponent magnitude s of 2^-s: 2^-29 is below the floor. */
+#define SVGF_S_MAX 29.0f
+
+/* Coefficients c0..c5 of the degree-5 minimax polynomial of 2^f on
+ * [-1/2, 1/2] (relative error 7.5e-8, 2.3e-7 in float arithmetic), as a
+ * polynomial of g = -f (odd coefficients negated), pre-multiplied by the
+ * kernel weight h of a tap, so that the tap's weight h 2^-s costs no
+ * negation and no multiply by h; and the weight floor times h. */
+typedef struct svgf_exp2_poly {
+  float c[6];
+  float floor; /* h SVGF_WEIGHT_FLOOR */
+} svgf_exp2_poly;
+
+static inline svgf_exp2_poly svgf_exp2_poly_scaled(float h) {
+  static const float c[6] = {1.0000001192092896f, -0.6931469440460205f, 0.24022120237350464f,
+                             -0.05550713092088699f, 0.009675540961325169f,
+                             -0.0013276472454890609f};
+  svgf_exp2_poly p;
+  for (int k = 0; k < 6; k++) p.c[k] = h * c[k];
+  p.floor = h * SVGF_WEIGHT_FLOOR;
+  return p;
+}
+
+/* h 2^-s for s in [0, s_max] (s above is taken as s_max, s_max <= 60):
+ * -s = n + f with n = round(-s) by the 1.5 * 2^23 trick, the polynomial
+ * of 2^f times h in g = -f = s + n, and n added straight into its exponent
+ * bits (h 2^f is in [2^-9, 2], so the result stays normal). NaN is taken
+ * as s_max. */
+static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf_exp2_poly *p) {
+  s = s < s_max ? s : s_max;       /* a min */
+  const float magic = 12582912.0f; /* 1.5 * 2^23 */
+  const float big = magic - s;     /* rounds -s to an integer n */
+  const float g = s + (big - magic);
+  float y = fmaf(g, p->c[5], p->c[4]);
+  y = fmaf(g, y, p->c[3]);
+  y = fmaf(g, y, p->c[2]);
+  y = fmaf(g, y, p->c[1]);
+  y = fmaf(g, y, p->c[0]);
+  uint32_t nb, yb;
+  memcpy(&nb, &big, sizeof nb);
+  memcpy(&yb, &y, sizeof yb);
+  yb += nb << 23; /* the low bits of big are n; 0x4B400000 << 23 wraps to 0 */
+  memcpy(&y, &yb, sizeof y);
+  return y;
+}
+
+/* The weight h w_n w_z w_l of one tap from s_zl = (|dz| / dd + |dl| /
+ * dl_max) log2 e (>= 0) and the normals' `dot`. SQUARINGS is a
+ * compile-time constant at every call (the caller dispatches once per
+ * level), so this is straight-line code; sigma_n_log2e and dot_floor are
+ * those of svgf_normal_power, read once per loop by the caller. */
+static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int squarings,
+                                                float sigma_n_log2e, float dot_floor,
+                                                const svgf_exp2_poly *p) {
+  float w;
+  if (squarings < 0) {
+    w = svgf_exp2_neg_h(fmaf(-sigma_n_log2e, svgf_log_pos(dot), s_zl), SVGF_S_MAX, p);
+    return w > p->floor ? w : 0.0f;
+  }
+  float d = dot > dot_floor ? dot : dot_floor; /* a max */
+  /* spelled out: gcc does not vectorise a loop around an inner loop */
+  if (squarings > 0) d *= d;
+  if (squarings > 1) d *= d;
+  if (squarings > 2) d *= d;
+  if (squarings > 3) d *= d;
+  if (squarings > 4) d *= d;
+  if (squarings > 5) d *= d;
+  if (squarings > 6) d *= d;
+  if (squarings > 7) d *= d;
+  if (squarings > 8) d *= d;
+  if (squarings > 9) d *= d;
+  w = d * svgf_exp2_neg_h(s_zl, SVGF_S_MAX, p);
+  return w > p->floor ? w : 0.0f;
+}
+
 /* How sigma_n is applied: squarings >= 0 when sigma_n = 2^squarings (then
- * dots are raised to at least dot_floor = e^(-21 / sigma_n) first, so no
- * square goes subnormal; such a dot's power is below the weight floor, and
- * the weight becomes 0 as it should), else -1: through the exp. */
+ * dots are raised to at least dot_floor = 2^(-SVGF_S_MAX / sigma_n) first,
+ * so no square goes subnormal), else -1: through the exponent, as
+ * sigma_n_log2e log(dot). */
 typedef struct svgf_normal_power {
   int squarings;
-  float sigma_n, dot_floor;
+  float sigma_n, sigma_n_log2e, dot_floor;
 } svgf_normal_power;
 
 static inline svgf_normal_power svgf_normal_power_of(float sigma_n) {
-  svgf_normal_power np = {-1, sigma_n, 0.0f};
-  for (int k = 0; k <= 10; k++) /* as many squarings as svgf_weight spells out */
+  svgf_normal_power np = {-1, sigma_n, sigma_n * SVGF_LOG2E, 0.0f};
+  for (int k = 0; k <= 10; k++) /* as many squarings as svgf_tap_weight spells out */
     if (sigma_n == (float)(1 << k)) {
       np.squarings = k;
-      np.dot_floor = expf(-21.0f / sigma_n);
+      np.dot_floor = exp2f(-SVGF_S_MAX / sigma_n);
     }
   return np;
-}
-
-/* The weight of one tap: exponent e_zl = -(|dz| / dd + |dl| / dl_max)
- * (passed pre-summed, <= 0) times the normal weight of `dot`. SQUARINGS is
- * a compile-time constant at every call (the caller dispatches once per
- * level), so this is straight-line code. */
-static HUSH_ALWAYS_INLINE float svgf_weight(float e_zl, float dot, const int squarings,
-                                            float sigma_n, float dot_floor) {
-  float w;
-  if (squarings >= 0) {
-    float d = dot > dot_floor ? dot : dot_floor; /* a max */
-    /* spelled out: gcc does not vectorise a loop around an inner loop */
-    if (squarings > 0) d *= d;
-    if (squarings > 1) d *= d;
-    if (squarings > 2) d *= d;
-    if (squarings > 3) d *= d;
-    if (squarings > 4) d *= d;
-    if (squarings > 5) d *= d;
-    if (squarings > 6) d *= d;
-    if (squarings > 7) d *= d;
-    if (squarings > 8) d *= d;
-    if (squarings > 9) d *= d;
-    w = d * svgf_exp_neg(e_zl);
-  } else {
-    w = svgf_exp_neg(fmaf(sigma_n, svgf_log_pos(dot), e_zl));
-  }
-  return hush__select_bits(w > SVGF_WEIGHT_FLOOR, w, 0.0f);
 }
 
 #endif
