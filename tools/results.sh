@@ -4,7 +4,8 @@
 # and RESULTS.md is their concatenation, so a part can be re-measured alone
 # (the speed part wants a quiet machine, the scenes part takes long).
 #
-#   tools/results.sh [PART...]     PART: speed synthetic scenes render (default: all)
+#   tools/results.sh [PART...]     PART: speed synthetic scenes render (default: all);
+#                                  join: only rewrite RESULTS.md from the parts
 #
 # Environment: HUSH (build/hush), BENCH_FRAMES (60); for the scenes part
 # SCENE_SIZE (640x360), SCENE_FRAMES (16), SCENE_REF_SPP (64); the scenes and
@@ -75,6 +76,9 @@ part_scenes() {
     echo "shadow rays) and at $spp spp as the reference (same cameras, jitter and bounce count, another"
     echo "seed), then evaluated: $frames frames at $size, means over the frames. The filters' acceptance"
     echo "runs (60+ frames, 1024-spp references) use this script with SCENE_FRAMES and SCENE_REF_SPP raised."
+    echo "With low-spp references, RMSE and relMSE are dominated by the references' own noise where light"
+    echo "arrives through rare paths (the living room is lit through glass: a fifth of its 32-spp reference"
+    echo "pixels are exactly 0) and at light sources' edges; SSIM separates the filters more reliably there."
     echo
     for entry in classroom:path living-room:path sponza-dabrovic:orbit cornell-box:orbit \
                  builtin+moving-light:static builtin+light-off:static; do
@@ -112,6 +116,7 @@ part_render() {
 for p in $parts; do
   case $p in
     speed | synthetic | scenes | render) "part_$p" ;;
+    join) ;;
     *) echo "results: unknown part '$p' (speed, synthetic, scenes, render)" >&2; exit 2 ;;
   esac
 done
