@@ -782,6 +782,9 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
               plan->w[0] + row, plan->w[1] + row, plan->w[2] + row, plan->w[3] + row, (size_t)W);
 }
 
+/* Rows per chunk of the parallel build (see hush__reproject_build). */
+#define BUILD_ROWS 4
+
 hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
                                   const hush_reproject_input *in, const hush_gbuffer *prev,
                                   const hush_frame_info *info, const hush_reproject_params *params,
@@ -837,7 +840,13 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
   }
 
   const int H = c.H;
-#pragma omp parallel for schedule(static) num_threads(threads)
+  /* Rows cost very different amounts (a disocclusion or a border runs
+   * plan_pixel's scalar path; a row whose footprints do not follow each
+   * other gathers its taps), and they cluster in bands: a static split in
+   * halves left one thread with ~1.4x the work of the other. Rows are
+   * handed out in small chunks instead; each row is computed on its own,
+   * so the plan does not depend on which thread builds it. */
+#pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) build_row(&c, plan, y);
   return HUSH_OK;
 }
