@@ -115,6 +115,37 @@ static void roundtrip_view(hush_format format, size_t offset, size_t pixel_pad, 
   hush__planar_free(&dst);
 }
 
+/* Planes of fewer channels than the view's pixels (3 planes in FLOAT4,
+ * 1 or 2 planes in a padded FLOAT2/FLOAT3/FLOAT4 pixel): export writes only
+ * those channels, leaving the rest of each pixel as it was, and import reads
+ * them back exactly. */
+static void partial_channels(hush_format format, int planes) {
+  const uint32_t w = 37, h = 3; /* not a multiple of any vector width */
+  const size_t sf = (size_t)hush_format_channels(format);
+  hush_planar src, dst;
+  REQUIRE(hush__planar_init(NULL, &src, planes, w, h) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &dst, planes, w, h) == HUSH_OK);
+  for (int c = 0; c < planes; c++)
+    for (size_t i = 0; i < (size_t)w * h; i++) src.plane[c][i] = (float)i * 0.5f - (float)c;
+  const size_t n = (size_t)w * h * sf;
+  float *mem = malloc(n * sizeof *mem);
+  REQUIRE(mem != NULL);
+  for (size_t k = 0; k < n; k++) mem[k] = -7.0f;
+  hush_image_view v = {mem, format, w, h, 0, 0, 0};
+  hush__view_export(&src, &v, 1);
+  CHECK(hush__view_import(NULL, &v, "test", &dst, HUSH_NONFINITE_ERROR, NULL) == HUSH_OK);
+  int same = 1, kept = 1;
+  for (int c = 0; c < planes; c++)
+    if (memcmp(src.plane[c], dst.plane[c], sizeof(float) * w * h)) same = 0;
+  for (size_t k = 0; k < n; k++)
+    if (k % sf >= (size_t)planes && mem[k] != -7.0f) kept = 0;
+  CHECK_MSG(same && kept, "format %d with %d plane(s): same %d, rest kept %d", format, planes,
+            same, kept);
+  free(mem);
+  hush__planar_free(&src);
+  hush__planar_free(&dst);
+}
+
 static void test_views(void) {
   const hush_format formats[] = {HUSH_FORMAT_FLOAT,  HUSH_FORMAT_FLOAT2, HUSH_FORMAT_FLOAT3,
                                  HUSH_FORMAT_FLOAT4, HUSH_FORMAT_HALF,   HUSH_FORMAT_HALF2,
@@ -123,6 +154,11 @@ static void test_views(void) {
     roundtrip_view(formats[i], 0, 0, 0);
     roundtrip_view(formats[i], 8, 4, 12);
     roundtrip_view(formats[i], 2 * (formats[i] >= HUSH_FORMAT_HALF ? 1 : 2), 8, 0);
+  }
+  for (int planes = 1; planes <= 3; planes++) {
+    if (planes < 2) partial_channels(HUSH_FORMAT_FLOAT2, planes);
+    if (planes < 3) partial_channels(HUSH_FORMAT_FLOAT3, planes);
+    partial_channels(HUSH_FORMAT_FLOAT4, planes);
   }
   CHECK(hush_format_pixel_size(HUSH_FORMAT_HALF3) == 6);
   CHECK(hush_format_pixel_size(HUSH_FORMAT_FLOAT4) == 16);

@@ -115,6 +115,31 @@ hush_status hush__view_validate(hush_device device, const hush_image_view *v, co
   return HUSH_OK;
 }
 
+#if defined(__GNUC__)
+#  define HUSH_IMAGE_INLINE inline __attribute__((always_inline))
+#else
+#  define HUSH_IMAGE_INLINE inline
+#endif
+
+/* The first nc channels of w interleaved pixels of sf floats each into nc
+ * planes. sf and nc are constants at each call (always inlined), so each
+ * pixel is one group of constant-offset loads, which vectorises. */
+static HUSH_IMAGE_INLINE void deinterleave_f32(const float *restrict rf, const size_t sf,
+                                               const int nc, uint32_t w,
+                                               float *const restrict *out) {
+  float *restrict o0 = out[0];
+  float *restrict o1 = nc > 1 ? out[1] : NULL;
+  float *restrict o2 = nc > 2 ? out[2] : NULL;
+  float *restrict o3 = nc > 3 ? out[3] : NULL;
+  for (uint32_t x = 0; x < w; x++) {
+    const float *p = rf + (size_t)x * sf;
+    o0[x] = p[0];
+    if (nc > 1) o1[x] = p[1];
+    if (nc > 2) o2[x] = p[2];
+    if (nc > 3) o3[x] = p[3];
+  }
+}
+
 /* One row of a view into planes. The float path reads through a float
  * pointer when the row is aligned (the common case), so the compiler can
  * vectorise the strided loads; anything else goes through memcpy. */
@@ -134,6 +159,20 @@ static void import_row(const hush_image_view *v, size_t ps, size_t rs, uint32_t 
   if ((uintptr_t)row % sizeof(float) == 0) {
     const float *rf = (const float *)(const void *)row;
     const size_t sf = ps / sizeof(float);
+    /* the usual layouts with a constant stride: the compiler turns the
+     * interleaved loads into vector shuffles (a runtime stride makes them
+     * scalar or gathers); one pass over the row for every channel */
+    if (sf == 1) {
+      memcpy(out[0], rf, (size_t)w * sizeof(float));
+      return;
+    }
+    if (sf == 2 && nc == 2) { deinterleave_f32(rf, 2, 2, w, out); return; }
+    if (sf == 2 && nc == 1) { deinterleave_f32(rf, 2, 1, w, out); return; }
+    if (sf == 3 && nc == 3) { deinterleave_f32(rf, 3, 3, w, out); return; }
+    if (sf == 3 && nc == 1) { deinterleave_f32(rf, 3, 1, w, out); return; }
+    if (sf == 4 && nc == 4) { deinterleave_f32(rf, 4, 4, w, out); return; }
+    if (sf == 4 && nc == 3) { deinterleave_f32(rf, 4, 3, w, out); return; }
+    if (sf == 4 && nc == 1) { deinterleave_f32(rf, 4, 1, w, out); return; }
     for (int c = 0; c < nc; c++) {
       float *o = out[c];
       for (uint32_t x = 0; x < w; x++) o[x] = rf[(size_t)x * sf + (size_t)c];
@@ -188,6 +227,23 @@ hush_status hush__view_import(hush_device device, const hush_image_view *v, cons
   return HUSH_OK;
 }
 
+/* nc planes into the first nc channels of w interleaved pixels of sf
+ * floats each (the others untouched); sf and nc constant at each call. */
+static HUSH_IMAGE_INLINE void interleave_f32(const float *const *in, const size_t sf,
+                                             const int nc, uint32_t w, float *restrict rf) {
+  const float *restrict i0 = in[0];
+  const float *restrict i1 = nc > 1 ? in[1] : NULL;
+  const float *restrict i2 = nc > 2 ? in[2] : NULL;
+  const float *restrict i3 = nc > 3 ? in[3] : NULL;
+  for (uint32_t x = 0; x < w; x++) {
+    float *p = rf + (size_t)x * sf;
+    p[0] = i0[x];
+    if (nc > 1) p[1] = i1[x];
+    if (nc > 2) p[2] = i2[x];
+    if (nc > 3) p[3] = i3[x];
+  }
+}
+
 static void export_row(const hush_planar *src, const hush_image_view *v, size_t ps, size_t rs,
                        uint32_t y) {
   char *row = (char *)v->data + v->byte_offset + (size_t)y * rs;
@@ -205,6 +261,13 @@ static void export_row(const hush_planar *src, const hush_image_view *v, size_t 
   if ((uintptr_t)row % sizeof(float) == 0) {
     float *rf = (float *)(void *)row;
     const size_t sf = ps / sizeof(float);
+    const float *in[4] = {NULL, NULL, NULL, NULL};
+    for (int c = 0; c < nc; c++) in[c] = src->plane[c] + base;
+    /* the usual layouts with a constant stride (see import_row) */
+    if (sf == 1) { memcpy(rf, in[0], (size_t)w * sizeof(float)); return; }
+    if (sf == 3 && nc == 3) { interleave_f32(in, 3, 3, w, rf); return; }
+    if (sf == 4 && nc == 4) { interleave_f32(in, 4, 4, w, rf); return; }
+    if (sf == 4 && nc == 3) { interleave_f32(in, 4, 3, w, rf); return; }
     for (int c = 0; c < nc; c++) {
       const float *p = src->plane[c] + base;
       for (uint32_t x = 0; x < w; x++) rf[(size_t)x * sf + (size_t)c] = p[x];

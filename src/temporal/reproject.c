@@ -146,7 +146,10 @@ static inline float prev_depth(const build_ctx *c, hush_vec4 p) {
 #define NO_LOCATION (-1e30f)
 
 
-/* The span arrays of back_project_span. */
+/* The span arrays of back_project_span. span_vectors and span_camera take
+ * them as restrict parameters, not as this struct: gcc ignores restrict on
+ * local pointers, and with position planes a loop needs more run-time alias
+ * checks than it versions for (10), so it stayed scalar. */
 typedef struct span_out {
   float *px, *py, *ze;
 } span_out;
@@ -155,7 +158,8 @@ typedef struct span_out {
  * expected depth is the point's view depth in the previous camera.
  * use_pos is a constant at each call, so each loop is branch-free. */
 static HUSH_ALWAYS_INLINE void span_vectors(const build_ctx *c, int y, int x_begin, int n,
-                                            span_out o, const int use_pos) {
+                                            float *restrict pxo, float *restrict pyo,
+                                            float *restrict zeo, const int use_pos) {
   const hush_reproject_input *in = c->in;
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   const float *zr = in->cur.depth + row;
@@ -171,7 +175,6 @@ static HUSH_ALWAYS_INLINE void span_vectors(const build_ctx *c, int y, int x_beg
   const float r2 = c->cur_to_prev_view_z[2], r3 = c->cur_to_prev_view_z[3];
   const float v2 = c->prev_w2v[2], v6 = c->prev_w2v[6], v10 = c->prev_w2v[10];
   const float v14 = c->prev_w2v[14];
-  float *restrict pxo = o.px, *restrict pyo = o.py, *restrict zeo = o.ze;
   for (int k = 0; k < n; k++) {
     const float z = zr[k];
     pxo[k] = (float)(x_begin + k) + 0.5f + mx[k];
@@ -194,7 +197,8 @@ static HUSH_ALWAYS_INLINE void span_vectors(const build_ctx *c, int y, int x_beg
  * infinity) taken to the previous clip space by one matrix; with use_pos,
  * surfaces project their position instead. */
 static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begin, int n,
-                                           span_out o, const int use_pos) {
+                                           float *restrict pxo, float *restrict pyo,
+                                           float *restrict zeo, const int use_pos) {
   const hush_reproject_input *in = c->in;
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   const float *zr = in->cur.depth + row;
@@ -218,7 +222,6 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
   const float V0 = c->prev_w2v[2], V1 = c->prev_w2v[6], V2 = c->prev_w2v[10];
   const float V3 = c->prev_w2v[14];
   const float jx = c->jx, jy = c->jy;
-  float *restrict pxo = o.px, *restrict pyo = o.py, *restrict zeo = o.ze;
   for (int k = 0; k < n; k++) {
     const float z = zr[k];
     const int bg = !(z > 0.0f);
@@ -273,14 +276,14 @@ static void back_project_span(const build_ctx *c, int y, int x_begin, int n, spa
       back_project_general(c, x_begin + k, y, row + (size_t)k, &o.px[k], &o.py[k], &o.ze[k]);
   } else if (c->vectors) {
     if (c->has_position)
-      span_vectors(c, y, x_begin, n, o, 1);
+      span_vectors(c, y, x_begin, n, o.px, o.py, o.ze, 1);
     else
-      span_vectors(c, y, x_begin, n, o, 0);
+      span_vectors(c, y, x_begin, n, o.px, o.py, o.ze, 0);
   } else {
     if (c->has_position)
-      span_camera(c, y, x_begin, n, o, 1);
+      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 1);
     else
-      span_camera(c, y, x_begin, n, o, 0);
+      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 0);
   }
 }
 
@@ -782,6 +785,9 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
               plan->w[0] + row, plan->w[1] + row, plan->w[2] + row, plan->w[3] + row, (size_t)W);
 }
 
+/* Rows per chunk of the parallel build (see hush__reproject_build). */
+#define BUILD_ROWS 4
+
 hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
                                   const hush_reproject_input *in, const hush_gbuffer *prev,
                                   const hush_frame_info *info, const hush_reproject_params *params,
@@ -837,7 +843,13 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
   }
 
   const int H = c.H;
-#pragma omp parallel for schedule(static) num_threads(threads)
+  /* Rows cost very different amounts (a disocclusion or a border runs
+   * plan_pixel's scalar path; a row whose footprints do not follow each
+   * other gathers its taps), and they cluster in bands: a static split in
+   * halves left one thread with ~1.4x the work of the other. Rows are
+   * handed out in small chunks instead; each row is computed on its own,
+   * so the plan does not depend on which thread builds it. */
+#pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) build_row(&c, plan, y);
   return HUSH_OK;
 }
