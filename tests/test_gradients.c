@@ -5,7 +5,8 @@
  * every other pixel as it was; a light switched off gives a large relative
  * gradient where it lit; forward projection lands on the pixel that sees the
  * sample's surface point under camera motion and object motion, checked
- * against the renderer's own motion vectors; and `hush render --gradients`
+ * against the renderer's own motion vectors; the result does not depend on
+ * the thread count; and `hush render --gradients`
  * writes the layer (half EXRs too) and rejects --spp > 1.
  */
 #include "check.h"
@@ -326,6 +327,41 @@ static void test_projection(void) {
   CHECK_MSG(obj >= 10, "moving box: only %d samples moved", obj);
 }
 
+/* ---- thread count ------------------------------------------------------------------------ */
+
+/* Which sample a stratum takes and how the pixels are shaded do not depend
+ * on the thread count: three frames with 1 and with 2 threads are equal bit
+ * for bit (colour, vis and the gradient layer). */
+static void test_threads(void) {
+  rig r;
+  rig_open(&r, "cornell-moving");
+  hush_frame out[2];
+  for (int k = 0; k < 2; k++) {
+    hush_render_params p;
+    params_for(&p, 83, 61);
+    p.threads = k + 1;
+    hush_gradients g;
+    REQUIRE(hush__gradients_init(r.device, &g, p.width, p.height) == HUSH_OK);
+    p.gradients = &g;
+    out[k] = hush_frame_new(r.device, p.width, p.height);
+    REQUIRE(out[k]);
+    for (uint32_t f = 3; f < 6; f++) {
+      hush_render_ctx ctx;
+      render_into(&r, &p, HUSH_MOVE_ORBIT, f, &ctx, out[k]);
+    }
+    CHECK(check_layer(&g, out[k]) > 100);
+    hush__gradients_free(&g);
+  }
+  static const char *const names[] = {"color", "vis", "gradient"};
+  const size_t n = (size_t)83 * 61 * 3;
+  for (int i = 0; i < 3; i++)
+    CHECK_MSG(memcmp(layer(out[0], names[i]), layer(out[1], names[i]), n * sizeof(float)) == 0,
+              "layer %s differs between 1 and 2 threads", names[i]);
+  hush_frame_release(out[0]);
+  hush_frame_release(out[1]);
+  rig_close(&r);
+}
+
 /* ---- bad parameters ---------------------------------------------------------------------- */
 
 static void test_bad_params(void) {
@@ -402,6 +438,7 @@ int main(void) {
   test_static_zero();
   test_light_off();
   test_projection();
+  test_threads();
   test_bad_params();
   test_cli();
   return check_summary();
