@@ -157,6 +157,7 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
     memcpy(out->specular, r.specular, sizeof out->specular);
   }
   out->first = f;
+  out->gradient_sample = 1;
   out->rays = (uint64_t)r.rays + 1; /* + the primary ray traced for the visibility test */
   g->current[t] = hush_luminance(out->color[0], out->color[1], out->color[2]);
   g->previous[t] = src->luminance;

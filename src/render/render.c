@@ -273,8 +273,15 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
     zero(L->id, 1, i);
     return;
   }
-  const float px = (float)x + 0.5f + ctx->cam.jitter[0];
-  const float py = (float)y + 0.5f + ctx->cam.jitter[1];
+  float px = (float)x + 0.5f + ctx->cam.jitter[0];
+  float py = (float)y + 0.5f + ctx->cam.jitter[1];
+  /* a gradient sample's point lies elsewhere in the pixel: its depth
+   * gradient is taken at its own image point */
+  float sx, sy;
+  if (r->gradient_sample && hush__camera_project(&ctx->cam, f->p, 1.0f, &sx, &sy)) {
+    px = sx;
+    py = sy;
+  }
   const float z = view_depth(&ctx->cam, f->p);
   L->depth[i] = z;
   memcpy(L->position + 3 * i, &f->p, 3 * sizeof(float));

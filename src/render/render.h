@@ -95,6 +95,8 @@ typedef struct hush_pixel_result {
   float diffuse[3], specular[3]; /* split_lobes; color = diffuse + specular */
   float variance;          /* of one sample's luminance (spp > 1) */
   hush_first_hit first;    /* of sample 0 */
+  int gradient_sample;     /* 1: a forward-projected A-SVGF sample (gradients.h), whose first hit
+                            * is not on the pixel's jittered ray */
   uint64_t rays;
 } hush_pixel_result;
 
