@@ -9,6 +9,7 @@
 #include "core/device.h"
 #include "io/frame.h"
 #include "render/bsdf.h"
+#include "render/gradients.h"
 
 #include <math.h>
 #include <omp.h>
@@ -272,8 +273,15 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
     zero(L->id, 1, i);
     return;
   }
-  const float px = (float)x + 0.5f + ctx->cam.jitter[0];
-  const float py = (float)y + 0.5f + ctx->cam.jitter[1];
+  float px = (float)x + 0.5f + ctx->cam.jitter[0];
+  float py = (float)y + 0.5f + ctx->cam.jitter[1];
+  /* a gradient sample's point lies elsewhere in the pixel: its depth
+   * gradient is taken at its own image point */
+  float sx, sy;
+  if (r->gradient_sample && hush__camera_project(&ctx->cam, f->p, 1.0f, &sx, &sy)) {
+    px = sx;
+    py = sy;
+  }
   const float z = view_depth(&ctx->cam, f->p);
   L->depth[i] = z;
   memcpy(L->position + 3 * i, &f->p, 3 * sizeof(float));
@@ -329,9 +337,13 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
                       "render: %u triangles: the visibility buffer holds triangle indices as "
                       "floats, exact only up to 2^24 = 16777216",
                       ctx->scene->triangle_count);
+  hush_status st = HUSH_OK;
+  if (p->gradients) {
+    st = hush__gradients_begin(device, p->gradients, ctx);
+    if (st != HUSH_OK) return st;
+  }
   layers L;
   memset(&L, 0, sizeof L);
-  hush_status st = HUSH_OK;
   const struct {
     const char *name;
     int channels;
@@ -379,7 +391,9 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
           if (!traced) trace_block(ctx, bx, by, &b);
           traced = 1;
           hush_pixel_result r;
-          shade_pixel(ctx, &b, i, x, y, ctx->frame, &r);
+          /* A-SVGF: a forward-projected gradient sample may take the pixel */
+          if (!p->gradients || !hush__gradients_shade(p->gradients, ctx, x, y, &b.hit[i], &r))
+            shade_pixel(ctx, &b, i, x, y, ctx->frame, &r);
           write_pixel(ctx, &L, x, y, &r);
           total += r.rays;
         }
@@ -390,6 +404,10 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
     /* progress counts rows; a tile stands for its share of them */
     if (progress && omp_get_thread_num() == 0)
       progress(user, (uint32_t)((uint64_t)done * H / tiles), H);
+  }
+  if (p->gradients) {
+    st = hush__gradients_end(device, p->gradients, ctx, out, threads, &total);
+    if (st != HUSH_OK) return st;
   }
   if (progress) progress(user, H, H);
   if (rays) *rays = total;

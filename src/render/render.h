@@ -26,6 +26,9 @@
  *                      directly is diffuse. color is then diffuse + specular,
  *                      exactly (without the split it can differ in the last bit)
  *
+ *   gradient (3)       with params.gradients: A-SVGF gradient samples per 3 x 3
+ *                      stratum (render/gradients.h)
+ *
  * With params.progressive (fewer than one sample per pixel, progressive.h)
  * only the pattern's pixels are traced; the others are holes: spp 0, every
  * other layer 0 except vis, which is -1 (no triangle) as for the sky.
@@ -46,6 +49,8 @@
 
 #include <stdint.h>
 
+struct hush_gradients;
+
 typedef struct hush_render_params {
   uint32_t width, height;
   uint32_t spp;            /* >= 1 */
@@ -61,6 +66,9 @@ typedef struct hush_render_params {
   hush_path_vertex_fn vertex_fn;
   hush_path_end_fn path_end_fn; /* integrator.h; both get vertex_user */
   void *vertex_user;
+  /* not NULL: A-SVGF gradient samples (render/gradients.h); the caller owns
+   * it and keeps it from frame to frame; needs spp 1 and no progressive */
+  struct hush_gradients *gradients;
 } hush_render_params;
 
 void hush__render_defaults(hush_render_params *p);
@@ -87,12 +95,14 @@ typedef struct hush_pixel_result {
   float diffuse[3], specular[3]; /* split_lobes; color = diffuse + specular */
   float variance;          /* of one sample's luminance (spp > 1) */
   hush_first_hit first;    /* of sample 0 */
+  int gradient_sample;     /* 1: a forward-projected A-SVGF sample (gradients.h), whose first hit
+                            * is not on the pixel's jittered ray */
   uint64_t rays;
 } hush_pixel_result;
 
 /* Renders pixel (x, y) of ctx's frame with the random numbers of frame
  * seed_frame (normally ctx->frame): the same arguments always give the same
- * result, bit for bit. */
+ * result, bit for bit. It ignores params.gradients. */
 void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint32_t seed_frame,
                         hush_pixel_result *out);
 

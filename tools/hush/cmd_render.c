@@ -15,6 +15,7 @@
 #include "io/export_bmfr.h"
 #include "io/sequence.h"
 #include "render/camera.h"
+#include "render/gradients.h"
 #include "render/lights.h"
 #include "render/progressive.h"
 #include "render/render.h"
@@ -62,6 +63,11 @@ static const char *const help_text =
     "  --split-lobes        also write the layers diffuse and specular: the\n"
     "                       radiance by the first hit's BSDF lobe (light seen\n"
     "                       directly is diffuse); color is their sum\n"
+    "  --gradients          A-SVGF gradient samples (docs/asvgf.md): per 3x3 stratum\n"
+    "                       the last frame's brightest sample is forward-projected\n"
+    "                       and re-shaded with its old random numbers; layer\n"
+    "                       gradient (current and previous luminance, landing\n"
+    "                       pixel in the stratum 0..8 or -1); needs --spp 1\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
     "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
@@ -92,6 +98,7 @@ typedef struct render_options {
   hush_render_params params;
   int png, quiet;
   int export_bmfr;
+  int gradients;           /* --gradients */
   double spp_fraction;     /* 1: every pixel */
   hush_progressive progressive;
   hush_exr_type exr_type;
@@ -192,6 +199,8 @@ static void parse_options(int argc, char **argv, render_options *o) {
       if (strcmp(v, "bmfr") != 0)
         cli_usage_error(a.cmd, "--export: unknown layout '%s' (bmfr)", v);
       o->export_bmfr = 1;
+    } else if (cli_switch(&a, arg, "--gradients")) {
+      o->gradients = 1;
     } else if (cli_switch(&a, arg, "--png")) {
       o->png = 1;
     } else if (cli_switch(&a, arg, "--half")) {
@@ -213,6 +222,9 @@ static void parse_options(int argc, char **argv, render_options *o) {
   }
   if (!o->scene) cli_usage_error(a.cmd, "--scene is required (see hush render --help)");
   if (!o->out) cli_usage_error(a.cmd, "--out DIR is required (see hush render --help)");
+  if (o->gradients && (o->params.spp != 1 || o->spp_fraction < 1.0))
+    cli_usage_error(a.cmd, "--gradients needs one sample on every pixel (--spp 1, no "
+                           "--spp-fraction)");
   if (o->path && strcmp(o->path, "path") && strcmp(o->path, "static") &&
       strcmp(o->path, "orbit") && strcmp(o->path, "dolly")) {
     char ext[16];
@@ -335,7 +347,7 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
           "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
           "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n  \"split_lobes\": %s,\n"
           "  \"spp_fraction\": %.9g,\n  \"progressive_block\": [%u, %u],\n  \"export\": %s,\n"
-          "  \"psf\": %s,\n  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
+          "  \"psf\": %s,\n  \"gradients\": %s,\n  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
           "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
           r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
           p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
@@ -344,6 +356,7 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
           r->o->spp_fraction < 1.0 ? r->o->progressive.k : 1u,
           r->o->spp_fraction < 1.0 ? r->o->progressive.m : 1u,
           r->o->export_bmfr ? "\"bmfr\"" : "null", r->psf.on ? "true" : "false",
+          r->o->gradients ? "true" : "false",
           r->scene.triangle_count,
           r->scene.skipped_triangles, seconds, (unsigned long long)rays);
   cli_json_string(f, "hush");
@@ -520,14 +533,25 @@ static int render_frames(render_run *r, int argc, char **argv) {
     hush__psf_renderer_hook(r->psf.renderer, &params);
   }
 
+  hush_gradients gradients;
+  memset(&gradients, 0, sizeof gradients);
+  if (o->gradients) {
+    st = hush__gradients_init(r->device, &gradients, W, H);
+    if (st != HUSH_OK) return fail(r, st, "gradients");
+    params.gradients = &gradients;
+  }
   const double t0 = hush__now_ms();
   uint64_t rays_total = 0;
   /* one frame for the whole sequence: hush__render_frame rewrites its
    * layers in place instead of allocating and zeroing them every frame */
   hush_frame frame = hush_frame_new(r->device, W, H);
-  if (!frame) return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
+  if (!frame) {
+    hush__gradients_free(&gradients);
+    return fail(r, HUSH_ERROR_OUT_OF_MEMORY, "frame");
+  }
   const int rc = render_sequence(r, &params, &moves, frame, n, &rays_total);
   hush_frame_release(frame);
+  hush__gradients_free(&gradients);
   if (rc) return rc;
   render_progress_break(&r->progress);
   st = hush__sequence_write_cameras(r->device, &r->seq);

@@ -1,0 +1,103 @@
+/*
+ * gradients.h — the renderer side of A-SVGF's temporal gradients
+ * (realtime-denoising-comparison-higginson-2023.md §2.3.1 "Gradient
+ * Estimation" and "Seed Reprojection"; ../shared/papers/NOTES.md, A-SVGF):
+ * `hush render --gradients`.
+ *
+ * The screen is cut into strata of 3 x 3 pixels. After a frame is rendered,
+ * each stratum picks its pixel of largest luminance among those that see a
+ * triangle, remembers that pixel's visibility sample (triangle, u, v) and the
+ * random numbers it was shaded with, and re-shades the sample from the
+ * visibility buffer to get its "previous" luminance (see below why).
+ *
+ * In the next frame each such sample is forward-projected: the same surface
+ * point (triangle, u, v) at the new frame's object transforms, so moving
+ * objects carry their samples, through the new camera. It lands on pixel
+ * (floor x, floor y), in some stratum of the new grid; a stratum takes at
+ * most one sample (the landing sample of largest previous luminance, then
+ * the lowest source stratum). If that pixel's own primary ray sees the same
+ * surface (the visibility test, see gradients.c), the pixel is shaded with
+ * the forward-projected sample and the previous frame's random numbers
+ * instead of a fresh sample: its "color" is that re-shaded sample and its
+ * G-buffer (vis, normal, position, depth ...) the sample's first hit. The
+ * other pixels are rendered as usual with fresh numbers.
+ *
+ * Both luminances of a gradient sample come from the same code path
+ * (hush__integrator_first_hit + hush__integrator_shade from the visibility
+ * sample): the previous frame's traced primary ray hits the point with
+ * other rounding than the one rebuilt from (triangle, u, v), and that would
+ * leave a small non-zero gradient where nothing changed. With the re-shade on
+ * both sides, a static scene and camera give a gradient of exactly 0. The
+ * price is one extra path per stratum (1/9 of a frame's paths).
+ *
+ * Output, the layer "gradient" (3 channels, docs/sequence-format.md): every
+ * pixel of stratum (sx, sy) holds that stratum's sample: current luminance,
+ * previous luminance, and where it landed as the pixel's index inside the
+ * stratum, (y - 3 sy) * 3 + (x - 3 sx) in 0..8, or -1 (and luminances 0)
+ * where no sample landed or the visibility test failed. The index is small so
+ * that it stays exact in half-float EXRs.
+ *
+ * Needs 1 sample per pixel on every pixel (no --spp > 1, no --spp-fraction):
+ * the sample replaces the pixel's only sample.
+ */
+#ifndef HUSH_RENDER_GRADIENTS_H
+#define HUSH_RENDER_GRADIENTS_H
+
+#include "hush.h"
+#include "render/render.h"
+
+#include <stdint.h>
+
+#define HUSH_GRADIENT_STRATUM 3u
+
+/* A visibility sample chosen in one frame, to be re-shaded in the next. */
+typedef struct hush_gradient_source {
+  uint32_t triangle;       /* UINT32_MAX: the stratum has none */
+  float u, v;
+  uint32_t x, y;           /* the pixel it was chosen at */
+  uint32_t seed_frame, seed_x, seed_y; /* the numbers it was shaded with (hush__rand_init) */
+  float luminance;         /* re-shaded in its own frame */
+} hush_gradient_source;
+
+/* State carried from frame to frame. All arrays have one entry per stratum
+ * (strata_x * strata_y, row-major) and are owned. */
+typedef struct hush_gradients {
+  uint32_t width, height;
+  uint32_t strata_x, strata_y; /* ceil(width / 3), ceil(height / 3) */
+  int have_sources;        /* sources hold the last rendered frame's samples */
+  hush_gradient_source *sources; /* by the stratum of the last frame they were chosen in */
+  hush_gradient_source *next;    /* being chosen for the next frame */
+  /* this frame, by the stratum of the landing pixel: */
+  int32_t *claim;          /* index into sources of the sample landing here, or -1 */
+  uint32_t *landing;       /* its landing pixel, y * width + x */
+  int32_t *accepted;       /* after the visibility test: index in the stratum 0..8, or -1 */
+  float *current, *previous; /* luminances of accepted samples */
+} hush_gradients;
+
+hush_status hush__gradients_init(hush_device device, hush_gradients *g, uint32_t width,
+                                 uint32_t height);
+void hush__gradients_free(hush_gradients *g);
+/* Forgets the last frame's samples (a cut: the next frame has no gradients). */
+void hush__gradients_reset(hush_gradients *g);
+
+/* The three hooks of hush__render_frame (render.c), in order: */
+
+/* Before the frame: forward-projects the last frame's samples into ctx's
+ * frame and assigns them to landing strata. Checks ctx's parameters. */
+hush_status hush__gradients_begin(hush_device device, hush_gradients *g,
+                                  const hush_render_ctx *ctx);
+
+/* For pixel (x, y), whose sample 0 primary ray hit `traced`: if a sample
+ * landed here and passes the visibility test, shades the pixel with it into
+ * *out and returns 1; else returns 0 (shade the pixel as usual). Called from
+ * the worker threads: each writes only the entries of (x, y)'s stratum. */
+int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_t x, uint32_t y,
+                          const hush_hit *traced, hush_pixel_result *out);
+
+/* After the frame: writes the layer "gradient" into out, then chooses and
+ * re-shades this frame's samples for the next frame (the scene must still be
+ * at ctx's frame). *rays (not NULL) is increased by the rays traced. */
+hush_status hush__gradients_end(hush_device device, hush_gradients *g, const hush_render_ctx *ctx,
+                                hush_frame out, int threads, uint64_t *rays);
+
+#endif
