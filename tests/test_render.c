@@ -617,6 +617,61 @@ static void test_cornell_gbuffer(void) {
   rig_close(&r);
 }
 
+/* ---- emission layer ----------------------------------------------------------------------- */
+
+/* The emission layer holds what the camera ray sees directly at its first
+ * hit: 0 on a non-emissive surface, the material's emission on an
+ * emissive triangle (the Cornell lamp), the sphere's radiance on a sphere
+ * light, and the whole colour on the sky (nothing else reaches a sky
+ * pixel). Each sample's primary ray goes through the pixel centre (jitter
+ * 0), so all of a pixel's samples see the same first hit. */
+static void test_emission_layer(void) {
+  static const char *const scenes[] = {"cornell", "courtyard", "moving-light"};
+  for (size_t si = 0; si < sizeof scenes / sizeof scenes[0]; si++) {
+    rig r;
+    rig_open(&r, scenes[si]);
+    hush_render_params p;
+    hush__render_defaults(&p);
+    p.width = p.height = 48;
+    p.spp = 2;
+    p.jitter = 0;
+    hush_render_ctx ctx;
+    hush_frame f = render_at(&r, &p, HUSH_MOVE_STATIC, 0, &ctx);
+    const float *e = layer(f, "emission"), *color = layer(f, "color"), *vis = layer(f, "vis");
+    int lamp = 0, sky = 0, sphere = 0, plain = 0, bad = 0;
+    for (uint32_t i = 0; i < p.width * p.height; i++) {
+      float expect[3] = {0.0f, 0.0f, 0.0f};
+      const float v = vis[3 * i];
+      if (v >= 0.0f) {
+        const hush_material *m = &r.scene.materials[r.scene.triangle_material[(uint32_t)v]];
+        const int emits = m->emission[0] + m->emission[1] + m->emission[2] > 0.0f;
+        lamp += emits;
+        plain += !emits;
+        if (emits) memcpy(expect, m->emission, sizeof expect);
+      } else if (v == -1.0f) {
+        sky++;
+        memcpy(expect, color + 3 * i, sizeof expect);
+      } else {
+        sphere++;
+        memcpy(expect, r.scene.spheres[(uint32_t)(-2.0f - v)].radiance, sizeof expect);
+      }
+      for (int k = 0; k < 3; k++) {
+        if (e[3 * i + k] != expect[k]) bad++;
+        /* the rest of the radiance (reflected light) is never negative */
+        if (!(color[3 * i + k] - e[3 * i + k] >= -1e-5f * (1.0f + e[3 * i + k]))) bad++;
+      }
+    }
+    printf("emission %s: %d lamp, %d sphere, %d sky, %d other pixels\n", scenes[si], lamp, sphere,
+           sky, plain);
+    CHECK_MSG(bad == 0, "%s: %d emission values differ from the first hit's", scenes[si], bad);
+    CHECK(plain > 100);
+    if (si == 0) CHECK_MSG(lamp > 4, "cornell: only %d lamp pixels", lamp);
+    if (si == 1) CHECK_MSG(sky > 20, "courtyard: only %d sky pixels", sky);
+    hush_frame_release(f);
+    rig_close(&r);
+  }
+}
+
 /* ---- diffuse / specular split ----------------------------------------------------------------- */
 
 /* hush__bsdf_eval_lobes: the lobes add up to hush__bsdf_eval bit for bit,
@@ -818,6 +873,7 @@ int main(void) {
   test_determinism();
   test_reuse_frame();
   test_cornell_gbuffer();
+  test_emission_layer();
   test_bsdf_lobes();
   test_lobe_layers();
   return check_summary();

@@ -152,6 +152,7 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
   memset(out, 0, sizeof *out);
   sample_color(p->split_lobes, &r, out->color);
   memcpy(out->direct, r.direct, sizeof out->direct);
+  memcpy(out->emission, r.emission, sizeof out->emission);
   if (p->split_lobes) {
     memcpy(out->diffuse, r.diffuse, sizeof out->diffuse);
     memcpy(out->specular, r.specular, sizeof out->specular);

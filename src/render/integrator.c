@@ -238,6 +238,14 @@ static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_
 
 /* ---- the path ------------------------------------------------------------------ */
 
+/* The emission the camera ray sees at its first hit (hush_path_result's
+ * emission): at depth 0 the throughput and MIS weight are 1, so it is c
+ * itself, dropped like add() drops it when not finite. */
+static void first_emission(hush_path_result *out, int depth, const float c[3]) {
+  if (depth != 0 || !(isfinite(c[0]) && isfinite(c[1]) && isfinite(c[2]))) return;
+  for (int k = 0; k < 3; k++) out->emission[k] = c[k];
+}
+
 static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
                        const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
   memset(out, 0, sizeof *out);
@@ -263,6 +271,7 @@ static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_firs
       const float pdf_env = hush__lights_env_eval(L, d, le);
       const float w = prev_delta ? 1.0f : power_heuristic(prev_pdf, pdf_env);
       add(it, out, vsum, beta, le, w, depth, direct, share);
+      first_emission(out, depth, le);
       return;
     }
     if (h.kind == HUSH_FIRST_SPHERE) {
@@ -270,6 +279,7 @@ static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_firs
           prev_delta ? 1.0f
                      : power_heuristic(prev_pdf, hush__lights_sphere_pdf(L, h.sphere, origin));
       add(it, out, vsum, beta, sc->spheres[h.sphere].radiance, w, depth, direct, share);
+      first_emission(out, depth, sc->spheres[h.sphere].radiance);
       return;
     }
     /* the first hit's surface is read in place (copying it and reading a
@@ -290,6 +300,7 @@ static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_firs
         w = power_heuristic(prev_pdf, hush__lights_triangle_pdf(L, h.hit.triangle, area, h.t, cos_l));
       }
       add(it, out, vsum, beta, m->emission, w, depth, direct, share);
+      first_emission(out, depth, m->emission);
     }
     const hush_vec3 wo = hush_v3_scale(d, -1.0f);
     hush_bsdf b;

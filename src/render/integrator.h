@@ -105,6 +105,9 @@ typedef struct hush_first_hit {
 typedef struct hush_path_result {
   float radiance[3];
   float direct[3];         /* emission seen directly + the first hit's shadow ray */
+  float emission[3];       /* emission seen directly: what the camera ray's first hit
+                            * emits towards it (emissive triangle, sphere light, sky);
+                            * radiance - emission is what the surfaces reflect */
   /* With split_lobes (else 0): radiance by the first hit's lobe. Light seen
    * directly is diffuse. The first hit's shadow ray is split by the BSDF's
    * lobes evaluated towards the light (hush__bsdf_eval_lobes); everything

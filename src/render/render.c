@@ -86,7 +86,7 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
                         uint32_t x, uint32_t y, uint32_t seed_frame, hush_pixel_result *out) {
   memset(out, 0, sizeof *out);
   const hush_render_params *p = &ctx->params;
-  double mean = 0.0, m2 = 0.0, sum[3] = {0, 0, 0}, dsum[3] = {0, 0, 0};
+  double mean = 0.0, m2 = 0.0, sum[3] = {0, 0, 0}, dsum[3] = {0, 0, 0}, esum[3] = {0, 0, 0};
   double diff_sum[3] = {0, 0, 0}, spec_sum[3] = {0, 0, 0};
   for (uint32_t s = 0; s < p->spp; s++) {
     hush_rand rng;
@@ -112,6 +112,7 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
     for (int k = 0; k < 3; k++) {
       sum[k] += r.radiance[k];
       dsum[k] += r.direct[k];
+      esum[k] += r.emission[k];
       diff_sum[k] += r.diffuse[k];
       spec_sum[k] += r.specular[k];
     }
@@ -124,6 +125,7 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
   for (int k = 0; k < 3; k++) {
     out->color[k] = (float)(sum[k] / p->spp);
     out->direct[k] = (float)(dsum[k] / p->spp);
+    out->emission[k] = (float)(esum[k] / p->spp);
     if (p->split_lobes) {
       /* the colour is the layers' sum, so that it holds exactly */
       out->diffuse[k] = (float)(diff_sum[k] / p->spp);
@@ -150,7 +152,7 @@ _Static_assert(TILE % BLOCK == 0, "tiles hold whole blocks");
 
 typedef struct layers {
   float *color, *albedo, *normal, *position, *depth, *dgrad, *motion, *id, *vis;
-  float *spp, *variance, *direct, *indirect, *diffuse, *specular;
+  float *spp, *variance, *direct, *indirect, *diffuse, *specular, *emission;
 } layers;
 
 static float view_depth(const hush_render_camera *cam, hush_vec3 p) {
@@ -239,6 +241,7 @@ static void clear_pixel(const layers *L, size_t i) {
   zero(L->indirect, 3, i);
   zero(L->diffuse, 3, i);
   zero(L->specular, 3, i);
+  zero(L->emission, 3, i);
 }
 
 static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x, uint32_t y,
@@ -249,6 +252,7 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   /* every value is written (the layers may hold the last frame): the
    * G-buffer entries a sky or sphere pixel does not have are set to 0 */
   memcpy(L->color + 3 * i, r->color, 3 * sizeof(float));
+  memcpy(L->emission + 3 * i, r->emission, 3 * sizeof(float));
   if (L->direct)
     for (int k = 0; k < 3; k++) {
       L->direct[3 * i + k] = r->direct[k];
@@ -359,6 +363,7 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
       {"indirect", 3, &L.indirect, p->split},
       {"diffuse", 3, &L.diffuse, p->split_lobes},
       {"specular", 3, &L.specular, p->split_lobes},
+      {"emission", 3, &L.emission, 1},
   };
   for (size_t k = 0; k < sizeof table / sizeof table[0] && st == HUSH_OK; k++)
     if (table[k].on) st = add_layer(out, table[k].name, table[k].channels, table[k].data);

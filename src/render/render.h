@@ -20,6 +20,10 @@
  *                      0 for a hole (a pixel this frame did not trace)
  *   variance (1)       when spp > 1: the sample variance of the luminance
  *                      of one sample
+ *   emission (3)       the radiance the camera rays see directly at their
+ *                      first hit (emissive triangle, sphere light, sky),
+ *                      averaged as color is: color - emission is what the
+ *                      first hits reflect, the part filters should filter
  *   direct, indirect (3) with split: first-hit emission + its shadow ray, and the rest
  *   diffuse, specular (3) with split_lobes: the radiance by the first hit's
  *                      BSDF lobe (integrator.h, hush_path_result); light seen
@@ -92,6 +96,7 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
 typedef struct hush_pixel_result {
   float color[3];
   float direct[3];
+  float emission[3];       /* mean over the samples of hush_path_result's emission */
   float diffuse[3], specular[3]; /* split_lobes; color = diffuse + specular */
   float variance;          /* of one sample's luminance (spp > 1) */
   hush_first_hit first;    /* of sample 0 */
