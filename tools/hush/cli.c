@@ -238,6 +238,15 @@ void cli_layer_channels(const char *layer, int channels, char *buf, size_t size)
   }
 }
 
+/* Whether the frame has layer `name`, without hush_frame_get_layer's
+ * error: the device keeps its first error, so a missing optional layer
+ * must not leave one behind to mask a later, real failure. */
+static int frame_has_layer(hush_frame frame, const char *name) {
+  for (uint32_t i = 0; i < hush_frame_layer_count(frame); i++)
+    if (strcmp(hush_frame_layer_name(frame, i), name) == 0) return 1;
+  return 0;
+}
+
 int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hush_frame frame,
                     const char *file) {
   const hush_filter_class_info *cls = hush_filter_get_class(filter);
@@ -245,7 +254,8 @@ int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hus
     const hush_image_info *im = &cls->images[i];
     if (im->role != HUSH_IMAGE_INPUT) continue;
     hush_image_view view;
-    if (hush_frame_get_layer(frame, im->name, &view) != HUSH_OK) {
+    if (!frame_has_layer(frame, im->name) ||
+        hush_frame_get_layer(frame, im->name, &view) != HUSH_OK) {
       if (im->required) {
         char channels[128];
         cli_layer_channels(im->name, im->channels, channels, sizeof channels);

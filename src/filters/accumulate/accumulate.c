@@ -12,6 +12,7 @@
  * accumulation.h), which the later filters share.
  */
 #include "filters/albedo.h"
+#include "filters/emission.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
 #include "temporal/accumulation.h"
@@ -71,6 +72,7 @@ enum {
   I_ID,
   I_MOTION,
   I_ALBEDO,
+  I_EMISSION,
   I_OUTPUT,
   I_VARIANCE,
   I_HISTORY_LENGTH,
@@ -87,6 +89,9 @@ static const hush_image_info accumulate_images[I_COUNT] = {
     {"motion", HUSH_IMAGE_INPUT, 0, 2,
      "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation"},
+    {"emission", HUSH_IMAGE_INPUT, 0, 3,
+     "radiance the camera sees directly at the first hit (lights, sky): kept out of the "
+     "accumulation (color - emission), added back to the output"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "accumulated radiance"},
     {"variance", HUSH_IMAGE_OUTPUT, 0, 1,
      "luminance variance from the accumulated moments (of the demodulated signal when "
@@ -113,6 +118,7 @@ typedef struct accumulate_state {
   hush_planar albedo;   /* imported albedo, then the remodulated output */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_planar variance; /* 1 */
+  hush_planar emission; /* imported emission, then the output (emission.h) */
 } accumulate_state;
 
 static void accumulate_destroy(void *state) {
@@ -124,6 +130,7 @@ static void accumulate_destroy(void *state) {
   hush__planar_free(&st->albedo);
   hush__gbuffer_inputs_free(&st->gin);
   hush__planar_free(&st->variance);
+  hush__planar_free(&st->emission);
   free(st);
 }
 
@@ -148,9 +155,11 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_begin(f);
 
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
+  const int emis = hush__filter_view(f, I_EMISSION) != NULL;
 
   /* ---- import: nothing of the history changes until every input is read */
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (emis && (s = hush__filter_scratch(f, &st->emission, 3))) return s;
   if (hush__filter_view(f, I_VARIANCE) && (s = hush__filter_scratch(f, &st->variance, 1)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
@@ -158,6 +167,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- reproject */
@@ -171,6 +181,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- accumulate */
+  if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
   if (demod) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA_MIN);
@@ -186,6 +197,10 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   if (demod) {
     hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
+  }
+  if (emis) {
+    hush__emission_add(&st->emission, result, threads);
+    result = &st->emission;
   }
   hush__view_export(result, hush__filter_view(f, I_OUTPUT), threads);
   if (var_view) hush__view_export(&st->variance, var_view, threads);

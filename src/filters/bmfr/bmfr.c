@@ -30,6 +30,7 @@
  * on its own and the noise depends on the frame index only.
  */
 #include "filters/albedo.h"
+#include "filters/emission.h"
 #include "filters/bmfr/blocks.h"
 #include "filters/bmfr/features.h"
 #include "filters/bmfr/regression.h"
@@ -149,6 +150,7 @@ enum {
   I_ID,
   I_MOTION,
   I_ALBEDO,
+  I_EMISSION,
   I_OUTPUT,
   I_FITTED,
   I_HISTORY_LENGTH,
@@ -166,6 +168,9 @@ static const hush_image_info bmfr_images[I_COUNT] = {
     {"motion", HUSH_IMAGE_INPUT, 0, 2,
      "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
+    {"emission", HUSH_IMAGE_INPUT, 0, 3,
+     "radiance the camera sees directly at the first hit (lights, sky): kept out of the fit "
+     "(color - emission), added back before TAA"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
     {"fitted", HUSH_IMAGE_OUTPUT, 0, 3,
      "phase II result: this frame's block fit of the accumulated (demodulated) radiance"},
@@ -204,6 +209,7 @@ typedef struct bmfr_state {
   int threads;
   /* allocated on first use: */
   hush_planar albedo;
+  hush_planar emission; /* imported emission, then the output (emission.h) */
   hush_gbuffer_inputs gin;
   hush_taa taa;
 } bmfr_state;
@@ -220,6 +226,7 @@ static void bmfr_destroy(void *state) {
   hush__free_floats(st->noise);
   hush__free_floats(st->scratch);
   hush__planar_free(&st->albedo);
+  hush__planar_free(&st->emission);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   free(st);
@@ -441,6 +448,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   const int has_albedo = hush__filter_view(f, I_ALBEDO) != NULL;
   const int demod = hush__param_i(f, P_DEMODULATE) && has_albedo;
   const int with_taa = hush__param_i(f, P_TAA);
+  const int emis = hush__filter_view(f, I_EMISSION) != NULL;
   if (!with_taa) st->taa.has_history = 0; /* switched back on later: start over */
 
   bmfr_feature_set set;
@@ -463,6 +471,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   /* ---- import: nothing of the history changes until every input is read */
   const int need_albedo = demod || (set.needs & (1u << BMFR_SRC_ALBEDO));
   if (need_albedo && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (emis && (s = hush__filter_scratch(f, &st->emission, 3))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
@@ -471,6 +480,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- phase I: reproject + accumulate the demodulated 1 spp radiance */
@@ -481,6 +491,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
+  if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
   if (demod) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA);
@@ -536,7 +547,24 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   const hush_planar *result = &st->fhist[cur];
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
-  if (with_taa) {
+  if (emis) {
+    /* the emission goes back before TAA, so the fused remodulation is
+     * done apart: remodulate, add the emission, then TAA the sum */
+    if (demod) {
+      hush__remodulate(&st->albedo, result, threads);
+      result = &st->albedo;
+    }
+    hush__emission_add(&st->emission, result, threads);
+    rgb = st->emission;
+    if (with_taa) {
+      hush_taa_params tp;
+      tp.alpha = hush__param_f(f, P_TAA_ALPHA);
+      tp.box = HUSH_TAA_CLAMP;
+      tp.tonemap = 1;
+      hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
+      rgb = *hush__taa_output(&st->taa);
+    }
+  } else if (with_taa) {
     hush_taa_params tp;
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;

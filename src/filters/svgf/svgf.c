@@ -28,6 +28,7 @@
  * not depend on the thread count.
  */
 #include "filters/albedo.h"
+#include "filters/emission.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
 #include "filters/svgf/atrous.h"
@@ -159,6 +160,7 @@ enum {
   I_ID,
   I_MOTION,
   I_ALBEDO,
+  I_EMISSION,
   I_SPP,
   I_SAMPLE_VARIANCE,
   I_DIRECT,
@@ -181,6 +183,9 @@ static const hush_image_info svgf_images[I_COUNT] = {
     {"motion", HUSH_IMAGE_INPUT, 0, 2,
      "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
+    {"emission", HUSH_IMAGE_INPUT, 0, 3,
+     "radiance the camera sees directly at the first hit (lights, sky): kept out of the "
+     "filtered signal (color, or direct, minus emission), added back before TAA"},
     {"spp", HUSH_IMAGE_INPUT, 0, 1,
      "samples per pixel of 'color' (else 1; `hush render --spp N`): the variance of a pixel "
      "value is the per-sample variance / spp"},
@@ -231,6 +236,7 @@ typedef struct svgf_state {
   hush_planar eps;       /* 1: progressive luminance epsilon */
   /* allocated on first use: */
   hush_planar albedo;
+  hush_planar emission; /* imported emission, then the output (emission.h) */
   hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
@@ -265,6 +271,7 @@ static void svgf_destroy(void *state) {
   svgf_padded_free(&st->signal[0]);
   svgf_padded_free(&st->signal[1]);
   hush__planar_free(&st->albedo);
+  hush__planar_free(&st->emission);
   hush__planar_free(&st->spp);
   hush__planar_free(&st->sample_var);
   hush__gbuffer_inputs_free(&st->gin);
@@ -505,6 +512,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   const int has_dgrad = hush__filter_view(f, I_DEPTH_GRADIENT) != NULL;
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
   const int with_taa = hush__param_i(f, P_TAA);
+  const int emis = hush__filter_view(f, I_EMISSION) != NULL;
   const int iterations = hush__param_i(f, P_ITERATIONS);
   const svgf_kernel *kernel = hush__param_i(f, P_KERNEL) ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
   const int split = hush__filter_view(f, I_DIRECT) && hush__filter_view(f, I_INDIRECT);
@@ -527,6 +535,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
       (s = component_init(f->device, &st->comp[1], f->width, f->height)))
     return s;
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
+  if (emis && (s = hush__filter_scratch(f, &st->emission, 3))) return s;
   if (has_spp && (s = hush__filter_scratch(f, &st->spp, 1))) return s;
   if (has_svar && (s = hush__filter_scratch(f, &st->sample_var, 1))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
@@ -539,6 +548,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
   if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
   const size_t npix = (size_t)W * H;
@@ -552,6 +562,8 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
       ((s = svgf_progressive_init(f->device, &st->prog, f->width, f->height)) ||
        (s = hush__filter_scratch(f, &st->eps, 1))))
     return s;
+  /* light seen directly is all direct light: with the split it comes off 'direct' */
+  if (emis) hush__emission_subtract(&st->comp[0].color, &st->emission, threads);
   hush__filter_timing_stage(f, "import");
 
   /* ---- progressive: the G-buffer holes filled (Dundr §4.2.1) */
@@ -641,6 +653,10 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   if (demod) {
     hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
+  }
+  if (emis) {
+    hush__emission_add(&st->emission, result, threads);
+    result = &st->emission;
   }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
