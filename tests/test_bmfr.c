@@ -686,6 +686,94 @@ static void test_block_sizes(hush_device dev) {
   }
 }
 
+/* ---- emission ------------------------------------------------------------ */
+
+/* A dark wall with a lamp on it, both in one block: the lamp (10 x 10
+ * pixels at (8, 8)) has the wall's position and normal, so no feature
+ * separates it, and the block's least-squares fit (outlier guard off, as
+ * the paper) smears it over the wall. With 'emission' bound, the lamp's
+ * output is its emission (plus at most the wall's radiance the fit may
+ * spread onto it) and none of its radiance reaches the wall: the wall
+ * stays within twice its radiance (the fit of the step between the
+ * lamp's 0 reflected light and the wall overshoots a little, 400 times
+ * below the lamp); a lamp that also reflects the wall's light comes out
+ * exactly. Unbound, the same frame leaks (the control). */
+#define LAMP_E 20.0f
+static int in_lamp(int i) {
+  const int x = i % W, y = i / W;
+  return x >= 8 && x < 18 && y >= 8 && y < 18;
+}
+
+static void lamp_scene(scene *s, float *emission, float wall, int lamp_reflects) {
+  plane(s, wall, wall, wall);
+  for (int i = 0; i < N; i++)
+    for (int c = 0; c < 3; c++) {
+      emission[3 * i + c] = in_lamp(i) ? LAMP_E : 0.0f;
+      if (in_lamp(i)) s->color[3 * i + c] = LAMP_E + (lamp_reflects ? wall : 0.0f);
+    }
+}
+
+static hush_filter make_emission(hush_device dev, scene *s, float *emission) {
+  hush_filter f = hush_filter_new(dev, "bmfr");
+  REQUIRE(f);
+  bind(f, "color", s->color, HUSH_FORMAT_FLOAT3);
+  bind(f, "depth", s->depth, HUSH_FORMAT_FLOAT);
+  bind(f, "normal", s->normal, HUSH_FORMAT_FLOAT3);
+  bind(f, "position", s->position, HUSH_FORMAT_FLOAT3);
+  bind(f, "albedo", s->albedo, HUSH_FORMAT_FLOAT3);
+  if (emission) bind(f, "emission", emission, HUSH_FORMAT_FLOAT3);
+  bind(f, "output", s->output, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+  return f;
+}
+
+static void test_emission(hush_device dev) {
+  static scene s;
+  static float emission[N * 3];
+  const float wall = 0.05f;
+  for (int bound = 1; bound >= 0; bound--)
+    for (int taa = 0; taa < 2; taa++) {
+      lamp_scene(&s, emission, wall, 0);
+      hush_filter f = make_emission(dev, &s, bound ? emission : NULL);
+      REQUIRE(hush_filter_set_int(f, "displace", 0) == HUSH_OK); /* lamp and wall in block (0, 0) */
+      REQUIRE(hush_filter_set_bool(f, "taa", taa) == HUSH_OK);
+      REQUIRE(hush_filter_set_float(f, "outlier", 0.0f) == HUSH_OK);
+      for (uint64_t k = 0; k < 6; k++) REQUIRE(run(f, k) == HUSH_OK);
+      float lamp_dev = 0.0f, wall_max = 0.0f;
+      for (int i = 0; i < N; i++)
+        for (int c = 0; c < 3; c++) {
+          const float o = s.output[3 * i + c];
+          if (in_lamp(i)) {
+            const float d = o < LAMP_E ? LAMP_E - o : o - LAMP_E - wall;
+            lamp_dev = d > lamp_dev ? d : lamp_dev;
+          } else {
+            wall_max = o > wall_max ? o : wall_max;
+          }
+        }
+      CHECK(all_finite(s.output, N * 3));
+      if (bound) {
+        CHECK_MSG(lamp_dev <= 1e-4f * LAMP_E, "taa %d: lamp output off its emission by %g", taa,
+                  (double)lamp_dev);
+        CHECK_MSG(wall_max <= 2.0f * wall, "taa %d: lamp leaks into the wall: %g (wall %g)", taa,
+                  (double)wall_max, (double)wall);
+      } else {
+        CHECK_MSG(wall_max > 10.0f * wall, "taa %d: unbound, the fit should smear the lamp (%g)",
+                  taa, (double)wall_max);
+      }
+      hush_filter_release(f);
+      if (!bound) continue;
+      lamp_scene(&s, emission, wall, 1);
+      f = make_emission(dev, &s, emission);
+      REQUIRE(hush_filter_set_bool(f, "taa", taa) == HUSH_OK);
+      REQUIRE(hush_filter_set_float(f, "outlier", 0.0f) == HUSH_OK);
+      for (uint64_t k = 0; k < 6; k++) REQUIRE(run(f, k) == HUSH_OK);
+      CHECK_MSG(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f * LAMP_E,
+                "taa %d: reflecting lamp off by %g", taa,
+                (double)max_abs_diff(s.output, s.color, N * 3));
+      hush_filter_release(f);
+    }
+}
+
 int main(void) {
   test_exact_block();
   test_rank_deficient_block();
@@ -704,6 +792,7 @@ int main(void) {
   test_block_sizes(dev);
   test_outliers(dev);
   test_firefly(dev);
+  test_emission(dev);
   hush_device_release(dev);
   return check_summary();
 }

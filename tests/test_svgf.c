@@ -800,6 +800,104 @@ static void test_weight_math(void) {
   }
 }
 
+/* ---- emission ------------------------------------------------------------ */
+
+/* A dark wall (radiance `wall`) with a lamp on it: a 6 x 6 patch whose
+ * colour is the lamp's emission E, plus `lamp_reflects` times the wall's
+ * radiance. The lamp shares the wall's depth and normal, so no G-buffer
+ * edge separates them: only the emission input does. */
+#define LAMP_X0 20
+#define LAMP_Y0 18
+#define LAMP_E 20.0f
+static int in_lamp(int i) {
+  const int x = i % W, y = i / W;
+  return x >= LAMP_X0 && x < LAMP_X0 + 6 && y >= LAMP_Y0 && y < LAMP_Y0 + 6;
+}
+
+static void lamp_scene(scene *s, float *emission, float wall, int lamp_reflects) {
+  flat(s, wall, wall, wall, 3.0f);
+  for (int i = 0; i < N; i++)
+    for (int c = 0; c < 3; c++) {
+      emission[3 * i + c] = in_lamp(i) ? LAMP_E : 0.0f;
+      s->color[3 * i + c] = in_lamp(i) ? LAMP_E + (lamp_reflects ? wall : 0.0f) : wall;
+    }
+}
+
+/* make() with 'emission' bound too (NULL: unbound). */
+static hush_filter make_emission(hush_device dev, const char *cls, scene *s, float *emission) {
+  hush_filter f = hush_filter_new(dev, cls);
+  REQUIRE(f);
+  hush_image_view v = view_of(s->color, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "color", &v) == HUSH_OK);
+  v = view_of(s->depth, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_set_image(f, "depth", &v) == HUSH_OK);
+  v = view_of(s->normal, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "normal", &v) == HUSH_OK);
+  v = view_of(s->albedo, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "albedo", &v) == HUSH_OK);
+  if (emission) {
+    v = view_of(emission, HUSH_FORMAT_FLOAT3);
+    REQUIRE(hush_filter_set_image(f, "emission", &v) == HUSH_OK);
+  }
+  v = view_of(s->output, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_set_image(f, "output", &v) == HUSH_OK);
+  REQUIRE(hush_filter_commit(f) == HUSH_OK);
+  return f;
+}
+
+/* With 'emission' bound, the lamp's output is its emission (plus at most
+ * the wall's radiance the filter may spread onto it) and none of the
+ * lamp's radiance reaches the wall; a lamp that also reflects the wall's
+ * light comes out exactly; zero emission changes nothing, bit for bit. */
+static void test_emission(hush_device dev, const char *cls) {
+  static scene s;
+  static float emission[N * 3], plain[N * 3];
+  const float wall = 0.05f;
+  lamp_scene(&s, emission, wall, 0);
+  hush_filter f = make_emission(dev, cls, &s, emission);
+  for (int k = 0; k < 6; k++) run(f, (uint64_t)k);
+  float lamp_dev = 0.0f, wall_max = 0.0f;
+  for (int i = 0; i < N; i++)
+    for (int c = 0; c < 3; c++) {
+      const float o = s.output[3 * i + c];
+      if (in_lamp(i)) {
+        const float d = o < LAMP_E ? LAMP_E - o : o - LAMP_E - wall;
+        lamp_dev = d > lamp_dev ? d : lamp_dev;
+      } else {
+        wall_max = o > wall_max ? o : wall_max;
+      }
+    }
+  CHECK_MSG(lamp_dev <= 1e-4f * LAMP_E, "%s: lamp output off its emission by %g", cls,
+            (double)lamp_dev);
+  CHECK_MSG(wall_max <= wall + 1e-5f, "%s: lamp leaks into the wall: %g (wall %g)", cls,
+            (double)wall_max, (double)wall);
+  CHECK(all_finite(s.output, N * 3));
+  hush_filter_release(f);
+
+  lamp_scene(&s, emission, wall, 1);
+  f = make_emission(dev, cls, &s, emission);
+  for (int k = 0; k < 6; k++) run(f, (uint64_t)k);
+  CHECK_MSG(max_abs_diff(s.output, s.color, N * 3) <= 1e-5f * LAMP_E,
+            "%s: reflecting lamp off by %g", cls, (double)max_abs_diff(s.output, s.color, N * 3));
+  hush_filter_release(f);
+
+  /* noisy frames, emission 0: the same output as without the input */
+  memset(emission, 0, sizeof emission);
+  for (int pass = 0; pass < 2; pass++) {
+    rng_state = 777u;
+    flat(&s, 0, 0, 0, 3.0f);
+    f = make_emission(dev, cls, &s, pass ? emission : NULL);
+    for (int k = 0; k < 4; k++) {
+      for (int i = 0; i < N * 3; i++) s.color[i] = 0.5f * rnd();
+      run(f, (uint64_t)k);
+    }
+    if (pass == 0) memcpy(plain, s.output, sizeof plain);
+    hush_filter_release(f);
+  }
+  CHECK_MSG(memcmp(plain, s.output, sizeof plain) == 0, "%s: zero emission changed the output",
+            cls);
+}
+
 int main(void) {
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);
@@ -825,6 +923,8 @@ int main(void) {
   test_taa_ghosting(dev, "clip");
   test_taa_smooths(dev);
   test_determinism("taa");
+  test_emission(dev, "svgf");
+  test_emission(dev, "accumulate");
   hush_device_release(dev);
   return check_summary();
 }
