@@ -896,6 +896,27 @@ static void test_emission(hush_device dev, const char *cls) {
   }
   CHECK_MSG(memcmp(plain, s.output, sizeof plain) == 0, "%s: zero emission changed the output",
             cls);
+
+  /* a light's edge pixel at 1 spp: the jittered ray sees the light every
+   * other frame; the emission added back is accumulated, so the output
+   * settles near the coverage (E / 2) instead of flipping between 0 and E */
+  lamp_scene(&s, emission, wall, 0);
+  f = make_emission(dev, cls, &s, emission);
+  const int edge = 3 * (LAMP_Y0 * W + LAMP_X0 + 6); /* right of the lamp */
+  float worst = 0.0f;
+  for (int k = 0; k < 16; k++) {
+    const float e = k % 2 ? LAMP_E : 0.0f;
+    for (int c = 0; c < 3; c++) {
+      emission[edge + c] = e;
+      s.color[edge + c] = e + wall;
+    }
+    run(f, (uint64_t)k);
+    const float d = fabsf(s.output[edge] - 0.5f * LAMP_E);
+    if (k >= 8) worst = d > worst ? d : worst;
+  }
+  CHECK_MSG(worst <= 0.15f * LAMP_E, "%s: edge pixel %g away from its coverage", cls,
+            (double)worst);
+  hush_filter_release(f);
 }
 
 int main(void) {

@@ -4,6 +4,8 @@
  */
 #include "filters/emission.h"
 
+#include "temporal/accumulation.h"
+
 void hush__emission_subtract(hush_planar *color, const hush_planar *emission, int threads) {
   const int H = (int)color->height;
   const size_t W = color->width;
@@ -21,14 +23,35 @@ void hush__emission_subtract(hush_planar *color, const hush_planar *emission, in
     }
 }
 
-void hush__emission_add(hush_planar *emission, const hush_planar *filtered, int threads) {
-  const int H = (int)emission->height;
-  const size_t W = emission->width;
+void hush__emission_add(hush_planar *out, const hush_planar *emission, const hush_planar *filtered,
+                        int threads) {
+  const int H = (int)out->height;
+  const size_t W = out->width;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++)
     for (int c = 0; c < 3; c++) {
-      float *em = emission->plane[c] + (size_t)y * W;
+      float *o = out->plane[c] + (size_t)y * W;
+      const float *em = emission->plane[c] + (size_t)y * W;
       const float *flt = filtered->plane[c] + (size_t)y * W;
-      for (size_t x = 0; x < W; x++) em[x] = flt[x] + em[x];
+      for (size_t x = 0; x < W; x++) o[x] = flt[x] + em[x];
     }
+}
+
+void hush__emission_history_free(hush_emission_history *h) {
+  hush__planar_free(&h->hist[0]);
+  hush__planar_free(&h->hist[1]);
+  h->valid = 0;
+}
+
+const hush_planar *hush__emission_accumulate(hush_emission_history *h,
+                                             const hush_reproject_plan *plan, const float *age,
+                                             float alpha_min, const hush_planar *emission,
+                                             int threads) {
+  const int prev = h->latest, cur = 1 - prev;
+  hush__temporal_blend(plan, h->valid ? (const float *const *)h->hist[prev].plane : NULL,
+                       (const float *const *)emission->plane, 3, age, alpha_min,
+                       h->hist[cur].plane, threads);
+  h->latest = cur;
+  h->valid = 1;
+  return &h->hist[cur];
 }

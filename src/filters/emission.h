@@ -14,12 +14,35 @@
 #define HUSH_FILTERS_EMISSION_H
 
 #include "core/image.h"
+#include "temporal/reproject.h"
 
 /* color[c] = max(color[c] - emission[c], 0), in place (3 channels). */
 void hush__emission_subtract(hush_planar *color, const hush_planar *emission, int threads);
-/* emission[c] += filtered[c], in place: the emission planes become the
- * output (3 channels), so the filter's own result (often its history) is
- * left untouched. */
-void hush__emission_add(hush_planar *emission, const hush_planar *filtered, int threads);
+/* out[c] = emission[c] + filtered[c] (3 channels). out may alias either
+ * input; filters write into their imported emission planes so that their
+ * own result (often their history) is left untouched. */
+void hush__emission_add(hush_planar *out, const hush_planar *emission, const hush_planar *filtered,
+                        int threads);
+
+/* The emission added back, accumulated over frames through the filter's
+ * own reprojection plan and ages (hush__temporal_blend): at 1 spp a light's
+ * edge pixel sees the light or not, all or nothing, and the references
+ * (and the filtered colour) average that coverage over samples; the
+ * accumulated emission does the same over frames. The filter owns it and
+ * allocates hist with hush__filter_scratch. */
+typedef struct hush_emission_history {
+  hush_planar hist[2]; /* ping-pong: the blend reads one and writes the other */
+  int latest;          /* index of the last result */
+  int valid;           /* 0: no history (first frame, or emission was unbound) */
+} hush_emission_history;
+
+void hush__emission_history_free(hush_emission_history *h);
+/* Blends this frame's emission into the history with the filter's plan,
+ * ages and alpha (as its colour) and returns the accumulated emission,
+ * owned by h, valid until the next call. */
+const hush_planar *hush__emission_accumulate(hush_emission_history *h,
+                                             const hush_reproject_plan *plan, const float *age,
+                                             float alpha_min, const hush_planar *emission,
+                                             int threads);
 
 #endif

@@ -119,6 +119,7 @@ typedef struct accumulate_state {
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_planar variance; /* 1 */
   hush_planar emission; /* imported emission, then the output (emission.h) */
+  hush_emission_history eh; /* the emission added back, accumulated */
 } accumulate_state;
 
 static void accumulate_destroy(void *state) {
@@ -131,6 +132,7 @@ static void accumulate_destroy(void *state) {
   hush__gbuffer_inputs_free(&st->gin);
   hush__planar_free(&st->variance);
   hush__planar_free(&st->emission);
+  hush__emission_history_free(&st->eh);
   free(st);
 }
 
@@ -159,7 +161,11 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
 
   /* ---- import: nothing of the history changes until every input is read */
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
-  if (emis && (s = hush__filter_scratch(f, &st->emission, 3))) return s;
+  if (!emis) st->eh.valid = 0; /* bound again later: start over */
+  if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
+               (s = hush__filter_scratch(f, &st->eh.hist[0], 3)) ||
+               (s = hush__filter_scratch(f, &st->eh.hist[1], 3))))
+    return s;
   if (hush__filter_view(f, I_VARIANCE) && (s = hush__filter_scratch(f, &st->variance, 1)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
@@ -199,7 +205,10 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
     result = &st->albedo;
   }
   if (emis) {
-    hush__emission_add(&st->emission, result, threads);
+    const hush_planar *e = hush__emission_accumulate(
+        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
+        threads);
+    hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }
   hush__view_export(result, hush__filter_view(f, I_OUTPUT), threads);

@@ -210,6 +210,7 @@ typedef struct bmfr_state {
   /* allocated on first use: */
   hush_planar albedo;
   hush_planar emission; /* imported emission, then the output (emission.h) */
+  hush_emission_history eh; /* the emission added back, accumulated */
   hush_gbuffer_inputs gin;
   hush_taa taa;
 } bmfr_state;
@@ -227,6 +228,7 @@ static void bmfr_destroy(void *state) {
   hush__free_floats(st->scratch);
   hush__planar_free(&st->albedo);
   hush__planar_free(&st->emission);
+  hush__emission_history_free(&st->eh);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   free(st);
@@ -471,7 +473,11 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   /* ---- import: nothing of the history changes until every input is read */
   const int need_albedo = demod || (set.needs & (1u << BMFR_SRC_ALBEDO));
   if (need_albedo && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
-  if (emis && (s = hush__filter_scratch(f, &st->emission, 3))) return s;
+  if (!emis) st->eh.valid = 0; /* bound again later: start over */
+  if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
+               (s = hush__filter_scratch(f, &st->eh.hist[0], 3)) ||
+               (s = hush__filter_scratch(f, &st->eh.hist[1], 3))))
+    return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
@@ -554,7 +560,10 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       hush__remodulate(&st->albedo, result, threads);
       result = &st->albedo;
     }
-    hush__emission_add(&st->emission, result, threads);
+    const hush_planar *e = hush__emission_accumulate(
+        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
+        threads);
+    hush__emission_add(&st->emission, e, result, threads);
     rgb = st->emission;
     if (with_taa) {
       hush_taa_params tp;

@@ -237,6 +237,7 @@ typedef struct svgf_state {
   /* allocated on first use: */
   hush_planar albedo;
   hush_planar emission; /* imported emission, then the output (emission.h) */
+  hush_emission_history eh; /* the emission added back, accumulated */
   hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
@@ -272,6 +273,7 @@ static void svgf_destroy(void *state) {
   svgf_padded_free(&st->signal[1]);
   hush__planar_free(&st->albedo);
   hush__planar_free(&st->emission);
+  hush__emission_history_free(&st->eh);
   hush__planar_free(&st->spp);
   hush__planar_free(&st->sample_var);
   hush__gbuffer_inputs_free(&st->gin);
@@ -535,7 +537,11 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
       (s = component_init(f->device, &st->comp[1], f->width, f->height)))
     return s;
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
-  if (emis && (s = hush__filter_scratch(f, &st->emission, 3))) return s;
+  if (!emis) st->eh.valid = 0; /* bound again later: start over */
+  if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
+               (s = hush__filter_scratch(f, &st->eh.hist[0], 3)) ||
+               (s = hush__filter_scratch(f, &st->eh.hist[1], 3))))
+    return s;
   if (has_spp && (s = hush__filter_scratch(f, &st->spp, 1))) return s;
   if (has_svar && (s = hush__filter_scratch(f, &st->sample_var, 1))) return s;
   if (with_taa && !st->taa.current.plane[0] &&
@@ -655,7 +661,10 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     result = &st->albedo;
   }
   if (emis) {
-    hush__emission_add(&st->emission, result, threads);
+    const hush_planar *e = hush__emission_accumulate(
+        &st->eh, &st->rp.plan, hush__accum_age(&st->comp[0].acc)->plane[0], fc.ap.alpha_min,
+        &st->emission, threads);
+    hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
