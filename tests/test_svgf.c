@@ -838,6 +838,8 @@ static hush_filter make_emission(hush_device dev, const char *cls, scene *s, flo
   if (emission) {
     v = view_of(emission, HUSH_FORMAT_FLOAT3);
     REQUIRE(hush_filter_set_image(f, "emission", &v) == HUSH_OK);
+    if (strcmp(cls, "svgf") == 0) /* opt-in there (its lamp edges stay aliased) */
+      REQUIRE(hush_filter_set_bool(f, "emission_bypass", 1) == HUSH_OK);
   }
   v = view_of(s->output, HUSH_FORMAT_FLOAT3);
   REQUIRE(hush_filter_set_image(f, "output", &v) == HUSH_OK);

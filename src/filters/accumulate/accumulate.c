@@ -34,6 +34,7 @@ enum {
   P_USE_ID,
   P_FALLBACK_3X3,
   P_DEMODULATE,
+  P_EMISSION_BYPASS,
   P_COUNT
 };
 
@@ -62,6 +63,8 @@ static const hush_param_info accumulate_params[P_COUNT] = {
      "search the 3x3 neighbourhood when no tap of the bilinear footprint is consistent", NULL},
     {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
      "with 'albedo' bound: accumulate color / max(albedo, 1e-3), multiply back after", NULL},
+    {"emission_bypass", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'emission' bound: accumulate color minus emission and add the emission back", NULL},
 };
 
 enum {
@@ -157,7 +160,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_begin(f);
 
   const int demod = hush__param_i(f, P_DEMODULATE) && hush__filter_view(f, I_ALBEDO);
-  const int emis = hush__filter_view(f, I_EMISSION) != NULL;
+  const int emis = hush__filter_view(f, I_EMISSION) != NULL && hush__param_i(f, P_EMISSION_BYPASS);
 
   /* ---- import: nothing of the history changes until every input is read */
   if (demod && (s = hush__filter_scratch(f, &st->albedo, 3))) return s;
