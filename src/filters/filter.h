@@ -57,6 +57,36 @@ struct hush_filter_t {
    hush__nonfinite_names}
 extern const char *const hush__nonfinite_names[];
 
+/* Table entries several filters share word for word (the same meaning and
+ * default everywhere they appear; docs/filters.md shows them per filter). */
+#define HUSH_IMAGE_COLOR_ENTRY \
+  {"color", HUSH_IMAGE_INPUT, 1, 3, "noisy radiance of this frame"}
+#define HUSH_IMAGE_NORMAL_ENTRY \
+  {"normal", HUSH_IMAGE_INPUT, 1, 3, "world-space shading normal"}
+#define HUSH_IMAGE_ID_ENTRY \
+  {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"}
+#define HUSH_IMAGE_MOTION_ENTRY \
+  {"motion", HUSH_IMAGE_INPUT, 0, 2, \
+  "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"}
+#define HUSH_PARAM_DEPTH_TOLERANCE_ENTRY \
+  {"depth_tolerance", HUSH_PARAM_FLOAT, 0.1, 0.0, 1e6, \
+  "reprojection: a history tap is kept when its depth is within this fraction (plus the " \
+  "gradient term)", \
+  NULL}
+#define HUSH_PARAM_DEPTH_GRADIENT_ENTRY \
+  {"depth_gradient", HUSH_PARAM_FLOAT, 1.0, 0.0, 1e3, \
+  "reprojection: weight of the screen-space depth gradient in the depth test", NULL}
+#define HUSH_PARAM_NORMAL_THRESHOLD_ENTRY \
+  {"normal_threshold", HUSH_PARAM_FLOAT, 0.9, -1.0, 1.0, \
+  "reprojection: a history tap is kept when dot(normal, previous normal) >= this (-1: off)", \
+  NULL}
+#define HUSH_PARAM_USE_ID_ENTRY \
+  {"use_id", HUSH_PARAM_BOOL, 1, 0, 1, \
+  "reject history from a pixel with another id (when 'id' is bound)", NULL}
+#define HUSH_PARAM_DEMODULATE_ENTRY \
+  {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1, \
+  "with 'albedo' bound: filter color / max(albedo, 1e-3), multiply back after", NULL}
+
 static inline double hush__param(const struct hush_filter_t *f, int index) {
   return f->params[index];
 }

@@ -57,8 +57,7 @@ static const hush_param_info accumulate_params[P_COUNT] = {
      NULL},
     {"normal_threshold", HUSH_PARAM_FLOAT, 0.9, -1.0, 1.0,
      "a history tap is kept when dot(normal, previous normal) >= this cosine (-1: off)", NULL},
-    {"use_id", HUSH_PARAM_BOOL, 1, 0, 1,
-     "reject history from a pixel with another id (when 'id' is bound)", NULL},
+    HUSH_PARAM_USE_ID_ENTRY,
     {"fallback_3x3", HUSH_PARAM_BOOL, 1, 0, 1,
      "search the 3x3 neighbourhood when no tap of the bilinear footprint is consistent", NULL},
     {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
@@ -83,14 +82,13 @@ enum {
 };
 
 static const hush_image_info accumulate_images[I_COUNT] = {
-    {"color", HUSH_IMAGE_INPUT, 1, 3, "noisy radiance of this frame"},
+    HUSH_IMAGE_COLOR_ENTRY,
     {"depth", HUSH_IMAGE_INPUT, 1, 1, "linear view depth (0: background)"},
-    {"normal", HUSH_IMAGE_INPUT, 1, 3, "world-space shading normal"},
+    HUSH_IMAGE_NORMAL_ENTRY,
     {"position", HUSH_IMAGE_INPUT, 0, 3,
      "world-space position (camera reprojection; else reconstructed from depth)"},
-    {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"},
-    {"motion", HUSH_IMAGE_INPUT, 0, 2,
-     "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
+    HUSH_IMAGE_ID_ENTRY,
+    HUSH_IMAGE_MOTION_ENTRY,
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation"},
     {"emission", HUSH_IMAGE_INPUT, 0, 3,
      "radiance the camera sees directly at the first hit (lights, sky): kept out of the "

@@ -31,8 +31,8 @@ static const hush_param_info nca_params[P_COUNT] = {
 enum { I_COLOR = 0, I_NORMAL, I_ALBEDO, I_OUTPUT, I_COUNT };
 
 static const hush_image_info nca_images[I_COUNT] = {
-    {"color", HUSH_IMAGE_INPUT, 1, 3, "noisy radiance of this frame"},
-    {"normal", HUSH_IMAGE_INPUT, 1, 3, "world-space shading normal"},
+    HUSH_IMAGE_COLOR_ENTRY,
+    HUSH_IMAGE_NORMAL_ENTRY,
     {"albedo", HUSH_IMAGE_INPUT, 1, 3, "first-hit albedo"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "denoised radiance"},
 };

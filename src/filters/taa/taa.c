@@ -41,8 +41,7 @@ static const hush_param_info taa_params[P_COUNT] = {
      "reprojection: relative depth tolerance of a history tap", NULL},
     {"normal_threshold", HUSH_PARAM_FLOAT, -1.0, -1.0, 1.0,
      "reprojection: minimum dot(normal, previous normal) of a history tap (-1: off)", NULL},
-    {"use_id", HUSH_PARAM_BOOL, 1, 0, 1,
-     "reject history from a pixel with another id (when 'id' is bound)", NULL},
+    HUSH_PARAM_USE_ID_ENTRY,
 };
 
 enum { I_COLOR = 0, I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION, I_OUTPUT, I_COUNT };
@@ -53,9 +52,8 @@ static const hush_image_info taa_images[I_COUNT] = {
     {"normal", HUSH_IMAGE_INPUT, 0, 3, "world-space shading normal (for the normal test)"},
     {"position", HUSH_IMAGE_INPUT, 0, 3,
      "world-space position (camera reprojection; else reconstructed from depth)"},
-    {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"},
-    {"motion", HUSH_IMAGE_INPUT, 0, 2,
-     "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"},
+    HUSH_IMAGE_ID_ENTRY,
+    HUSH_IMAGE_MOTION_ENTRY,
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "anti-aliased radiance"},
 };
 
