@@ -6,7 +6,10 @@
  * numbers, bad input (missing references, another frame count or size, an
  * unknown filter or parameter), a filter that fails on one frame (marked
  * failed, the others complete; --strict makes it an error), the render form
- * on builtin:cornell (deterministic), report.html, and `hush bench --scene`.
+ * on builtin:cornell (deterministic), report.html, and `hush bench --scene`;
+ * --gradients (only the input frames get the "gradient" layer) and the lag
+ * on builtin:light-off (the event found at frame 8 where the light goes off,
+ * the noisy input at the reference at once, accumulation trailing it).
  */
 #include "check.h"
 
@@ -210,6 +213,73 @@ static void test_render_form(void) {
   CHECK(ea && eb && ea - a == eb - text && memcmp(a, text, (size_t)(ea - a)) == 0);
 }
 
+static int has_layer(hush_device dev, const char *path, const char *layer) {
+  hush_frame f = NULL;
+  if (hush_frame_read_exr(dev, path, &f) != HUSH_OK) return -1;
+  hush_image_view v;
+  const int has = hush_frame_get_layer(f, layer, &v) == HUSH_OK;
+  if (!has) hush_device_get_error(dev, NULL);
+  hush_frame_release(f);
+  return has;
+}
+
+/* Field `column` (0 = the filter) of lag.csv's row for filter. */
+static void lag_field(const char *dir, const char *filter, int column, char *out, size_t size) {
+  char path[512], prefix[64];
+  snprintf(path, sizeof path, "%s/lag.csv", dir);
+  snprintf(prefix, sizeof prefix, "\n%s,", filter);
+  const char *p = strstr(read_file(path), prefix);
+  out[0] = '\0';
+  if (!p) return;
+  p++;
+  for (int c = 0; c < column && p; c++) p = strchr(p, ',') ? strchr(p, ',') + 1 : NULL;
+  if (!p) return;
+  const size_t n = strcspn(p, ",\n");
+  snprintf(out, size, "%.*s", (int)(n < size ? n : size - 1), p);
+}
+
+static void test_gradients_and_lag(hush_device dev) {
+  const char *args = "--scene builtin:light-off --path static --size 48x27 --frames 12 "
+                     "--ref-spp 8 --filters accumulate --no-video --quiet";
+  char line[1024];
+  snprintf(line, sizeof line, "%s --gradients --out %s", args, WORK "/lo");
+  expect(line, 0, NULL);
+  CHECK(has_layer(dev, WORK "/lo/seq/frame_0003.exr", "gradient") == 1);
+  CHECK(has_layer(dev, WORK "/lo/ref/frame_0003.exr", "gradient") == 0);
+  CHECK(strstr(read_file(WORK "/lo/eval.json"), "\"gradients\": true") != NULL);
+  /* the frames of the render form above have none: no filter needs them */
+  CHECK(has_layer(dev, WORK "/rr/seq/frame_0001.exr", "gradient") == 0);
+  CHECK(strstr(read_file(WORK "/rr/eval.json"), "\"gradients\": false") != NULL);
+
+  CHECK(starts_with(read_file(WORK "/lo/lag.csv"),
+                    "filter,event_frame,region_pixels,event_lag,shift_lag\n"));
+  char field[64];
+  lag_field(WORK "/lo", "accumulate", 1, field, sizeof field);
+  CHECK_MSG(strcmp(field, "8") == 0, "event frame '%s', the light goes off at 8", field);
+  lag_field(WORK "/lo", "noisy", 3, field, sizeof field);
+  CHECK_MSG(strcmp(field, "0") == 0, "noisy event lag '%s'", field);
+  lag_field(WORK "/lo", "accumulate", 3, field, sizeof field);
+  CHECK_MSG(strcmp(field, "inf") == 0 || atoi(field) >= 2, "accumulate event lag '%s'", field);
+  read_file(WORK "/lo/summary.md");
+  CHECK(strstr(text, "## Lag") && strstr(text, "| lag | event (frames) | shift (frames) |") &&
+        strstr(text, "Event at frame 8"));
+
+  /* the same event named; bad ones */
+  snprintf(line, sizeof line, "--seq %s --ref %s --filters accumulate --lag-frame 8 --no-video "
+           "--quiet --out %s", WORK "/lo/seq", WORK "/lo/ref", WORK "/lo2");
+  expect(line, 0, NULL);
+  char a[4096];
+  snprintf(a, sizeof a, "%s", read_file(WORK "/lo/lag.csv"));
+  CHECK(strcmp(a, read_file(WORK "/lo2/lag.csv")) == 0);
+  snprintf(line, sizeof line, "--seq %s --ref %s --lag-frame 0 --out %s", WORK "/lo/seq",
+           WORK "/lo/ref", WORK "/x");
+  expect(line, 1, "--lag-frame 0");
+  snprintf(line, sizeof line, "--seq %s --ref %s --lag-frame 12 --out %s", WORK "/lo/seq",
+           WORK "/lo/ref", WORK "/x");
+  expect(line, 1, "frames 0 to 11");
+  expect("--seq " WORK "/s --gradients --out " WORK "/x", 2, "--gradients goes with --scene");
+}
+
 static void test_bench_scene(void) {
   result r;
   run(&r, "bench", "--scene builtin:cornell --size 32x24 --frames 2 --warmup 1 --distinct 2 "
@@ -240,6 +310,7 @@ int main(void) {
   test_render_form();
   test_bad_input();
   test_failing_filter(dev);
+  test_gradients_and_lag(dev);
   test_bench_scene();
   hush_device_release(dev);
   return check_summary();

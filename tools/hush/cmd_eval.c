@@ -24,11 +24,13 @@
 #include "scene_frames.h"
 
 #include "core/timer.h"
+#include "eval/lag.h"
 #include "eval/metrics.h"
 #include "eval/report.h"
 #include "eval/ssim.h"
 #include "io/atomic_file.h"
 #include "io/sequence.h"
+#include "render/gradients.h"
 
 #include <math.h>
 #include <stdio.h>
@@ -87,6 +89,11 @@ static const char *const help_text =
     "  --exposure E         report pictures: scale radiance by 2^E (default 0)\n"
     "  --tonemap T          report pictures: clamp, reinhard or aces (default aces)\n"
     "  --no-video           report: no side-by-side video (default: with ffmpeg)\n"
+    "  --lag-frame K        the lag after a change at frame K (a light switched\n"
+    "                       off): frames until each filter's mean over the region\n"
+    "                       that changed in the references is within 10% of the\n"
+    "                       reference's (default: the frame where the references\n"
+    "                       change most); lag.csv and summary.md (docs/eval.md)\n"
     "  --quiet              no progress and no table, only warnings and errors\n"
     "  -h, --help           show this help\n"
     "\n"
@@ -96,7 +103,11 @@ static const char *const help_text =
     "                       (as `hush render --path`)\n"
     "  --size WxH           frame size (default: the scene's, else 640x360)\n"
     "  --ref-spp N          samples per pixel of the references (default 64); the\n"
-    "                       inputs are the 1 spp configuration of `hush render`\n";
+    "                       inputs are the 1 spp configuration of `hush render`\n"
+    "  --gradients          render the inputs (not the references) with A-SVGF\n"
+    "                       gradient samples, layer \"gradient\" (hush render\n"
+    "                       --gradients); automatic when a filter needs them (a\n"
+    "                       class requiring \"gradient\", or temporal_gradients on)\n";
 
 typedef struct eval_options {
   const char *seq, *ref, *out;
@@ -114,6 +125,8 @@ typedef struct eval_options {
   float exposure;
   hush_tonemap tonemap;
   int no_video;
+  int gradients;           /* --gradients */
+  const char *lag_frame;   /* --lag-frame K, NULL: automatic */
 } eval_options;
 
 typedef struct stage_times {
@@ -142,6 +155,8 @@ typedef struct eval_filter {
   uint32_t done;
   stage_times stages[MAX_STAGES + 1]; /* the filter's stages, then "total" */
   uint32_t stage_count;
+  double *lag_mean;          /* mean display luminance over the lag region, from the event on */
+  double lag_sse[HUSH_LAG_MAX_SHIFT]; /* shift lag sums (eval/lag.h) */
 } eval_filter;
 
 typedef struct eval_run {
@@ -165,6 +180,19 @@ typedef struct eval_run {
   int tty;
   int psf;                   /* a filter reads the "psf" layer */
   double *psf_ms;            /* --scene: psf time of each frame, else NULL */
+  int gradients;             /* --scene: the inputs have the "gradient" layer */
+  /* lag (eval/lag.h): the event's region, its frame and size, the
+   * reference's region means from it on; the last lag_shifts reference
+   * luminances by frame modulo lag_shifts */
+  float *lag_mask, *lag_candidate;
+  float *lag_luma, *lag_ref_luma; /* lag luminance: an output, the reference */
+  float *lag_box, *lag_box_prev; /* the reference's box average, this frame and the last */
+  uint32_t lag_event;        /* UINT32_MAX: no event (yet) */
+  uint32_t lag_fixed;        /* --lag-frame K, else UINT32_MAX */
+  size_t lag_region;
+  double *lag_ref_mean;
+  uint32_t lag_shifts;       /* 0: too few frames for the shift lag */
+  float *lag_ring[HUSH_LAG_MAX_SHIFT];
 } eval_run;
 
 /* ---- options ---------------------------------------------------------------- */
@@ -222,6 +250,10 @@ static void parse_options(int argc, char **argv, eval_options *o) {
       o->tonemap = cli_parse_tonemap(a.cmd, "--tonemap", v);
     } else if (cli_switch(&a, arg, "--no-video")) {
       o->no_video = 1;
+    } else if (cli_option(&a, arg, "--lag-frame", &v)) {
+      o->lag_frame = v;
+    } else if (cli_switch(&a, arg, "--gradients")) {
+      o->gradients = 1;
     } else if (cli_switch(&a, arg, "--quiet")) {
       o->quiet = 1;
     } else if (cli_option(&a, arg, "--scene", &v)) {
@@ -245,6 +277,9 @@ static void parse_options(int argc, char **argv, eval_options *o) {
     cli_usage_error(a.cmd, "--ref: with --scene the references are rendered (--ref-spp)");
   if (o->seq && (o->path || o->width))
     cli_usage_error(a.cmd, "--path and --size go with --scene, not --seq");
+  if (o->seq && o->gradients)
+    cli_usage_error(a.cmd, "--gradients goes with --scene (render the sequence with hush render "
+                           "--gradients for --seq)");
 }
 
 /* ---- the list of filters ---------------------------------------------------- */
@@ -337,12 +372,44 @@ static int check_sets(eval_run *r) {
   return 0;
 }
 
+/* Whether filter f reads the "gradient" layer (A-SVGF gradient samples):
+ * its class requires it, or the class takes it optionally and has the
+ * switch temporal_gradients, which --set turns on (bmfr). Asked of a
+ * throw-away filter with the --set values, before anything is rendered. */
+static int wants_gradients(eval_run *r, eval_filter *f, int *wants) {
+  *wants = 0;
+  const hush_filter_class_info *cls = f->cls ? hush_filter_class_find(f->cls) : NULL;
+  int optional = 0;
+  for (uint32_t i = 0; cls && i < cls->image_count; i++) {
+    const hush_image_info *im = &cls->images[i];
+    if (im->role != HUSH_IMAGE_INPUT || strcmp(im->name, "gradient") != 0) continue;
+    if (im->required) {
+      *wants = 1;
+      return 0;
+    }
+    optional = 1;
+  }
+  if (!optional) return 0;
+  f->filter = hush_filter_new(r->device, f->cls);
+  if (!f->filter) return cli_device_error(r->cmd, r->device, HUSH_ERROR_NOT_FOUND, f->cls);
+  int rc = apply_sets(r, f);
+  if (!rc && hush_filter_get_bool(f->filter, "temporal_gradients", wants) != HUSH_OK) {
+    hush_device_get_error(r->device, NULL); /* no such switch: not wanted */
+    *wants = 0;
+  }
+  hush_filter_release(f->filter);
+  f->filter = NULL;
+  return rc;
+}
+
 static int setup_filter(eval_run *r, eval_filter *f) {
   const uint32_t n = r->last - r->first;
   f->rows = calloc(n, sizeof *f->rows);
   f->luma = malloc(r->pixels * sizeof *f->luma);
   f->prev_luma = malloc(r->pixels * sizeof *f->prev_luma);
-  if (!f->rows || !f->luma || !f->prev_luma) return cli_error(r->cmd, "out of memory");
+  f->lag_mean = calloc(n, sizeof *f->lag_mean);
+  if (!f->rows || !f->luma || !f->prev_luma || !f->lag_mean)
+    return cli_error(r->cmd, "out of memory");
   if (!f->cls) return 0;
   f->filter = hush_filter_new(r->device, f->cls);
   if (!f->filter) return cli_device_error(r->cmd, r->device, HUSH_ERROR_NOT_FOUND, f->cls);
@@ -427,6 +494,96 @@ static int get_color(eval_run *r, hush_frame frame, const char *layer, const cha
     return cli_error(r->cmd, "%s: layer '%s' has %d channels, 3 are needed", file, layer,
                      hush_format_channels(view->format));
   return 0;
+}
+
+/* ---- lag (eval/lag.h) ------------------------------------------------------------ */
+
+/* --lag-frame, the region masks, the reference's series and the ring of
+ * reference luminances for the shift lag (S = half the frames, at most
+ * HUSH_LAG_MAX_SHIFT: the shift sums run over the frames that have S
+ * references before them, at least half of them). */
+static int lag_setup(eval_run *r) {
+  const uint32_t n = r->last - r->first;
+  r->lag_event = r->lag_fixed = UINT32_MAX;
+  if (r->o->lag_frame) {
+    r->lag_fixed = cli_parse_uint(r->cmd, "--lag-frame", r->o->lag_frame, 0, 10000000);
+    if (r->lag_fixed <= r->first || r->lag_fixed >= r->last)
+      return cli_error(r->cmd,
+                       "--lag-frame %u: the change must follow an evaluated frame (frames %u to "
+                       "%u were evaluated)",
+                       r->lag_fixed, r->first, r->last - 1);
+  }
+  r->lag_shifts = n / 2 < HUSH_LAG_MAX_SHIFT ? n / 2 : HUSH_LAG_MAX_SHIFT;
+  if (r->lag_shifts < 2) r->lag_shifts = 0;
+  r->lag_mask = malloc(r->pixels * sizeof *r->lag_mask);
+  r->lag_candidate = malloc(r->pixels * sizeof *r->lag_candidate);
+  r->lag_ref_mean = calloc(n, sizeof *r->lag_ref_mean);
+  r->lag_luma = malloc(r->pixels * sizeof *r->lag_luma);
+  r->lag_ref_luma = malloc(r->pixels * sizeof *r->lag_ref_luma);
+  r->lag_box = malloc(r->pixels * sizeof *r->lag_box);
+  r->lag_box_prev = malloc(r->pixels * sizeof *r->lag_box_prev);
+  if (!r->lag_mask || !r->lag_candidate || !r->lag_ref_mean || !r->lag_luma ||
+      !r->lag_ref_luma || !r->lag_box || !r->lag_box_prev)
+    return cli_error(r->cmd, "out of memory");
+  for (uint32_t k = 0; k < r->lag_shifts; k++)
+    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))))
+      return cli_error(r->cmd, "out of memory");
+  return 0;
+}
+
+/* Frame i's reference (r->ref_rgb; r->lag_box_prev holds frame i - 1's
+ * box-averaged lag luminance): the event's region at --lag-frame, or, without it, at the frame whose
+ * change from the one before is the largest so far (the series start over
+ * there: only the frames from the event on count). */
+static void lag_reference(eval_run *r, uint32_t i) {
+  float *t = r->lag_box_prev;
+  r->lag_box_prev = r->lag_box;
+  r->lag_box = t;
+  hush__lag_luminance(r->ref_rgb, r->pixels, r->lag_ref_luma);
+  /* lag_luma is free until the filters run: the box's scratch */
+  hush__lag_box(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma, r->lag_box);
+  if (i > r->first && (r->lag_fixed == UINT32_MAX || r->lag_fixed == i)) {
+    const size_t c = hush__lag_region(r->lag_box_prev, r->lag_box, r->pixels,
+                                      HUSH_LAG_THRESHOLD, r->lag_candidate);
+    const int fixed = r->lag_fixed == i;
+    if (c > 0 && (fixed || (c > r->lag_region && c >= HUSH_LAG_MIN_REGION * (double)r->pixels))) {
+      t = r->lag_mask;
+      r->lag_mask = r->lag_candidate;
+      r->lag_candidate = t;
+      r->lag_region = c;
+      r->lag_event = i;
+    }
+  }
+  if (r->lag_event != UINT32_MAX && i >= r->lag_event)
+    r->lag_ref_mean[i - r->lag_event] =
+        hush__lag_region_mean(r->lag_ref_luma, r->lag_mask, r->pixels);
+  if (r->lag_shifts)
+    memcpy(r->lag_ring[i % r->lag_shifts], r->lag_ref_luma, r->pixels * sizeof(float));
+}
+
+/* Filter f's output of frame i (r->out_rgb) into its series. */
+static void lag_filter(eval_run *r, eval_filter *f, uint32_t i) {
+  hush__lag_luminance(r->out_rgb, r->pixels, r->lag_luma);
+  if (r->lag_event != UINT32_MAX && i >= r->lag_event)
+    f->lag_mean[i - r->lag_event] = hush__lag_region_mean(r->lag_luma, r->lag_mask, r->pixels);
+  if (r->lag_shifts && i + 1 >= r->first + r->lag_shifts) {
+    const float *ring[HUSH_LAG_MAX_SHIFT];
+    for (uint32_t k = 0; k < r->lag_shifts; k++) ring[k] = r->lag_ring[(i - k) % r->lag_shifts];
+    hush__lag_shift_add(r->lag_luma, ring, r->lag_shifts, r->pixels, f->lag_sse);
+  }
+}
+
+/* NaN: not measured (no event, or the filter failed); +inf: never within
+ * the tolerance in the frames evaluated. */
+static double event_lag(const eval_run *r, const eval_filter *f) {
+  if (r->lag_event == UINT32_MAX || f->failed) return NAN;
+  const int k = hush__lag_event(f->lag_mean, r->lag_ref_mean, r->last - r->lag_event,
+                                HUSH_LAG_TOLERANCE);
+  return k < 0 ? INFINITY : (double)k;
+}
+
+static double shift_lag(const eval_run *r, const eval_filter *f) {
+  return r->lag_shifts && !f->failed ? hush__lag_shift(f->lag_sse, r->lag_shifts) : NAN;
 }
 
 /* ---- one frame ---------------------------------------------------------------- */
@@ -560,6 +717,7 @@ static int filter_frame(eval_run *r, eval_filter *f, hush_frame frame, uint32_t 
   pack_rgb(&out, r->out_rgb);
   const hush_error_stats e = hush__error_stats(r->out_rgb, r->ref_rgb, r->pixels, 3);
   hush__display_luma_plane(r->out_rgb, 3, r->pixels, f->luma);
+  lag_filter(r, f, i);
   eval_row *row = &f->rows[f->done];
   row->frame = i;
   row->rmse = e.rmse;
@@ -609,6 +767,7 @@ static int eval_frame(eval_run *r, uint32_t i) {
     pack_rgb(&rv, r->ref_rgb);
     hush__display_luma_plane(r->ref_rgb, 3, r->pixels, r->ref_luma);
     if (i > r->first) ref_temporal = hush__temporal_error(r->ref_prev_luma, r->ref_luma, r->pixels);
+    lag_reference(r, i);
     rc = write_picture(r, "reference", i, r->ref_rgb);
   }
   for (uint32_t k = 0; !rc && k < r->filter_count; k++)
@@ -700,6 +859,20 @@ static void write_timings(const eval_run *r, FILE *f) {
   }
 }
 
+static void write_lag(const eval_run *r, FILE *f) {
+  fputs("filter,event_frame,region_pixels,event_lag,shift_lag\n", f);
+  for (uint32_t k = 0; k < r->filter_count; k++) {
+    const eval_filter *fl = &r->filters[k];
+    fprintf(f, "%s,", fl->name);
+    if (r->lag_event != UINT32_MAX) fprintf(f, "%u,%zu,", r->lag_event, r->lag_region);
+    else fputs(",,", f);
+    put_number(f, event_lag(r, fl));
+    fputc(',', f);
+    put_number(f, shift_lag(r, fl));
+    fputc('\n', f);
+  }
+}
+
 static void write_status(const eval_run *r, FILE *f) {
   fputs("filter,status,message\n", f);
   for (uint32_t k = 0; k < r->filter_count; k++) {
@@ -757,6 +930,44 @@ static void put_cell(FILE *f, double v, const char *fmt) {
     fprintf(f, fmt, v);
 }
 
+/* The lag table of summary.md (its first column is not "filter": tools
+ * that take the table starting "| filter" get the main one). */
+static void write_lag_table(const eval_run *r, FILE *f) {
+  if (r->lag_event == UINT32_MAX && !r->lag_shifts) return;
+  fputs("\n## Lag\n\n", f);
+  if (r->lag_event != UINT32_MAX)
+    fprintf(f,
+            "Event at frame %u: %zu pixels (%.1f%%) of the reference changed by more than %.2f "
+            "in luminance (linear, clamped to 1, averaged over %dx%d boxes) from frame %u. Event lag: frames after it until the filter's "
+            "mean over them is within %.0f%% of the reference's (`> M`: not in the M frames "
+            "evaluated after it).",
+            r->lag_event, r->lag_region, 100.0 * (double)r->lag_region / (double)r->pixels,
+            (double)HUSH_LAG_THRESHOLD, 2 * HUSH_LAG_RADIUS + 1, 2 * HUSH_LAG_RADIUS + 1,
+            r->lag_event - 1, 100.0 * HUSH_LAG_TOLERANCE);
+  else
+    fprintf(f, "No event: no frame's reference changed on %.1f%% of the pixels or more.",
+            100.0 * HUSH_LAG_MIN_REGION);
+  if (r->lag_shifts)
+    fprintf(f,
+            " Shift lag: the delay, 0 to %u frames, of the reference sequence that the output "
+            "matches best (least squares over frames %u to %u).",
+            r->lag_shifts - 1, r->first + r->lag_shifts - 1, r->last - 1);
+  fputs(" docs/eval.md defines both.\n\n| lag | event (frames) | shift (frames) |\n"
+        "| --- | ---: | ---: |\n",
+        f);
+  for (uint32_t k = 0; k < r->filter_count; k++) {
+    const eval_filter *fl = &r->filters[k];
+    fprintf(f, "| %s%s", fl->name, fl->failed ? " (failed)" : "");
+    const double e = event_lag(r, fl);
+    if (isinf(e))
+      fprintf(f, " | > %u", r->last - 1 - r->lag_event);
+    else
+      put_cell(f, e, "%.0f");
+    put_cell(f, shift_lag(r, fl), "%.2f");
+    fputs(" |\n", f);
+  }
+}
+
 static void write_summary(const eval_run *r, FILE *f) {
   fprintf(f, "# hush eval\n\n");
   fprintf(f, "Input `%s`, reference `%s`, frames %u to %u (%u frames of %ux%u).\n\n", r->seq_dir,
@@ -789,6 +1000,7 @@ static void write_summary(const eval_run *r, FILE *f) {
           "between consecutive frames, and the reference's own is its last row: a filter close "
           "to it flickers as little as the converged image changes. ms/frame is the median "
           "execute time.\n");
+  write_lag_table(r, f);
   for (uint32_t k = 0; k < r->filter_count; k++) {
     const eval_filter *fl = &r->filters[k];
     if (fl->failed)
@@ -813,7 +1025,9 @@ static void write_json(const eval_run *r, FILE *f) {
     cli_json_string(f, r->o->scene);
   else
     fputs("null", f);
-  if (r->o->scene) fprintf(f, ",\n  \"ref_spp\": %u", r->o->ref_spp);
+  if (r->o->scene)
+    fprintf(f, ",\n  \"ref_spp\": %u,\n  \"gradients\": %s", r->o->ref_spp,
+            r->gradients ? "true" : "false");
   fprintf(f, ",\n  \"frames\": [%u, %u],\n  \"width\": %u,\n  \"height\": %u,\n  \"filters\": [",
           r->first, r->last, r->width, r->height);
   for (uint32_t k = 0; k < r->filter_count; k++) {
@@ -885,6 +1099,14 @@ static int render_sequence(eval_run *r, scene_frames *sf, const char *dir, uint3
   FILE *csv = NULL;
   sf->psf = NULL;
   if (spp == 1 && r->psf) rc = open_psf(r, sf, &pc, &csv);
+  /* only the input gets gradient samples: they replace a pixel's sample */
+  hush_gradients gradients;
+  memset(&gradients, 0, sizeof gradients);
+  if (!rc && spp == 1 && r->gradients) {
+    st = hush__gradients_init(r->device, &gradients, sf->width, sf->height);
+    if (st != HUSH_OK) rc = cli_device_error(r->cmd, r->device, st, "gradients");
+    params.gradients = &gradients;
+  }
   for (uint32_t i = 0; !rc && i < sf->frames; i++) {
     hush_frame frame = NULL;
     rc = scene_frames_render(sf, i, &params, (int)r->o->threads, &p, &frame, &seq.cameras[i]);
@@ -900,6 +1122,7 @@ static int render_sequence(eval_run *r, scene_frames *sf, const char *dir, uint3
     hush_frame_release(frame);
   }
   render_progress_break(&p);
+  hush__gradients_free(&gradients);
   sf->psf = NULL;
   if (csv && fclose(csv) != 0 && !rc) rc = cli_error(r->cmd, "psf.csv: write failed");
   psf_cli_close(&pc);
@@ -958,6 +1181,7 @@ static int write_results(eval_run *r) {
   int rc = write_file(r, "metrics.csv", write_metrics);
   if (!rc) rc = write_file(r, "timings.csv", write_timings);
   if (!rc) rc = write_file(r, "status.csv", write_status);
+  if (!rc) rc = write_file(r, "lag.csv", write_lag);
   if (!rc) rc = write_file(r, "summary.md", write_summary);
   if (!rc) rc = write_file(r, "eval.json", write_json);
   return rc;
@@ -984,6 +1208,12 @@ static int write_report(eval_run *r) {
 static int run(eval_run *r) {
   int rc = filter_list(r);
   if (!rc) rc = check_sets(r);
+  r->gradients = r->o->gradients;
+  for (uint32_t k = 0; !rc && r->o->scene && k < r->filter_count; k++) {
+    int wants = 0;
+    rc = wants_gradients(r, &r->filters[k], &wants);
+    r->gradients |= wants;
+  }
   if (!rc && r->o->scene) {
     rc = render_inputs(r);
   } else if (!rc) {
@@ -992,6 +1222,7 @@ static int run(eval_run *r) {
   }
   if (!rc) rc = open_inputs(r);
   if (!rc) rc = allocate(r);
+  if (!rc) rc = lag_setup(r);
   for (uint32_t k = 0; !rc && k < r->filter_count; k++) rc = setup_filter(r, &r->filters[k]);
   if (!rc) rc = make_output_dirs(r);
   for (uint32_t i = r->first; !rc && i < r->last; i++) rc = eval_frame(r, i);
@@ -1024,6 +1255,7 @@ static void run_free(eval_run *r) {
     free(f->luma);
     free(f->prev_luma);
     free(f->rows);
+    free(f->lag_mean);
     for (uint32_t s = 0; s < f->stage_count; s++) free(f->stages[s].ms);
   }
   free(r->psf_ms);
@@ -1031,6 +1263,14 @@ static void run_free(eval_run *r) {
   free(r->out_rgb);
   free(r->ref_luma);
   free(r->ref_prev_luma);
+  free(r->lag_mask);
+  free(r->lag_candidate);
+  free(r->lag_ref_mean);
+  free(r->lag_luma);
+  free(r->lag_ref_luma);
+  free(r->lag_box);
+  free(r->lag_box_prev);
+  for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) free(r->lag_ring[k]);
   hush_frame_release(r->picture);
   if (r->have_seq) hush__sequence_free(&r->seq);
   if (r->have_ref) hush__sequence_free(&r->ref);

@@ -1,0 +1,86 @@
+/*
+ * lag.h — how many frames a filter's output trails a change of the lighting
+ * (issue 7, A-SVGF; realtime-denoising-comparison-higginson-2023.md §2.3 and
+ * papers/NOTES.md: temporal accumulation reacts to a change only as fast as
+ * its history weight lets it). Two measures, both on the lag luminance Y:
+ * the Rec. 709 luminance of the linear radiance clamped to [0, 1], so that
+ * a light seen directly does not outweigh the rest, and linear below 1, so
+ * that the mean of a noisy image (a 1 spp input, a reference of a few
+ * dozen samples) is not biased, as the mean of sRGB-encoded values would
+ * be. Both are defined by the references alone and are the same for every
+ * filter (docs/eval.md "Lag"):
+ *
+ *   event lag  a change at frame K (a light switched off): the changed
+ *              region R is the set of pixels whose reference luminance,
+ *              averaged over a (2 HUSH_LAG_RADIUS + 1)^2 box, changes by
+ *              more than HUSH_LAG_THRESHOLD between frames K-1 and K (the
+ *              box keeps the references' own noise out: a region chosen
+ *              where a noisy reference happens to change would favour
+ *              bright noise in it). The lag is the number of frames after K until the
+ *              filter's mean luminance over R is within HUSH_LAG_TOLERANCE
+ *              (10%) of the reference's mean over R (0: already at K).
+ *   shift lag  continuous change (a moving light): the shift k, 0..S, of
+ *              the reference sequence that the filter's output matches
+ *              best, argmin_k of the sum over frames t and pixels of
+ *              (Y_out(t) - Y_ref(t - k))^2, refined to a fraction of a
+ *              frame by the parabola through the minimum and its two
+ *              neighbours. A filter that trails the reference by L frames
+ *              on a steady change minimises it at k = L: the error is
+ *              exactly quadratic in k - L for a linear ramp, and the
+ *              noise adds the same constant to every k.
+ *
+ * Pure functions on caller-owned planes; deterministic.
+ */
+#ifndef HUSH_EVAL_LAG_H
+#define HUSH_EVAL_LAG_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* Change of the box-averaged lag luminance that puts a pixel in the region
+ * (radiance 1 is display white: 0.02 is a visible change in a dim scene). */
+#define HUSH_LAG_THRESHOLD 0.02f
+#define HUSH_LAG_RADIUS 3
+/* "Within 10% of the reference". */
+#define HUSH_LAG_TOLERANCE 0.1
+/* An event needs at least this fraction of the frame to change. */
+#define HUSH_LAG_MIN_REGION 0.001
+/* Largest shift the shift lag tries. */
+#define HUSH_LAG_MAX_SHIFT 8u
+
+/* The lag luminance of `count` interleaved RGB pixels into the plane y:
+ * min(max(0.2126 R + 0.7152 G + 0.0722 B, 0), 1), NaN counts as 0. */
+void hush__lag_luminance(const float *rgb, size_t count, float *y);
+
+/* out = in averaged over the box of radius `radius` (clipped at the
+ * edges) on a width x height plane; tmp: width x height floats. */
+void hush__lag_box(const float *in, uint32_t width, uint32_t height, int radius, float *tmp,
+                   float *out);
+
+/* mask[i] = 1 where |cur[i] - prev[i]| > threshold, else 0; returns the
+ * number of ones. */
+size_t hush__lag_region(const float *prev, const float *cur, size_t n, float threshold,
+                        float *mask);
+
+/* Mean of y over the pixels where mask is 1 (NaN for an empty mask). */
+double hush__lag_region_mean(const float *y, const float *mask, size_t n);
+
+/*
+ * Event lag: out_mean[k] and ref_mean[k] are the region means at frame
+ * K + k, k < count. Returns the first k with |out - ref| <= tolerance *
+ * |ref|, or -1 when no frame is within it.
+ */
+int hush__lag_event(const double *out_mean, const double *ref_mean, uint32_t count,
+                    double tolerance);
+
+/* Shift lag, per frame: sse[k] += sum over pixels (out - ref[k])^2 for
+ * k < shifts, ref[k] the reference k frames before out's frame. */
+void hush__lag_shift_add(const float *out, const float *const *ref, uint32_t shifts, size_t n,
+                         double *sse);
+
+/* The shift lag from the sums of hush__lag_shift_add (shifts >= 1): the
+ * argmin (the smallest on a tie), refined by the parabola through it and
+ * its neighbours when it is inside. NaN when shifts is 0. */
+double hush__lag_shift(const double *sse, uint32_t shifts);
+
+#endif

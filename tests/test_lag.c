@@ -1,0 +1,158 @@
+/*
+ * test_lag.c — the lag measures of eval/lag.h on synthetic frames whose
+ * answer is known: the box average keeps a constant and spreads an impulse
+ * evenly (clipped at the edges); the changed region is exactly the pixels that stepped;
+ * an exponential moving average with weight a after a step is within 10%
+ * after the frames 0.6 (1 - a)^(k+1) <= 0.1 * 0.2 predicts, no history
+ * gives 0 and a filter that never follows gives -1; the shift lag finds an
+ * integer delay exactly, a half-frame blend at k + 0.5, keeps it under
+ * noise, and an exponential moving average on a steady ramp trails it by
+ * (1 - a) / a frames.
+ */
+#include "check.h"
+
+#include "core/rng.h"
+#include "eval/lag.h"
+
+#include <math.h>
+#include <string.h>
+
+#define W 64
+#define H 48
+#define N (W * H)
+#define FRAMES 24
+
+static float prev[N], cur[N], mask[N];
+
+/* Lit square: pixels with 16 <= x < 40, 8 <= y < 30. */
+static int lit(int i) {
+  const int x = i % W, y = i / W;
+  return x >= 16 && x < 40 && y >= 8 && y < 30;
+}
+
+/* The box average: a constant stays, an impulse spreads 1/(2r+1)^2 over
+ * the box inside and more where the box is clipped at an edge. */
+static void test_box(void) {
+  static float in[N], tmp[N], out[N];
+  for (int i = 0; i < N; i++) in[i] = 0.25f;
+  hush__lag_box(in, W, H, 3, tmp, out);
+  int same = 1;
+  for (int i = 0; i < N; i++) same &= fabsf(out[i] - 0.25f) < 1e-6f;
+  CHECK(same);
+  memset(in, 0, sizeof in);
+  in[20 * W + 30] = 49.0f;
+  hush__lag_box(in, W, H, 3, tmp, out);
+  CHECK_NEAR(out[20 * W + 30], 1.0, 1e-6);
+  CHECK_NEAR(out[23 * W + 27], 1.0, 1e-6);
+  CHECK(out[24 * W + 30] == 0.0f && out[20 * W + 34] == 0.0f);
+  memset(in, 0, sizeof in);
+  in[0] = 16.0f; /* the corner's box holds 4 x 4 pixels */
+  hush__lag_box(in, W, H, 3, tmp, out);
+  CHECK_NEAR(out[0], 1.0, 1e-6);
+}
+
+static void test_region(void) {
+  for (int i = 0; i < N; i++) {
+    const float noise = 0.016f * (hush_rng_float(3, 0, (uint32_t)i) - 0.5f);
+    prev[i] = (lit(i) ? 0.8f : 0.2f) + noise;
+    cur[i] = 0.2f - noise;
+  }
+  const size_t count = hush__lag_region(prev, cur, N, HUSH_LAG_THRESHOLD, mask);
+  CHECK(count == 24 * 22);
+  int same = 1;
+  for (int i = 0; i < N; i++) same &= (mask[i] == 1.0f) == lit(i);
+  CHECK(same);
+  /* the region mean is over the region only */
+  CHECK_NEAR(hush__lag_region_mean(prev, mask, N), 0.8, 0.02);
+  memset(mask, 0, sizeof mask);
+  CHECK(isnan(hush__lag_region_mean(prev, mask, N)));
+}
+
+/* An EMA of weight a follows a step 0.8 -> 0.2 at frame 0 of the series:
+ * out(k) = 0.2 + 0.6 (1 - a)^(k + 1). */
+static int ema_event_lag(double a) {
+  double out[FRAMES], ref[FRAMES];
+  double y = 0.8;
+  for (int k = 0; k < FRAMES; k++) {
+    y = (1.0 - a) * y + a * 0.2;
+    for (int i = 0; i < N; i++) cur[i] = lit(i) ? (float)y : 0.2f;
+    out[k] = hush__lag_region_mean(cur, mask, N);
+    ref[k] = 0.2;
+  }
+  return hush__lag_event(out, ref, FRAMES, HUSH_LAG_TOLERANCE);
+}
+
+static void test_event(void) {
+  for (int i = 0; i < N; i++) mask[i] = lit(i) ? 1.0f : 0.0f;
+  /* within 10% of 0.2: 0.6 (1 - a)^(k + 1) <= 0.02 */
+  const double alphas[] = {0.2, 0.3, 0.5};
+  for (int j = 0; j < 3; j++) {
+    const double a = alphas[j];
+    const int expected = (int)ceil(log(0.02 / 0.6) / log(1.0 - a) - 1.0 - 1e-9);
+    CHECK_MSG(ema_event_lag(a) == expected, "alpha %g: lag %d, expected %d", a, ema_event_lag(a),
+              expected);
+  }
+  CHECK(ema_event_lag(0.2) >= 5); /* svgf's alpha trails by 5 frames or more */
+  CHECK(ema_event_lag(1.0) == 0); /* no history: at the reference at once */
+  CHECK(ema_event_lag(0.0) == -1); /* never follows */
+}
+
+/* A pattern moving one pixel per frame: ref(t)(x) = ramp of x - t. */
+static float ramp(int i, double t) {
+  const double x = i % W, y = i / W;
+  return (float)(0.3 + 0.004 * (x - t) + 0.002 * y);
+}
+
+static float refs[FRAMES][N];
+
+static double shift_of(float (*out)[N], int first) {
+  double sse[HUSH_LAG_MAX_SHIFT] = {0};
+  const float *ring[HUSH_LAG_MAX_SHIFT];
+  for (int t = first; t < FRAMES; t++) {
+    for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) ring[k] = refs[t - (int)k];
+    hush__lag_shift_add(out[t], ring, HUSH_LAG_MAX_SHIFT, N, sse);
+  }
+  return hush__lag_shift(sse, HUSH_LAG_MAX_SHIFT);
+}
+
+static float outs[FRAMES][N];
+
+static void test_shift(void) {
+  for (int t = 0; t < FRAMES; t++)
+    for (int i = 0; i < N; i++) refs[t][i] = ramp(i, t);
+  const int first = (int)HUSH_LAG_MAX_SHIFT;
+  /* an exact copy: 0; a copy 3 frames late: 3 */
+  CHECK(shift_of(refs, first) == 0.0);
+  for (int t = 0; t < FRAMES; t++)
+    for (int i = 0; i < N; i++) outs[t][i] = ramp(i, t - 3);
+  CHECK_NEAR(shift_of(outs, first), 3.0, 1e-9);
+  /* halfway between 2 and 3 frames late */
+  for (int t = 0; t < FRAMES; t++)
+    for (int i = 0; i < N; i++) outs[t][i] = 0.5f * (ramp(i, t - 2) + ramp(i, t - 3));
+  CHECK_NEAR(shift_of(outs, first), 2.5, 1e-3);
+  /* the same under noise of 5x the per-frame change */
+  for (int t = 0; t < FRAMES; t++)
+    for (int i = 0; i < N; i++)
+      outs[t][i] = ramp(i, t - 4) + 0.02f * (hush_rng_float(7, (uint32_t)t, (uint32_t)i) - 0.5f);
+  CHECK_NEAR(shift_of(outs, first), 4.0, 0.1);
+  /* EMA of weight a on the ramp trails by (1 - a) / a once settled (it
+   * starts settled) */
+  const double a = 0.25;
+  for (int i = 0; i < N; i++) outs[0][i] = ramp(i, -(1.0 - a) / a);
+  for (int t = 1; t < FRAMES; t++)
+    for (int i = 0; i < N; i++)
+      outs[t][i] = (float)((1.0 - a) * outs[t - 1][i] + a * refs[t][i]);
+  CHECK_NEAR(shift_of(outs, first), (1.0 - a) / a, 0.1);
+  /* the argmin stays inside 0..S-1 */
+  double sse[3] = {3.0, 2.0, 1.0};
+  CHECK(hush__lag_shift(sse, 3) == 2.0);
+  CHECK(isnan(hush__lag_shift(sse, 0)));
+}
+
+int main(void) {
+  test_box();
+  test_region();
+  test_event();
+  test_shift();
+  return check_summary();
+}
