@@ -6,6 +6,7 @@
 
 extern const hush_filter_class hush__filter_accumulate;
 extern const hush_filter_class hush__filter_svgf;
+extern const hush_filter_class hush__filter_asvgf;
 extern const hush_filter_class hush__filter_taa;
 extern const hush_filter_class hush__filter_bmfr;
 extern const hush_filter_class hush__filter_nca;
@@ -13,6 +14,7 @@ extern const hush_filter_class hush__filter_nca;
 const hush_filter_class *const hush__filter_classes[] = {
     &hush__filter_accumulate,
     &hush__filter_svgf,
+    &hush__filter_asvgf,
     &hush__filter_taa,
     &hush__filter_bmfr,
     &hush__filter_nca,

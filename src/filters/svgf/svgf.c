@@ -31,11 +31,13 @@
 #include "filters/emission.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/svgf/adaptive.h"
 #include "filters/svgf/atrous.h"
 #include "filters/svgf/guide.h"
 #include "filters/svgf/padded.h"
 #include "filters/svgf/progressive.h"
 #include "filters/svgf/samples.h"
+#include "filters/svgf/svgf.h"
 #include "filters/svgf/variance.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
@@ -45,160 +47,13 @@
 #include <stdlib.h>
 #include <string.h>
 
-enum {
-  P_NONFINITE = 0,
-  P_ALPHA,
-  P_ALPHA_MOMENTS,
-  P_MAX_AGE,
-  P_DEPTH_TOLERANCE,
-  P_DEPTH_GRADIENT,
-  P_NORMAL_THRESHOLD,
-  P_USE_ID,
-  P_FALLBACK_3X3,
-  P_DEMODULATE,
-  P_ITERATIONS,
-  P_SIGMA_Z,
-  P_SIGMA_N,
-  P_SIGMA_L,
-  P_SPATIAL_VARIANCE_FRAMES,
-  P_FEEDBACK_FIRST_LEVEL,
-  P_TAA,
-  P_TAA_ALPHA,
-  P_KERNEL,
-  P_ORDER,
-  P_DEPTH_STEEP,
-  P_SAMPLE_VARIANCE,
-  P_PROGRESSIVE,
-  P_PROGRESSIVE_EPSILON,
-  P_EMISSION_BYPASS,
-  P_COUNT
-};
-
-static const char *const svgf_kernel_names[] = {"5x5", "3x3"};
+const char *const svgf_kernel_names[] = {"5x5", "3x3"};
 enum { ORDER_INCREASING = 0, ORDER_DECREASING, ORDER_ZERO_THEN_DECREASING };
-static const char *const svgf_order_names[] = {"increasing", "decreasing", "0-then-decreasing"};
+const char *const svgf_order_names[] = {"increasing", "decreasing", "0-then-decreasing"};
 
-static const hush_param_info svgf_params[P_COUNT] = {
-    HUSH_PARAM_NONFINITE_ENTRY,
-    {"alpha", HUSH_PARAM_FLOAT, 0.2, 0.0, 1.0,
-     "minimum weight of the new frame in the colour blend: max(alpha, 1/history_length)", NULL},
-    {"alpha_moments", HUSH_PARAM_FLOAT, 0.2, 0.0, 1.0,
-     "minimum weight of the new frame in the luminance-moment blend", NULL},
-    {"max_age", HUSH_PARAM_INT, 32, 1, 65535, "history length cap in frames", NULL},
-    HUSH_PARAM_DEPTH_TOLERANCE_ENTRY,
-    HUSH_PARAM_DEPTH_GRADIENT_ENTRY,
-    HUSH_PARAM_NORMAL_THRESHOLD_ENTRY,
-    HUSH_PARAM_USE_ID_ENTRY,
-    {"fallback_3x3", HUSH_PARAM_BOOL, 1, 0, 1,
-     "search the 3x3 neighbourhood when no tap of the bilinear footprint is consistent", NULL},
-    HUSH_PARAM_DEMODULATE_ENTRY,
-    {"iterations", HUSH_PARAM_INT, 5, 0, 10,
-     "a-trous levels, tap steps 1, 2, ..., 2^(iterations-1) (0: accumulation only); the thesis "
-     "uses 6 with the 3x3 kernel",
-     NULL},
-    {"sigma_z", HUSH_PARAM_FLOAT, 1.0, 1e-6, 1e6,
-     "depth weight exp(-|z_p - z_q| / (sigma_z |grad z . (p - q)| + eps))", NULL},
-    {"sigma_n", HUSH_PARAM_FLOAT, 128.0, 0.0, 1024.0,
-     "normal weight max(0, n_p . n_q)^sigma_n", NULL},
-    {"sigma_l", HUSH_PARAM_FLOAT, 4.0, 1e-6, 1e6,
-     "luminance weight exp(-|l_p - l_q| / (sigma_l sqrt(g3x3(var_p)) + eps))", NULL},
-    {"spatial_variance_frames", HUSH_PARAM_INT, 4, 0, 65535,
-     "below this history length (in samples: frames x spp) the variance is a 7x7 bilateral "
-     "spatial estimate (0: never)",
-     NULL},
-    {"feedback_first_level", HUSH_PARAM_BOOL, 1, 0, 1,
-     "the first a-trous level becomes the next frame's colour history (else the accumulation)",
-     NULL},
-    {"taa", HUSH_PARAM_BOOL, 0, 0, 1,
-     "finish with temporal anti-aliasing of the remodulated output (as the 'taa' filter: 3x3 "
-     "YCoCg clamp, tone-mapped); off by default so that svgf alone can be compared",
-     NULL},
-    {"taa_alpha", HUSH_PARAM_FLOAT, 0.1, 0.01, 1.0,
-     "with taa: weight of the current frame in the TAA blend", NULL},
-    {"kernel", HUSH_PARAM_ENUM, 0, 0, 1,
-     "a-trous kernel: 5x5 B3 spline (1 4 6 4 1)/16 (Schied 2017) or 3x3 (1 2 1)/4 (Dundr 2018 "
-     "§4.1.4.6)",
-     svgf_kernel_names},
-    {"order", HUSH_PARAM_ENUM, 0, 0, 2,
-     "order of the tap steps: increasing (1, 2, 4, ...; Schied 2017), decreasing (largest "
-     "first) or 0-then-decreasing (1, then largest down to 2: Dundr 2018 §4.1.4.6, 'i = 0, 5, 4, "
-     "3, 2, 1'); the first level run is the one fed back (with decreasing that is the coarsest: "
-     "its bias accumulates, measured +2 % on a noisy wall after 8 frames)",
-     svgf_order_names},
-    {"depth_steep", HUSH_PARAM_FLOAT, 0.0, 0.0, 1e6,
-     "the depth weight is 1 where |grad z| > depth_steep * z (relative slope per pixel; Dundr "
-     "2018 §4.1.4.3, a scene-dependent constant without a published value); 0: never",
-     NULL},
-    {"sample_variance", HUSH_PARAM_BOOL, 1, 0, 1,
-     "with 'variance' and 'spp' bound: merge the within-pixel sample variance into the moments "
-     "(Dundr 2018 §4.3)",
-     NULL},
-    {"progressive", HUSH_PARAM_BOOL, 1, 0, 1,
-     "with 'spp' bound and holes (spp 0, `hush render --spp-fraction`): fewer than 1 spp "
-     "(Dundr 2018 §4.2): G-buffer holes filled by a pyramid, forward reprojection by scatter "
-     "with a depth test, near/far rejection, holes without data weightless; needs 'position'",
-     NULL},
-    {"progressive_epsilon", HUSH_PARAM_FLOAT, 0.05, 0.0, 1e6,
-     "progressive: the luminance weight's epsilon is 1e-4 + this / samples below 4 samples "
-     "(Dundr 2018 §4.2.3: typically 0.01 to 0.1)",
-     NULL},
-    {"emission_bypass", HUSH_PARAM_BOOL, 0, 0, 1,
-     "with 'emission' bound: filter color minus emission and add the emission back (lights seen "
-     "directly stay exact and do not bleed, but their 1 spp edges stay aliased: on the cornell-box "
-     "relMSE 0.040 -> 0.008, RMSE 0.126 -> 0.174; docs/bmfr.md)",
-     NULL},
-};
+static const hush_param_info svgf_params[P_COUNT] = {SVGF_PARAM_ROWS};
 
-enum {
-  I_COLOR = 0,
-  I_DEPTH,
-  I_NORMAL,
-  I_DEPTH_GRADIENT,
-  I_POSITION,
-  I_ID,
-  I_MOTION,
-  I_ALBEDO,
-  I_EMISSION,
-  I_SPP,
-  I_SAMPLE_VARIANCE,
-  I_DIRECT,
-  I_INDIRECT,
-  I_OUTPUT,
-  I_VARIANCE_ESTIMATE,
-  I_HISTORY_LENGTH,
-  I_COUNT
-};
-
-static const hush_image_info svgf_images[I_COUNT] = {
-    HUSH_IMAGE_COLOR_ENTRY,
-    {"depth", HUSH_IMAGE_INPUT, 1, 1, "linear view depth (0: background)"},
-    HUSH_IMAGE_NORMAL_ENTRY,
-    {"depth_gradient", HUSH_IMAGE_INPUT, 0, 2,
-     "d depth / d pixel in x and y (else the smaller one-sided difference of 'depth')"},
-    {"position", HUSH_IMAGE_INPUT, 0, 3,
-     "world-space position (camera reprojection; else reconstructed from depth)"},
-    HUSH_IMAGE_ID_ENTRY,
-    HUSH_IMAGE_MOTION_ENTRY,
-    {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
-    {"emission", HUSH_IMAGE_INPUT, 0, 3,
-     "radiance the camera sees directly at the first hit (lights, sky): kept out of the "
-     "filtered signal (color, or direct, minus emission), added back before TAA"},
-    {"spp", HUSH_IMAGE_INPUT, 0, 1,
-     "samples per pixel of 'color' (else 1; `hush render --spp N`): the variance of a pixel "
-     "value is the per-sample variance / spp"},
-    {"variance", HUSH_IMAGE_INPUT, 0, 1,
-     "per-sample luminance variance within the pixel (`hush render --spp N`, needs 'spp'), "
-     "merged into the moments (Dundr 2018 §4.3)"},
-    {"direct", HUSH_IMAGE_INPUT, 0, 3,
-     "direct light (`hush render --split`): with 'indirect' also bound, each is filtered on its "
-     "own (own history, variance and a-trous; Schied 2017) and the output is their sum ('color' "
-     "is then not used)"},
-    {"indirect", HUSH_IMAGE_INPUT, 0, 3, "indirect light, see 'direct'"},
-    {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
-    {"variance_estimate", HUSH_IMAGE_OUTPUT, 0, 1,
-     "luminance variance estimate that guides the first a-trous level (demodulated)"},
-    {"history_length", HUSH_IMAGE_OUTPUT, 0, 1, "frames accumulated per pixel"},
-};
+static const hush_image_info svgf_images[I_COUNT] = {SVGF_IMAGE_ROWS};
 
 static const hush_filter_class_info svgf_info = {
     "svgf",
@@ -254,7 +109,7 @@ static hush_status component_init(hush_device device, svgf_component *c, uint32_
   return s;
 }
 
-static void svgf_destroy(void *state) {
+void svgf_destroy(void *state) {
   svgf_state *st = state;
   if (!st) return;
   hush__reprojector_free(&st->rp);
@@ -280,7 +135,7 @@ static void svgf_destroy(void *state) {
   free(st);
 }
 
-static hush_status svgf_create(hush_filter f, void **state) {
+hush_status svgf_create(hush_filter f, void **state) {
   svgf_state *st = calloc(1, sizeof *st);
   if (!st) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "svgf: out of memory");
   const uint32_t W = f->width, H = f->height;
@@ -382,6 +237,7 @@ typedef struct frame_ctx {
   int demod, merge, iterations, order, threads;
   int holes; /* progressive: this frame has untraced pixels */
   const svgf_kernel *kernel;
+  svgf_adaptive *ad; /* asvgf: the adaptive temporal stage, else NULL */
 } frame_ctx;
 
 /* Accumulation, variance and a-trous of one component: c->result. */
@@ -400,6 +256,9 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   }
   hush__accum_blend(&c->acc, &st->rp.plan, (const float *const *)c->color.plane, &fc->ap,
                     st->var.plane[0], threads);
+  if (fc->ad)
+    svgf_adaptive_history(fc->ad, &c->acc, had_history, &st->rp.plan,
+                          (const float *const *)c->color.plane, &fc->ap, st->var.plane[0], threads);
   if (fc->holes) {
     float *const cur[6] = {
         hush__accum_color(&c->acc)->plane[0],   hush__accum_color(&c->acc)->plane[1],
@@ -501,7 +360,7 @@ static void add_planes(hush_planar *a, const hush_planar *b, int threads) {
   }
 }
 
-static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_info *info) {
+hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, svgf_adaptive *ad) {
   svgf_state *st = state;
   const int threads = st->threads;
   const int W = (int)f->width, H = (int)f->height;
@@ -554,6 +413,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
   if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
+  if (ad && (s = svgf_adaptive_import(f, ad))) return s;
   const size_t npix = (size_t)W * H;
   const int holes = has_spp && hush__param_i(f, P_PROGRESSIVE) &&
                     svgf_has_holes(st->spp.plane[0], npix, threads);
@@ -625,6 +485,15 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
                          info, threads);
   hush__filter_timing_stage(f, "reproject");
 
+  /* ---- asvgf: lambda from the gradient samples */
+  if (ad) {
+    svgf_adaptive_lambda(ad, gb->depth.plane[0], (const float *const *)gb->normal.plane,
+                         st->grad.plane[0], st->grad.plane[1],
+                         (const float *const *)st->comp[0].color.plane,
+                         split ? (const float *const *)st->comp[1].color.plane : NULL, threads);
+    hush__filter_timing_stage(f, "gradient");
+  }
+
   /* ---- per component: accumulate, variance, a-trous */
   frame_ctx fc;
   fc.f = f;
@@ -641,6 +510,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   fc.kernel = kernel;
   fc.threads = threads;
   fc.holes = holes;
+  fc.ad = ad;
   filter_component(&fc, &st->comp[0], 1);
   if (split) {
     filter_component(&fc, &st->comp[1], 0);
@@ -680,6 +550,10 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
   if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
+}
+
+static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_info *info) {
+  return svgf_run(f, state, info, NULL);
 }
 
 const hush_filter_class hush__filter_svgf = {
