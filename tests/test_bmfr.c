@@ -2,7 +2,10 @@
  * test_bmfr.c — the "bmfr" filter (bmfr-koskela-2019.md): the block fit on
  * its own (src/filters/bmfr/regression.h, features.h, blocks.h) and the
  * whole pipeline through the public API, on synthetic G-buffers seen by a
- * static camera.
+ * static camera; temporal_gradients (adaptive BMFR): off is plain bmfr even
+ * with a gradient bound, an all-zero gradient changes no bit, a gradient
+ * of lambda 1 everywhere makes every frame a first frame (no history), and
+ * the option without the image is an error naming it.
  */
 #include "hush.h"
 
@@ -774,6 +777,96 @@ static void test_emission(hush_device dev) {
     }
 }
 
+/* ---- temporal_gradients ---------------------------------------------------- */
+
+static float gradient_layer[N * 3];
+static float history_length[N];
+
+/* Every stratum's sample: current c, previous p, landing index 0. */
+static void gradient_samples(float c, float p) {
+  for (int i = 0; i < N; i++) {
+    gradient_layer[3 * i + 0] = c;
+    gradient_layer[3 * i + 1] = p;
+    gradient_layer[3 * i + 2] = 0.0f;
+  }
+}
+
+static void test_temporal_gradients(hush_device dev) {
+  static scene a, b;
+  busy(&a, 0);
+  busy(&b, 0);
+  hush_filter fa = make(dev, &a, 1), fb = make(dev, &b, 1);
+  int on = 1;
+  CHECK(hush_filter_get_bool(fa, "temporal_gradients", &on) == HUSH_OK && on == 0);
+  /* off: a bound gradient (of lambda 1) is not read */
+  gradient_samples(0.0f, 1.0f);
+  bind(fb, "gradient", gradient_layer, HUSH_FORMAT_FLOAT3);
+  REQUIRE(hush_filter_commit(fb) == HUSH_OK);
+  int same = 1;
+  for (int k = 0; k < 4; k++) {
+    busy(&a, k);
+    busy(&b, k);
+    REQUIRE(run(fa, (uint64_t)k) == HUSH_OK);
+    REQUIRE(run(fb, (uint64_t)k) == HUSH_OK);
+    same &= memcmp(a.output, b.output, sizeof a.output) == 0;
+  }
+  CHECK_MSG(same, "temporal_gradients off: a bound gradient changed the output");
+  /* on, all-zero gradient (no change anywhere): the same bits, history going on */
+  gradient_samples(0.0f, 0.0f);
+  REQUIRE(hush_filter_set_bool(fb, "temporal_gradients", 1) == HUSH_OK);
+  for (int k = 4; k < 8; k++) {
+    busy(&a, k);
+    busy(&b, k);
+    REQUIRE(run(fa, (uint64_t)k) == HUSH_OK);
+    REQUIRE(run(fb, (uint64_t)k) == HUSH_OK);
+    same &= memcmp(a.output, b.output, sizeof a.output) == 0;
+  }
+  CHECK_MSG(same, "temporal_gradients on with a zero gradient changed the output");
+  hush_filter_release(fa);
+  hush_filter_release(fb);
+
+  /* lambda 1 everywhere (c = 0 < p = 1): each frame equals a new filter's
+   * first frame at the same frame index (TAA, which keeps its own history,
+   * off); phase I's counts are all 1 */
+  busy(&a, 0);
+  fa = make(dev, &a, 1);
+  REQUIRE(hush_filter_set_bool(fa, "taa", 0) == HUSH_OK);
+  REQUIRE(hush_filter_set_bool(fa, "temporal_gradients", 1) == HUSH_OK);
+  gradient_samples(0.0f, 1.0f);
+  bind(fa, "gradient", gradient_layer, HUSH_FORMAT_FLOAT3);
+  bind(fa, "history_length", history_length, HUSH_FORMAT_FLOAT);
+  REQUIRE(hush_filter_commit(fa) == HUSH_OK);
+  int fresh = 1, ones = 1;
+  for (int k = 0; k < 4; k++) {
+    busy(&a, k);
+    REQUIRE(run(fa, (uint64_t)k) == HUSH_OK);
+    busy(&b, k);
+    fb = make(dev, &b, 1);
+    REQUIRE(hush_filter_set_bool(fb, "taa", 0) == HUSH_OK);
+    REQUIRE(run(fb, (uint64_t)k) == HUSH_OK);
+    fresh &= memcmp(a.output, b.output, sizeof a.output) == 0;
+    for (int i = 0; i < N; i++) ones &= history_length[i] == 1.0f;
+    hush_filter_release(fb);
+  }
+  CHECK_MSG(fresh, "lambda 1: not the first-frame result");
+  CHECK(ones);
+  /* lambda 0 again: the history grows back */
+  gradient_samples(0.5f, 0.5f);
+  for (int k = 4; k < 7; k++) {
+    busy(&a, k);
+    REQUIRE(run(fa, (uint64_t)k) == HUSH_OK);
+  }
+  CHECK_MSG(history_length[N / 4] == 4.0f, "history length %g after 3 unchanged frames",
+            (double)history_length[N / 4]);
+  /* on without the image: an error naming it */
+  REQUIRE(hush_filter_unset_image(fa, "gradient") == HUSH_OK);
+  CHECK(run(fa, 7) == HUSH_ERROR_INVALID_OPERATION);
+  const char *msg = NULL;
+  hush_device_get_error(dev, &msg);
+  CHECK(msg && strstr(msg, "'gradient'") && strstr(msg, "temporal_gradients"));
+  hush_filter_release(fa);
+}
+
 int main(void) {
   test_exact_block();
   test_rank_deficient_block();
@@ -793,6 +886,7 @@ int main(void) {
   test_outliers(dev);
   test_firefly(dev);
   test_emission(dev);
+  test_temporal_gradients(dev);
   hush_device_release(dev);
   return check_summary();
 }

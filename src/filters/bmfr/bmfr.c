@@ -20,16 +20,18 @@
  * Holes (depth <= 0: no surface) take no part in a fit and keep their
  * accumulated radiance.
  *
- * Adaptive temporal weights (A-SVGF, issue 7) fit in as a per-pixel alpha:
- * both blends take max(alpha_min, 1 / age) per pixel, so a per-pixel alpha
- * plane a(p) can be applied by lowering the age planes to min(age, 1 / a(p))
- * before each blend (and that also shortens the kept history, as A-SVGF's
- * history-length reduction does); see docs/bmfr.md.
+ * Adaptive temporal weights (A-SVGF, issue 7; parameter temporal_gradients,
+ * adaptive.h): both blends take max(alpha_min, 1 / age) per pixel, so the
+ * per-pixel weight a(p) of A-SVGF is applied by lowering phase I's ages to
+ * min(age, 1 / a(p)) and blending its colour again where they were lowered;
+ * phase III reads the lowered ages, and the kept history is shortened, as
+ * A-SVGF's history-length reduction does; see docs/bmfr.md.
  *
  * Deterministic and independent of the thread count: every block is fitted
  * on its own and the noise depends on the frame index only.
  */
 #include "filters/albedo.h"
+#include "filters/bmfr/adaptive.h"
 #include "filters/emission.h"
 #include "filters/bmfr/blocks.h"
 #include "filters/bmfr/features.h"
@@ -72,8 +74,20 @@ enum {
   P_TAA,
   P_TAA_ALPHA,
   P_EMISSION_BYPASS,
+  P_TEMPORAL_GRADIENTS,
+  P_GRADIENT_ITERATIONS,
+  P_GRADIENT_SIGMA_L,
+  P_GRADIENT_EXPONENT,
+  P_HISTORY_RULE,
   P_COUNT
 };
+
+/* The gradient reconstruction's depth and normal weights: svgf's defaults
+ * (bmfr has no sigma_z / sigma_n of its own). */
+#define GRADIENT_SIGMA_Z 1.0f
+#define GRADIENT_SIGMA_N 128.0f
+
+static const char *const history_rule_names[] = {"schied", "higginson"};
 
 #define EXPONENT_DOC(what)                                                                 \
   "features " what ": each channel, scaled to [-1, 1] per block, raised to this exponent " \
@@ -137,6 +151,25 @@ static const hush_param_info bmfr_params[P_COUNT] = {
      "with 'emission' bound: fit color minus emission and add the emission back, so lights seen "
      "directly never enter a block's fit (cornell-box relMSE 0.116 -> 0.022; docs/bmfr.md)",
      NULL},
+    {"temporal_gradients", HUSH_PARAM_BOOL, 0, 0, 1,
+     "adaptive BMFR: A-SVGF's temporal gradients (image 'gradient', required when on) shorten "
+     "phase I's history where the shading changed, and phase III reuses those counts "
+     "(docs/asvgf.md)",
+     NULL},
+    {"gradient_iterations", HUSH_PARAM_INT, 3, 0, HUSH_GRADIENT_MAX_ITERATIONS,
+     "with temporal_gradients: a-trous levels reconstructing the gradient on the 3x3-stratum "
+     "grid, guided by depth and normal (0: the raw per-stratum gradient), as asvgf",
+     NULL},
+    {"gradient_sigma_l", HUSH_PARAM_FLOAT, 4.0, 1e-6, 1e6,
+     "with temporal_gradients: relative luminance weight of the reconstruction, as asvgf", NULL},
+    {"gradient_exponent", HUSH_PARAM_FLOAT, 1.0, 0.01, 100.0,
+     "with temporal_gradients: lambda = min(|delta| / max(current, previous), 1)^exponent (1: "
+     "Schied 2018; 2: Higginson 2023)",
+     NULL},
+    {"history_rule", HUSH_PARAM_ENUM, 0, 0, 1,
+     "with temporal_gradients: schied, a = (1 - lambda) max(alpha, 1/N) + lambda, or higginson, "
+     "N' = min((N - 1)(1 - lambda)^10 + 1, max_age); the count becomes min(N, 1/a), as asvgf",
+     history_rule_names},
 };
 
 enum {
@@ -148,6 +181,7 @@ enum {
   I_MOTION,
   I_ALBEDO,
   I_EMISSION,
+  I_GRADIENT,
   I_OUTPUT,
   I_FITTED,
   I_HISTORY_LENGTH,
@@ -167,6 +201,10 @@ static const hush_image_info bmfr_images[I_COUNT] = {
     {"emission", HUSH_IMAGE_INPUT, 0, 3,
      "radiance the camera sees directly at the first hit (lights, sky): kept out of the fit "
      "(color - emission), added back before TAA"},
+    {"gradient", HUSH_IMAGE_INPUT, 0, 3,
+     "temporal gradient samples (`hush render --gradients`), read with temporal_gradients on: "
+     "per 3x3 stratum, at its top-left pixel, the current and previous luminance and the "
+     "landing index 0..8 (-1: none)"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
     {"fitted", HUSH_IMAGE_OUTPUT, 0, 3,
      "phase II result: this frame's block fit of the accumulated (demodulated) radiance"},
@@ -209,6 +247,7 @@ typedef struct bmfr_state {
   hush_emission_history eh; /* the emission added back, accumulated */
   hush_gbuffer_inputs gin;
   hush_taa taa;
+  bmfr_adaptive ad;    /* temporal_gradients */
 } bmfr_state;
 
 static void bmfr_destroy(void *state) {
@@ -227,6 +266,7 @@ static void bmfr_destroy(void *state) {
   hush__emission_history_free(&st->eh);
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
+  bmfr_adaptive_free(&st->ad);
   free(st);
 }
 
@@ -483,6 +523,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
     return s;
   if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
+  const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
+  if (adaptive && (s = bmfr_adaptive_import(f, &st->ad, I_GRADIENT))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- phase I: reproject + accumulate the demodulated 1 spp radiance */
@@ -499,9 +541,23 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   ap.alpha_min = hush__param_f(f, P_ALPHA);
   ap.alpha_moments_min = ap.alpha_min;
   ap.max_age = hush__param_i(f, P_MAX_AGE);
+  const int had_history = st->acc.has_history;
   hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap, NULL,
                     threads);
   hush__filter_timing_stage(f, "accumulate");
+  if (adaptive) {
+    st->ad.params.iterations = hush__param_i(f, P_GRADIENT_ITERATIONS);
+    st->ad.params.sigma_z = GRADIENT_SIGMA_Z;
+    st->ad.params.sigma_n = GRADIENT_SIGMA_N;
+    st->ad.params.sigma_l = hush__param_f(f, P_GRADIENT_SIGMA_L);
+    st->ad.params.exponent = hush__param_f(f, P_GRADIENT_EXPONENT);
+    st->ad.rule = hush__param_i(f, P_HISTORY_RULE) ? HUSH_HISTORY_HIGGINSON : HUSH_HISTORY_SCHIED;
+    const hush_gbuffer_store *cur = hush__reprojector_latest(&st->rp);
+    bmfr_adaptive_history(&st->ad, &st->acc, had_history, &st->rp.plan,
+                          (const float *const *)st->color.plane, &ap, cur->depth.plane[0],
+                          (const float *const *)cur->normal.plane, threads);
+    hush__filter_timing_stage(f, "gradient");
+  }
 
   /* ---- phase II: features, fit, weighted sum, per block */
   const int B = hush__param_i(f, P_BLOCK_SIZE);
