@@ -278,6 +278,25 @@ static void test_gradients_and_lag(hush_device dev) {
            WORK "/lo/ref", WORK "/x");
   expect(line, 1, "frames 0 to 11");
   expect("--seq " WORK "/s --gradients --out " WORK "/x", 2, "--gradients goes with --scene");
+
+  /* automatic: a filter that reads the gradients (here bmfr under a second
+   * name with temporal_gradients on; asvgf requires them) */
+  expect("--scene builtin:light-off --path static --size 48x27 --frames 3 --ref-spp 2 "
+         "--filters bmfr,bmfr-tg=bmfr --set bmfr-tg.temporal_gradients=on --no-video --quiet "
+         "--out " WORK "/tg", 0, NULL);
+  CHECK(has_layer(dev, WORK "/tg/seq/frame_0001.exr", "gradient") == 1);
+  read_file(WORK "/tg/status.csv");
+  CHECK(strstr(text, "bmfr,ok,") && strstr(text, "bmfr-tg,ok,"));
+  CHECK(strstr(read_file(WORK "/tg/eval.json"), "\"bmfr\", \"bmfr-tg\"") != NULL);
+  expect("--scene builtin:light-off --path static --size 48x27 --frames 2 --ref-spp 2 "
+         "--filters asvgf --no-video --quiet --out " WORK "/ta", 0, NULL);
+  CHECK(has_layer(dev, WORK "/ta/seq/frame_0001.exr", "gradient") == 1);
+  /* without them, temporal_gradients fails with the image named */
+  expect("--seq " WORK "/rr/seq --ref " WORK "/rr/ref --filters bmfr "
+         "--set bmfr.temporal_gradients=on --strict --no-video --quiet --out " WORK "/tgx", 1,
+         "'gradient'");
+  expect("--seq " WORK "/s --filters =bmfr --out " WORK "/x", 1, "NAME=FILTER");
+  expect("--seq " WORK "/s --filters a/b=bmfr --out " WORK "/x", 1, "a name has");
 }
 
 static void test_bench_scene(void) {

@@ -75,7 +75,10 @@ static const char *const help_text =
     "                       filters` lists them). \"psf\" is hashed path-space\n"
     "                       filtering (docs/psf.md): the input's \"psf\" layer, which\n"
     "                       --scene renders (or `hush render --psf`); \"psf+F\" runs\n"
-    "                       filter F on it instead of on \"color\" (e.g. psf+svgf)\n"
+    "                       filter F on it instead of on \"color\" (e.g. psf+svgf);\n"
+    "                       NAME=F runs F under the name NAME, for a second set\n"
+    "                       of parameters (bmfr,bmfr-tg=bmfr --set\n"
+    "                       bmfr-tg.temporal_gradients=on)\n"
     "  --set F.KEY=VALUE    parameter KEY of filter F; repeatable (default: the\n"
     "                       filter's defaults); psf.KEY=VALUE sets a psf parameter\n"
     "                       (psf.vertex=2, psf.scale=4 ...) for --scene\n"
@@ -290,11 +293,16 @@ static int has_filter(const eval_run *r, const char *name) {
   return 0;
 }
 
-static int add_filter(eval_run *r, const char *name) {
+/* Filter `spec` under the name `name` (the same but for NAME=SPEC). */
+static int add_filter(eval_run *r, const char *name, const char *spec) {
   if (has_filter(r, name)) return 0;
+  for (const char *c = name; *c; c++)
+    if (!(*c >= 'a' && *c <= 'z') && !(*c >= 'A' && *c <= 'Z') && !(*c >= '0' && *c <= '9') &&
+        !strchr("_-+", *c))
+      return cli_error(r->cmd, "--filters: '%s': a name has letters, digits, '_', '-', '+'", name);
   /* "psf" reads the psf layer; "psf+F" runs F with the psf layer as colour */
-  const int psf = strcmp(name, "psf") == 0 || strncmp(name, "psf+", 4) == 0;
-  const char *cls = strcmp(name, "psf") == 0 ? NULL : psf ? name + 4 : name;
+  const int psf = strcmp(spec, "psf") == 0 || strncmp(spec, "psf+", 4) == 0;
+  const char *cls = strcmp(spec, "psf") == 0 ? NULL : psf ? spec + 4 : spec;
   if (cls && strcmp(cls, "noisy") != 0 && !hush_filter_class_find(cls)) {
     char names[512] = "";
     for (uint32_t i = 0; i < hush_filter_class_count(); i++) {
@@ -306,7 +314,7 @@ static int add_filter(eval_run *r, const char *name) {
                      cls, names);
   }
   if (psf && cls && strcmp(cls, "noisy") == 0)
-    return cli_error(r->cmd, "--filters: '%s': use psf", name);
+    return cli_error(r->cmd, "--filters: '%s': use psf", spec);
   if (r->filter_count == MAX_FILTERS)
     return cli_error(r->cmd, "--filters: more than %d filters", MAX_FILTERS - 2);
   eval_filter *f = &r->filters[r->filter_count++];
@@ -319,16 +327,21 @@ static int add_filter(eval_run *r, const char *name) {
 
 /* The baselines first, then --filters in order (or every class). */
 static int filter_list(eval_run *r) {
-  int rc = add_filter(r, "noisy");
-  if (!rc) rc = add_filter(r, "accumulate");
+  int rc = add_filter(r, "noisy", "noisy");
+  if (!rc) rc = add_filter(r, "accumulate", "accumulate");
   if (!r->o->filters[0]) {
     for (uint32_t i = 0; !rc && i < hush_filter_class_count(); i++)
-      rc = add_filter(r, hush_filter_class_at(i)->name);
+      rc = add_filter(r, hush_filter_class_at(i)->name, hush_filter_class_at(i)->name);
     return rc;
   }
   strcpy(r->filter_names, r->o->filters);
-  for (char *tok = strtok(r->filter_names, ","); !rc && tok; tok = strtok(NULL, ","))
-    rc = add_filter(r, tok);
+  for (char *tok = strtok(r->filter_names, ","); !rc && tok; tok = strtok(NULL, ",")) {
+    /* NAME=F: filter F once more under its own name, for its own --set */
+    char *eq = strchr(tok, '=');
+    if (eq) *eq = '\0';
+    rc = eq && (eq == tok || !eq[1]) ? cli_error(r->cmd, "--filters: expected NAME=FILTER")
+                                     : add_filter(r, tok, eq ? eq + 1 : tok);
+  }
   return rc;
 }
 
