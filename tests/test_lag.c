@@ -15,6 +15,7 @@
 #include "eval/lag.h"
 
 #include <math.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define W 64
@@ -49,6 +50,23 @@ static void test_box(void) {
   in[0] = 16.0f; /* the corner's box holds 4 x 4 pixels */
   hush__lag_box(in, W, H, 3, tmp, out);
   CHECK_NEAR(out[0], 1.0, 1e-6);
+}
+
+/* A saturated pixel marks its box, and only its box, NaN; NaN is never in
+ * a region. */
+static void test_saturated(void) {
+  static float y[N], tmp[N], ind[N], boxed[N], other[N], m[N];
+  for (int i = 0; i < N; i++) y[i] = boxed[i] = 0.5f, other[i] = 0.0f;
+  y[20 * W + 30] = 1.0f;
+  hush__lag_mark_saturated(y, W, H, 2, tmp, ind, boxed);
+  int marked = 0, right = 1;
+  for (int i = 0; i < N; i++) {
+    const int near = abs(i % W - 30) <= 2 && abs(i / W - 20) <= 2;
+    marked += isnan(boxed[i]);
+    right &= near ? isnan(boxed[i]) : boxed[i] == 0.5f;
+  }
+  CHECK(marked == 25 && right);
+  CHECK(hush__lag_region(other, boxed, N, HUSH_LAG_THRESHOLD, m) == (size_t)(N - 25));
 }
 
 static void test_region(void) {
@@ -110,7 +128,7 @@ static double shift_of(float (*out)[N], int first) {
   const float *ring[HUSH_LAG_MAX_SHIFT];
   for (int t = first; t < FRAMES; t++) {
     for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) ring[k] = refs[t - (int)k];
-    hush__lag_shift_add(out[t], ring, HUSH_LAG_MAX_SHIFT, N, sse);
+    hush__lag_shift_add(out[t], ring, NULL, HUSH_LAG_MAX_SHIFT, N, sse);
   }
   return hush__lag_shift(sse, HUSH_LAG_MAX_SHIFT);
 }
@@ -151,6 +169,7 @@ static void test_shift(void) {
 
 int main(void) {
   test_box();
+  test_saturated();
   test_region();
   test_event();
   test_shift();

@@ -52,6 +52,15 @@ void hush__lag_box(const float *in, uint32_t width, uint32_t height, int radius,
   box_columns(tmp, width, height, radius, out);
 }
 
+void hush__lag_mark_saturated(const float *y, uint32_t width, uint32_t height, int radius,
+                              float *tmp, float *ind, float *boxed) {
+  const size_t n = (size_t)width * height;
+  for (size_t i = 0; i < n; i++) ind[i] = y[i] >= 1.0f ? 1.0f : 0.0f;
+  hush__lag_box(ind, width, height, radius, tmp, ind);
+  for (size_t i = 0; i < n; i++)
+    if (ind[i] > 0.0f) boxed[i] = NAN;
+}
+
 size_t hush__lag_region(const float *prev, const float *cur, size_t n, float threshold,
                         float *mask) {
   size_t count = 0;
@@ -79,14 +88,14 @@ int hush__lag_event(const double *out_mean, const double *ref_mean, uint32_t cou
   return -1;
 }
 
-void hush__lag_shift_add(const float *out, const float *const *ref, uint32_t shifts, size_t n,
-                         double *sse) {
+void hush__lag_shift_add(const float *out, const float *const *ref, const float *mask,
+                         uint32_t shifts, size_t n, double *sse) {
   for (uint32_t k = 0; k < shifts; k++) {
     const float *r = ref[k];
     double s = 0.0;
     for (size_t i = 0; i < n; i++) {
       const double d = (double)out[i] - r[i];
-      s += d * d;
+      s += (mask ? (double)mask[i] : 1.0) * d * d;
     }
     sse[k] += s;
   }

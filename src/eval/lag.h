@@ -19,10 +19,17 @@
  *              bright noise in it). The lag is the number of frames after K until the
  *              filter's mean luminance over R is within HUSH_LAG_TOLERANCE
  *              (10%) of the reference's mean over R (0: already at K).
- *   shift lag  continuous change (a moving light): the shift k, 0..S, of
+ *   shift lag  continuous change (a moving light): the shift k, 0..S-1, of
  *              the reference sequence that the filter's output matches
- *              best, argmin_k of the sum over frames t and pixels of
- *              (Y_out(t) - Y_ref(t - k))^2, refined to a fraction of a
+ *              best, argmin_k of the sum over frames t and the pixels of
+ *              frame t's shift region of (Y_out(t) - Y_ref(t - k))^2
+ *              (the region: where the box-averaged reference changes by
+ *              more than HUSH_LAG_THRESHOLD from frame t - S + 1 to t, the
+ *              pixels that carry the change, less those within the box of
+ *              a saturated pixel, Y = 1, in either frame: a light seen
+ *              directly moves with the motion vectors, which every filter
+ *              follows, and its clamped edges would outweigh the shading
+ *              whose history the lag is about), refined to a fraction of a
  *              frame by the parabola through the minimum and its two
  *              neighbours. A filter that trails the reference by L frames
  *              on a steady change minimises it at k = L: the error is
@@ -57,8 +64,13 @@ void hush__lag_luminance(const float *rgb, size_t count, float *y);
 void hush__lag_box(const float *in, uint32_t width, uint32_t height, int radius, float *tmp,
                    float *out);
 
-/* mask[i] = 1 where |cur[i] - prev[i]| > threshold, else 0; returns the
- * number of ones. */
+/* boxed[i] = NaN where a pixel within the box of radius `radius` around i
+ * has y >= 1 (saturated); tmp and ind: width x height floats of scratch. */
+void hush__lag_mark_saturated(const float *y, uint32_t width, uint32_t height, int radius,
+                              float *tmp, float *ind, float *boxed);
+
+/* mask[i] = 1 where |cur[i] - prev[i]| > threshold, else 0 (also where
+ * either is NaN); returns the number of ones. */
 size_t hush__lag_region(const float *prev, const float *cur, size_t n, float threshold,
                         float *mask);
 
@@ -73,10 +85,11 @@ double hush__lag_region_mean(const float *y, const float *mask, size_t n);
 int hush__lag_event(const double *out_mean, const double *ref_mean, uint32_t count,
                     double tolerance);
 
-/* Shift lag, per frame: sse[k] += sum over pixels (out - ref[k])^2 for
- * k < shifts, ref[k] the reference k frames before out's frame. */
-void hush__lag_shift_add(const float *out, const float *const *ref, uint32_t shifts, size_t n,
-                         double *sse);
+/* Shift lag, per frame: sse[k] += sum over pixels of mask (out - ref[k])^2
+ * for k < shifts, ref[k] the reference k frames before out's frame; mask
+ * NULL: every pixel. */
+void hush__lag_shift_add(const float *out, const float *const *ref, const float *mask,
+                         uint32_t shifts, size_t n, double *sse);
 
 /* The shift lag from the sums of hush__lag_shift_add (shifts >= 1): the
  * argmin (the smallest on a tie), refined by the parabola through it and

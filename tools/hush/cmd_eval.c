@@ -195,7 +195,8 @@ typedef struct eval_run {
   size_t lag_region;
   double *lag_ref_mean;
   uint32_t lag_shifts;       /* 0: too few frames for the shift lag */
-  float *lag_ring[HUSH_LAG_MAX_SHIFT];
+  float *lag_ring[HUSH_LAG_MAX_SHIFT], *lag_ring_box[HUSH_LAG_MAX_SHIFT]; /* and box-averaged */
+  float *lag_shift_mask;     /* this frame's shift region */
 } eval_run;
 
 /* ---- options ---------------------------------------------------------------- */
@@ -539,8 +540,11 @@ static int lag_setup(eval_run *r) {
       !r->lag_ref_luma || !r->lag_box || !r->lag_box_prev)
     return cli_error(r->cmd, "out of memory");
   for (uint32_t k = 0; k < r->lag_shifts; k++)
-    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))))
+    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))) ||
+        !(r->lag_ring_box[k] = malloc(r->pixels * sizeof(float))))
       return cli_error(r->cmd, "out of memory");
+  if (r->lag_shifts && !(r->lag_shift_mask = malloc(r->pixels * sizeof(float))))
+    return cli_error(r->cmd, "out of memory");
   return 0;
 }
 
@@ -570,8 +574,17 @@ static void lag_reference(eval_run *r, uint32_t i) {
   if (r->lag_event != UINT32_MAX && i >= r->lag_event)
     r->lag_ref_mean[i - r->lag_event] =
         hush__lag_region_mean(r->lag_ref_luma, r->lag_mask, r->pixels);
-  if (r->lag_shifts)
-    memcpy(r->lag_ring[i % r->lag_shifts], r->lag_ref_luma, r->pixels * sizeof(float));
+  if (!r->lag_shifts) return;
+  const uint32_t S = r->lag_shifts;
+  memcpy(r->lag_ring[i % S], r->lag_ref_luma, r->pixels * sizeof(float));
+  memcpy(r->lag_ring_box[i % S], r->lag_box, r->pixels * sizeof(float));
+  /* lag_luma and the shift mask are free here: scratch */
+  hush__lag_mark_saturated(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma,
+                           r->lag_shift_mask, r->lag_ring_box[i % S]);
+  /* the shift region: what changed over the S frames the shifts span */
+  if (i + 1 >= r->first + S)
+    hush__lag_region(r->lag_ring_box[(i + 1) % S], r->lag_box, r->pixels, HUSH_LAG_THRESHOLD,
+                     r->lag_shift_mask);
 }
 
 /* Filter f's output of frame i (r->out_rgb) into its series. */
@@ -582,7 +595,8 @@ static void lag_filter(eval_run *r, eval_filter *f, uint32_t i) {
   if (r->lag_shifts && i + 1 >= r->first + r->lag_shifts) {
     const float *ring[HUSH_LAG_MAX_SHIFT];
     for (uint32_t k = 0; k < r->lag_shifts; k++) ring[k] = r->lag_ring[(i - k) % r->lag_shifts];
-    hush__lag_shift_add(r->lag_luma, ring, r->lag_shifts, r->pixels, f->lag_sse);
+    hush__lag_shift_add(r->lag_luma, ring, r->lag_shift_mask, r->lag_shifts, r->pixels,
+                        f->lag_sse);
   }
 }
 
@@ -1283,7 +1297,11 @@ static void run_free(eval_run *r) {
   free(r->lag_ref_luma);
   free(r->lag_box);
   free(r->lag_box_prev);
-  for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) free(r->lag_ring[k]);
+  for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) {
+    free(r->lag_ring[k]);
+    free(r->lag_ring_box[k]);
+  }
+  free(r->lag_shift_mask);
   hush_frame_release(r->picture);
   if (r->have_seq) hush__sequence_free(&r->seq);
   if (r->have_ref) hush__sequence_free(&r->ref);
