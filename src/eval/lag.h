@@ -51,7 +51,7 @@
 /* "Within 10% of the reference". */
 #define HUSH_LAG_TOLERANCE 0.1
 /* An event needs at least this fraction of the frame to change. */
-#define HUSH_LAG_MIN_REGION 0.001
+#define HUSH_LAG_MIN_REGION 0.05
 /* Largest shift the shift lag tries. */
 #define HUSH_LAG_MAX_SHIFT 8u
 
