@@ -263,6 +263,7 @@ static void test_gradients_and_lag(hush_device dev) {
   read_file(WORK "/lo/summary.md");
   CHECK(strstr(text, "## Lag") && strstr(text, "| lag | event (frames) | shift (frames) |") &&
         strstr(text, "Event at frame 8"));
+  CHECK(strstr(read_file(WORK "/lo/report.html"), ">Lag<") != NULL); /* summary.md's table */
 
   /* the same event named; bad ones */
   snprintf(line, sizeof line, "--seq %s --ref %s --filters accumulate --lag-frame 8 --no-video "
