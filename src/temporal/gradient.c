@@ -225,12 +225,32 @@ static void stratum_lambda(const float *d, const float *n, const float *v, size_
   }
 }
 
-static void expand(const float *ls, int ws, uint32_t W, uint32_t H, float *lambda, int threads) {
+/* Per pixel, joint nearest-neighbour upsampling: of its stratum and the 8
+ * around it, the lambda of the one whose guide depth is nearest the pixel's
+ * (its own on ties), so that a pixel of another surface than its stratum's
+ * sample (a silhouette, the sky beside a lit wall) takes the lambda of its
+ * own surface. */
+static void expand(const float *ls, const float *zs, int ws, int hs, const float *depth,
+                   uint32_t W, uint32_t H, float *lambda, int threads) {
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < (int)H; y++) {
-    const float *restrict src = ls + (size_t)(y / 3) * ws;
-    float *restrict dst = lambda + (size_t)y * W;
-    for (uint32_t x = 0; x < W; x++) dst[x] = src[x / 3];
+    const int sy = y / 3;
+    const int rows[3] = {sy > 0 ? sy - 1 : sy, sy, sy < hs - 1 ? sy + 1 : sy};
+    for (uint32_t x = 0; x < W; x++) {
+      const int sx = (int)(x / 3);
+      const int cols[3] = {sx > 0 ? sx - 1 : sx, sx, sx < ws - 1 ? sx + 1 : sx};
+      const size_t i = (size_t)y * W + x, own = (size_t)sy * ws + sx;
+      const float z = depth[i];
+      float best = fabsf(z - zs[own]), l = ls[own];
+      for (int a = 0; a < 3; a++)
+        for (int b = 0; b < 3; b++) {
+          const size_t s = (size_t)rows[a] * ws + cols[b];
+          const float d = fabsf(z - zs[s]);
+          l = d < best ? ls[s] : l;
+          best = d < best ? d : best;
+        }
+      lambda[i] = l;
+    }
   }
 }
 
@@ -270,7 +290,7 @@ void hush__gradient_lambda(const float *const gradient[3], const hush_gradient_g
   }
   const int fin = cur ? G_D1 : G_D0;
   stratum_lambda(g[fin], g[fin + 1], g[fin + 2], S, params->exponent, g[G_LAMBDA], threads);
-  expand(g[G_LAMBDA], ws, width, height, lambda, threads);
+  expand(g[G_LAMBDA], g[G_Z], ws, hs, guides->depth, width, height, lambda, threads);
 }
 
 /* ---- history --------------------------------------------------------------- */

@@ -20,7 +20,12 @@
  *      because no variance is known at stratum resolution).
  *   3. lambda_s = min(|delta~| / norm~, 1) ^ exponent, 0 where norm~ <= 1e-6
  *      or no valid sample reached the stratum (no evidence of change: keep
- *      the history). Per pixel: the stratum's value (nearest).
+ *      the history).
+ *   4. Per pixel (joint nearest-neighbour upsampling): the lambda of the
+ *      stratum, among its own and the 8 around it, whose guide depth is
+ *      nearest the pixel's depth (its own on ties), so that a pixel of
+ *      another surface than its stratum's sample (a silhouette, sky beside
+ *      a lit wall) takes the lambda of its own surface.
  *
  * Deterministic whatever the thread count; never NaN or Inf out for finite
  * input (callers import the layer with the filters' `nonfinite` policy).

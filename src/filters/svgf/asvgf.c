@@ -42,10 +42,12 @@ static const hush_param_info asvgf_params[P_ASVGF_COUNT] = {
      "lambda = min(|delta| / max(current, previous), 1)^exponent, of the reconstructed "
      "luminances (1: Schied 2018; 2: Higginson 2023)",
      NULL},
-    {"history_rule", HUSH_PARAM_ENUM, 0, 0, 1,
+    {"history_rule", HUSH_PARAM_ENUM, 1, 0, 1,
      "how lambda shortens the history: schied, a = (1 - lambda) max(alpha, 1/N) + lambda; or "
      "higginson, N' = min((N - 1)(1 - lambda)^10 + 1, max_age), a = mix(1/N', 1, lambda); the "
-     "history length becomes min(N, 1/a) where a exceeds the blend's weight",
+     "history length becomes min(N, 1/a) where a exceeds the blend's weight (higginson by "
+     "default: where some light remains, lambda = 1 - c/p < 1 and schied keeps that stale "
+     "fraction; light-off 96x54, lit region at the change: +19% over the truth vs +1%)",
      asvgf_rule_names},
 };
 
