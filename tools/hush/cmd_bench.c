@@ -49,8 +49,8 @@ static const char *const help_text =
     "  --csv FILE          also write the results as CSV\n"
     "Filters that need the layer 'gradient' (asvgf) get a stand-in: per 3x3\n"
     "stratum the centre pixel's luminance as current and previous value, the\n"
-    "previous one doubled on every 4th stratum (so the history is shortened\n"
-    "there, as after a change of the lighting).\n"
+    "previous one doubled in the left quarter of the frame (the lighting\n"
+    "changed there: the history is shortened, as after a light went off).\n"
     "  -h, --help          show this help\n";
 
 typedef struct bench_options {
@@ -312,9 +312,10 @@ static int needs_image(const char *const *names, uint32_t count, const char *ima
  * --gradients`; the frames here are played back and forth, so real ones
  * would not match): per 3x3 stratum, landing index 4 (its centre pixel, or
  * the last one of a partial stratum), current luminance c = that pixel's,
- * previous p = c, except p = 2c on every 4th stratum (lambda 0.5), so the
- * history-lowering and re-blend work of asvgf is timed as on a frame where
- * the lighting changed. Frames that already have the layer keep it. */
+ * previous p = c, except p = 2c in the left quarter of the frame (lambda
+ * 0.5 there), so the history lowering of asvgf and the spatial variance
+ * estimate it brings on are timed as on a frame where the lighting changed
+ * in part of the view. Frames that already have the layer keep it. */
 static int add_gradients(hush_device device, hush_frame *frames, uint32_t count) {
   for (uint32_t k = 0; k < count; k++) {
     if (hush__frame_find(frames[k], "gradient")) continue;
@@ -334,7 +335,7 @@ static int add_gradients(hush_device device, hush_frame *frames, uint32_t count)
         const float l = hush_luminance(c[0], c[1], c[2]);
         float *o = g->pixels + ((size_t)y * W + x) * 3;
         o[0] = l;
-        o[1] = (sx + sy) % 4 == 0 ? 2.0f * l : l;
+        o[1] = x < W / 4 ? 2.0f * l : l;
         o[2] = (float)((ly - 3 * sy) * 3 + (lx - 3 * sx));
       }
   }

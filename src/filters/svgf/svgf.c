@@ -257,8 +257,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   hush__accum_blend(&c->acc, &st->rp.plan, (const float *const *)c->color.plane, &fc->ap,
                     st->var.plane[0], threads);
   if (fc->ad)
-    svgf_adaptive_history(fc->ad, &c->acc, had_history, &st->rp.plan,
-                          (const float *const *)c->color.plane, &fc->ap, st->var.plane[0], threads);
+    svgf_adaptive_history(fc->ad, &c->acc, had_history, (const float *const *)c->color.plane,
+                          &fc->ap, st->var.plane[0], threads);
   if (fc->holes) {
     float *const cur[6] = {
         hush__accum_color(&c->acc)->plane[0],   hush__accum_color(&c->acc)->plane[1],
