@@ -50,10 +50,15 @@ static void grid_size(uint32_t W, uint32_t H, int *ws, int *hs) {
   *hs = (int)((H + 2) / 3);
 }
 
+/* The upsampling's rows: per stratum row, its depth and lambda repeated
+ * over the 3 pixels of each stratum, padded by one stratum each side. */
+#define GRADIENT_REP_PAD 3
+static size_t rep_row(uint32_t width) { return (size_t)width + 2 * GRADIENT_REP_PAD; }
+
 size_t hush__gradient_scratch_floats(uint32_t width, uint32_t height) {
   int ws, hs;
   grid_size(width, height, &ws, &hs);
-  return (size_t)G_PLANES * (size_t)ws * (size_t)hs;
+  return (size_t)G_PLANES * (size_t)ws * (size_t)hs + 2 * (size_t)hs * rep_row(width);
 }
 
 /* 2^t for t in [-126, 0] (callers clamp): t = i + f, 2^f by its degree-5
@@ -225,7 +230,7 @@ static int power_of_two(float sigma_n) {
 
 /* One a-trous level: out = sum w q / sum w, valid where sum w > 0. */
 static void level(const level_ctx *L, int threads) {
-  static const float b3[5] = {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16};
+  static const float b2[3] = {1.0f / 4, 1.0f / 2, 1.0f / 4};
   const int ws = L->ws, hs = L->hs, step = L->step;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int sy = 0; sy < hs; sy++) {
@@ -233,14 +238,14 @@ static void level(const level_ctx *L, int threads) {
     memset(L->od + row, 0, (size_t)ws * sizeof(float));
     memset(L->on + row, 0, (size_t)ws * sizeof(float));
     memset(L->ov + row, 0, (size_t)ws * sizeof(float));
-    for (int dy = -2; dy <= 2; dy++) {
+    for (int dy = -1; dy <= 1; dy++) {
       const int qy = sy + dy * step;
       if (qy < 0 || qy >= hs) continue;
-      for (int dx = -2; dx <= 2; dx++) {
+      for (int dx = -1; dx <= 1; dx++) {
         const int o = dx * step;
         const int x0 = o < 0 ? -o : 0, x1 = o > 0 ? ws - o : ws;
         if (x0 >= x1) continue;
-        level_tap_any(L, sy, dx, dy, b3[dy + 2] * b3[dx + 2], x0, x1);
+        level_tap_any(L, sy, dx, dy, b2[dy + 1] * b2[dx + 1], x0, x1);
       }
     }
     float *restrict od = L->od + row, *restrict on = L->on + row, *restrict ov = L->ov + row;
@@ -275,27 +280,56 @@ static void stratum_lambda(const float *d, const float *n, const float *v, size_
  * around it, the lambda of the one whose guide depth is nearest the pixel's
  * (its own on ties), so that a pixel of another surface than its stratum's
  * sample (a silhouette, the sky beside a lit wall) takes the lambda of its
- * own surface. */
+ * own surface. The strata's depth and lambda are first repeated over their
+ * 3 pixel columns (rows zr, lr, padded by the edge stratum), so that the
+ * candidates of pixel x are at x - 3, x, x + 3 of three such rows: the
+ * pixel loop is branch-free and vectorises. */
 static void expand(const float *ls, const float *zs, int ws, int hs, const float *depth,
-                   uint32_t W, uint32_t H, float *lambda, int threads) {
+                   uint32_t W, uint32_t H, float *zr, float *lr, float *lambda, int threads) {
+  const size_t rw = rep_row(W);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int sy = 0; sy < hs; sy++) {
+    float *z = zr + (size_t)sy * rw + GRADIENT_REP_PAD, *l = lr + (size_t)sy * rw + GRADIENT_REP_PAD;
+    for (int x = -GRADIENT_REP_PAD; x < (int)W + GRADIENT_REP_PAD; x++) {
+      /* the pads repeat the edge strata (the last one may be partial) */
+      const int sx = x < 0 ? 0 : x >= (int)W ? ws - 1 : x / 3;
+      z[x] = zs[(size_t)sy * ws + sx];
+      l[x] = ls[(size_t)sy * ws + sx];
+    }
+  }
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < (int)H; y++) {
     const int sy = y / 3;
-    const int rows[3] = {sy > 0 ? sy - 1 : sy, sy, sy < hs - 1 ? sy + 1 : sy};
-    for (uint32_t x = 0; x < W; x++) {
-      const int sx = (int)(x / 3);
-      const int cols[3] = {sx > 0 ? sx - 1 : sx, sx, sx < ws - 1 ? sx + 1 : sx};
-      const size_t i = (size_t)y * W + x, own = (size_t)sy * ws + sx;
-      const float z = depth[i];
-      float best = fabsf(z - zs[own]), l = ls[own];
-      for (int a = 0; a < 3; a++)
-        for (int b = 0; b < 3; b++) {
-          const size_t s = (size_t)rows[a] * ws + cols[b];
-          const float d = fabsf(z - zs[s]);
-          l = d < best ? ls[s] : l;
-          best = d < best ? d : best;
-        }
-      lambda[i] = l;
+    const int up = sy > 0 ? sy - 1 : sy, down = sy < hs - 1 ? sy + 1 : sy;
+    const float *restrict z0 = zr + (size_t)sy * rw + GRADIENT_REP_PAD,
+                          *restrict l0 = lr + (size_t)sy * rw + GRADIENT_REP_PAD;
+    const float *restrict zu = zr + (size_t)up * rw + GRADIENT_REP_PAD,
+                          *restrict lu = lr + (size_t)up * rw + GRADIENT_REP_PAD;
+    const float *restrict zd = zr + (size_t)down * rw + GRADIENT_REP_PAD,
+                          *restrict ld = lr + (size_t)down * rw + GRADIENT_REP_PAD;
+    const float *restrict d = depth + (size_t)y * W;
+    float *restrict out = lambda + (size_t)y * W;
+#pragma omp simd
+    for (int x = 0; x < (int)W; x++) {
+      const float p = d[x];
+      float best = fabsf(p - z0[x]), l = l0[x];
+#define GRADIENT_CANDIDATE(zrow, lrow, o)                   \
+  {                                                         \
+    const float dist = fabsf(p - zrow[x + (o)]);            \
+    const int nearer = dist < best;                         \
+    l = hush__select_bits(nearer, lrow[x + (o)], l);        \
+    best = hush__select_bits(nearer, dist, best);           \
+  }
+      GRADIENT_CANDIDATE(zu, lu, -3)
+      GRADIENT_CANDIDATE(zu, lu, 0)
+      GRADIENT_CANDIDATE(zu, lu, 3)
+      GRADIENT_CANDIDATE(z0, l0, -3)
+      GRADIENT_CANDIDATE(z0, l0, 3)
+      GRADIENT_CANDIDATE(zd, ld, -3)
+      GRADIENT_CANDIDATE(zd, ld, 0)
+      GRADIENT_CANDIDATE(zd, ld, 3)
+#undef GRADIENT_CANDIDATE
+      out[x] = l;
     }
   }
 }
@@ -337,7 +371,8 @@ void hush__gradient_lambda(const float *const gradient[3], const hush_gradient_g
   }
   const int fin = cur ? G_D1 : G_D0;
   stratum_lambda(g[fin], g[fin + 1], g[fin + 2], S, params->exponent, g[G_LAMBDA], threads);
-  expand(g[G_LAMBDA], g[G_Z], ws, hs, guides->depth, width, height, lambda, threads);
+  float *zr = scratch + (size_t)G_PLANES * S, *lr = zr + (size_t)hs * rep_row(width);
+  expand(g[G_LAMBDA], g[G_Z], ws, hs, guides->depth, width, height, zr, lr, lambda, threads);
 }
 
 /* ---- history --------------------------------------------------------------- */

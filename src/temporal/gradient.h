@@ -13,7 +13,7 @@
  *      (0..8, else no sample): delta = c - p, norm = max(c, p), valid. The
  *      guides (depth, normal, depth gradient x 3, luminance) are taken at the
  *      landing pixel, or at the stratum's centre pixel where there is none.
- *   2. Reconstruction: `iterations` a-trous levels (5x5 B3 kernel, steps
+ *   2. Reconstruction: `iterations` a-trous levels (3x3 (1 2 1)/4 kernel, steps
  *      1, 2, 4, ...) over the grid, a normalised convolution of delta and norm
  *      with weights h * w_z * w_n * w_l * valid_q (SVGF's w_z and w_n;
  *      w_l = exp(-|l_p - l_q| / (sigma_l max(l_p, l_q) + 1e-4)), relative
