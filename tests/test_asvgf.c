@@ -514,9 +514,9 @@ static float region_mean(const float *v, const unsigned char *mask) {
 static void test_light_off(hush_device dev) {
   REQUIRE(system("rm -rf '" WORK "' && mkdir -p '" WORK "'") == 0);
   REQUIRE(cli("render --scene builtin:light-off --out " WORK "/seq --gradients --quiet --size 96x54 "
-              "--frames 11 --path static") == 0);
+              "--frames 10 --path static") == 0);
   REQUIRE(cli("render --scene builtin:light-off --out " WORK "/ref --quiet --size 96x54 --first 7 "
-              "--frames 4 --spp 32 --path static") == 0);
+              "--frames 3 --spp 32 --path static") == 0);
   REQUIRE(cli("denoise --filter asvgf --in " WORK "/seq --out " WORK "/asvgf --quiet") == 0);
   REQUIRE(cli("denoise --filter svgf --in " WORK "/seq --out " WORK "/svgf --quiet") == 0);
   REQUIRE(cli("denoise --filter asvgf --in " WORK "/seq --out " WORK "/schied --set "
