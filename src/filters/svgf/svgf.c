@@ -23,7 +23,9 @@
  * spatial estimate), atrous.c (one fused pass per level: Gaussian of the
  * variance, weights, colour and variance), weights.h (one exp per tap),
  * padded.c (row padding so every inner loop is branch-free), samples.c
- * (§4.3), progressive.c (§4.2). Every pixel is computed on its own (the
+ * (§4.3), progressive.c (§4.2); svgf.h (the parameter and image tables and
+ * svgf_run, shared with the "asvgf" class of asvgf.c, whose adaptive
+ * temporal stage, adaptive.c, svgf_run calls when given one). Every pixel is computed on its own (the
  * progressive scatter breaks depth ties by source index): the result does
  * not depend on the thread count.
  */
