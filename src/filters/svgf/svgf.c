@@ -25,9 +25,9 @@
  * padded.c (row padding so every inner loop is branch-free), samples.c
  * (§4.3), progressive.c (§4.2); svgf.h (the parameter and image tables and
  * svgf_run, shared with the "asvgf" class of asvgf.c, whose adaptive
- * temporal stage, adaptive.c, svgf_run calls when given one). Every pixel is computed on its own (the
- * progressive scatter breaks depth ties by source index): the result does
- * not depend on the thread count.
+ * temporal stage, adaptive.c, svgf_run calls when given one). Every pixel
+ * is computed on its own (the progressive scatter breaks depth ties by
+ * source index): the result does not depend on the thread count.
  */
 #include "filters/albedo.h"
 #include "filters/emission.h"
