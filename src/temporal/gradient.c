@@ -6,12 +6,13 @@
  * Schied, Peters, Dachsbacher 2018 §4.2-4.3; Higginson 2023 §2.3.1
  * (papers/NOTES.md "A-SVGF"); docs/asvgf.md.
  *
- * The grid is 1/9 of the pixels, so the reconstruction costs about a third
- * of one full-resolution SVGF level. Its inner loops run along a grid row,
- * one tap at a time, on planar rows with no branch: the row range of a tap
- * that stays inside the grid is computed before the loop, and the weight is
- * one base-2 exponential by a polynomial (expf/powf would keep errno
- * branches and stop the vectoriser).
+ * The grid is 1/9 of the pixels, so three 3x3 levels cost 3 taps per pixel
+ * (one full-resolution SVGF level: 25). Its inner loops run along a grid
+ * row, one tap at a time, on planar rows with no branch: the row range of a
+ * tap that stays inside the grid is computed before the loop, and the
+ * weight is one base-2 exponential by a polynomial (expf/powf would keep
+ * errno branches and stop the vectoriser). The upsampling to pixels is
+ * vectorised the same way (expand). 1280x720, one thread: about 8 ms.
  */
 #include "temporal/gradient.h"
 
