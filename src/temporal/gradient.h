@@ -13,14 +13,19 @@
  *      (0..8, else no sample): delta = c - p, norm = max(c, p), valid. The
  *      guides (depth, normal, depth gradient x 3, luminance) are taken at the
  *      landing pixel, or at the stratum's centre pixel where there is none.
- *   2. Reconstruction: `iterations` a-trous levels (5x5 B3 kernel, steps
+ *   2. Reconstruction: `iterations` a-trous levels (3x3 (1 2 1)/4 kernel, steps
  *      1, 2, 4, ...) over the grid, a normalised convolution of delta and norm
  *      with weights h * w_z * w_n * w_l * valid_q (SVGF's w_z and w_n;
  *      w_l = exp(-|l_p - l_q| / (sigma_l max(l_p, l_q) + 1e-4)), relative
  *      because no variance is known at stratum resolution).
  *   3. lambda_s = min(|delta~| / norm~, 1) ^ exponent, 0 where norm~ <= 1e-6
  *      or no valid sample reached the stratum (no evidence of change: keep
- *      the history). Per pixel: the stratum's value (nearest).
+ *      the history).
+ *   4. Per pixel (joint nearest-neighbour upsampling): the lambda of the
+ *      stratum, among its own and the 8 around it, whose guide depth is
+ *      nearest the pixel's depth (its own on ties), so that a pixel of
+ *      another surface than its stratum's sample (a silhouette, sky beside
+ *      a lit wall) takes the lambda of its own surface.
  *
  * Deterministic whatever the thread count; never NaN or Inf out for finite
  * input (callers import the layer with the filters' `nonfinite` policy).

@@ -11,9 +11,11 @@
 #include "cli.h"
 #include "scene_frames.h"
 
+#include "core/hmath.h"
 #include "core/timer.h"
 #include "eval/synthetic.h"
 #include "io/atomic_file.h"
+#include "io/frame.h"
 
 #include <stdio.h>
 #include <stdlib.h>
@@ -45,6 +47,10 @@ static const char *const help_text =
     "                      (default: synthetic frames)\n"
     "  --path MOVE         with --scene: the camera move, as `hush render --path`\n"
     "  --csv FILE          also write the results as CSV\n"
+    "Filters that need the layer 'gradient' (asvgf) get a stand-in: per 3x3\n"
+    "stratum the centre pixel's luminance as current and previous value, the\n"
+    "previous one doubled in the left quarter of the frame (the lighting\n"
+    "changed there: the history is shortened, as after a light went off).\n"
     "  -h, --help          show this help\n";
 
 typedef struct bench_options {
@@ -292,6 +298,50 @@ static int make_frames(const bench_options *o, hush_device device, hush_frame *f
   return st == HUSH_OK ? 0 : cli_device_error("bench", device, st, "synthetic frames");
 }
 
+/* Does a selected filter need the image `image` (a required input)? */
+static int needs_image(const char *const *names, uint32_t count, const char *image) {
+  for (uint32_t k = 0; k < count; k++) {
+    const hush_filter_class_info *c = hush_filter_class_find(names[k]);
+    for (uint32_t i = 0; c && i < c->image_count; i++)
+      if (c->images[i].required && strcmp(c->images[i].name, image) == 0) return 1;
+  }
+  return 0;
+}
+
+/* A stand-in for the renderer's temporal gradient samples (`hush render
+ * --gradients`; the frames here are played back and forth, so real ones
+ * would not match): per 3x3 stratum, landing index 4 (its centre pixel, or
+ * the last one of a partial stratum), current luminance c = that pixel's,
+ * previous p = c, except p = 2c in the left quarter of the frame (lambda
+ * 0.5 there), so the history lowering of asvgf and the spatial variance
+ * estimate it brings on are timed as on a frame where the lighting changed
+ * in part of the view. Frames that already have the layer keep it. */
+static int add_gradients(hush_device device, hush_frame *frames, uint32_t count) {
+  for (uint32_t k = 0; k < count; k++) {
+    if (hush__frame_find(frames[k], "gradient")) continue;
+    const hush_layer *color = hush__frame_find(frames[k], "color");
+    if (!color) return cli_error("bench", "frame without a color layer");
+    hush_status st = hush_frame_add_layer(frames[k], "gradient", 3, NULL);
+    if (st != HUSH_OK) return cli_device_error("bench", device, st, "gradient");
+    color = hush__frame_find(frames[k], "color"); /* adding may have moved it */
+    const hush_layer *g = hush__frame_find(frames[k], "gradient");
+    const uint32_t W = hush_frame_width(frames[k]), H = hush_frame_height(frames[k]);
+    for (uint32_t y = 0; y < H; y++)
+      for (uint32_t x = 0; x < W; x++) {
+        const uint32_t sx = x / 3, sy = y / 3;
+        const uint32_t lx = 3 * sx + 1 < W ? 3 * sx + 1 : W - 1;
+        const uint32_t ly = 3 * sy + 1 < H ? 3 * sy + 1 : H - 1;
+        const float *c = color->pixels + ((size_t)ly * W + lx) * color->channels;
+        const float l = hush_luminance(c[0], c[1], c[2]);
+        float *o = g->pixels + ((size_t)y * W + x) * 3;
+        o[0] = l;
+        o[1] = x < W / 4 ? 2.0f * l : l;
+        o[2] = (float)((ly - 3 * sy) * 3 + (lx - 3 * sx));
+      }
+  }
+  return 0;
+}
+
 /* Fills names[] from the comma list (or every class) and checks each. */
 static int filter_list(const bench_options *o, char *buf, const char **names, uint32_t *count) {
   *count = 0;
@@ -322,6 +372,7 @@ int cmd_bench(int argc, char **argv) {
   hush_frame *frames = calloc(o.distinct, sizeof *frames);
   hush_camera *cams = calloc(o.distinct, sizeof *cams);
   int rc = frames && cams ? make_frames(&o, device, frames, cams) : cli_error("bench", "out of memory");
+  if (!rc && needs_image(names, nf, "gradient")) rc = add_gradients(device, frames, o.distinct);
 
   char cpu[256];
   cpu_model(cpu, sizeof cpu);

@@ -7,7 +7,8 @@
  *   (src/temporal/gradient.h) -> after each temporal blend, the history
  *   length lowered by lambda (history_rule) and, where it was, the colour
  *   and the luminance moments blended again with the new frame's weight
- *   max(alpha, 1 / lowered age) from the same reprojected history.
+ *   max(alpha, 1 / lowered age) (the blend's result rescaled: no second
+ *   gather of the history).
  *
  * The lowered age is also the history length the next frame gathers and
  * the one SVGF's variance estimate sees (spatial estimate below 4 frames).
@@ -31,8 +32,6 @@ typedef struct svgf_adaptive {
   hush_planar lambda;   /* 1: per pixel */
   hush_planar lum;      /* 1: luminance guide of this frame's colour */
   hush_planar lowered;  /* 1: the lowered ages */
-  hush_planar color;    /* 3: the colour blended again */
-  hush_planar moments;  /* 4: the moments blended again, the sample's (l, l^2) */
   float *scratch;       /* hush__gradient_scratch_floats */
 } svgf_adaptive;
 
@@ -50,14 +49,14 @@ void svgf_adaptive_lambda(svgf_adaptive *ad, const float *depth, const float *co
                           const float *const second[3], int threads);
 
 /*
- * After hush__accum_blend of acc with `sample` through plan: lowers the
- * ages by lambda and blends colour and moments again where they were
- * lowered; variance (the blend's m2 - m1^2 plane, may be NULL) is updated
- * there too. had_history: the blend had a previous frame to read (else
- * nothing to do).
+ * After hush__accum_blend of acc with `sample` (3 planes) and ap: lowers the
+ * ages by lambda and redoes the colour and moment blends with the lowered
+ * ages where they were lowered; variance (the blend's m2 - m1^2 plane) is
+ * updated there too. had_history: the blend had a previous frame to
+ * read (else nothing to do).
  */
 void svgf_adaptive_history(svgf_adaptive *ad, hush_accum *acc, int had_history,
-                           const hush_reproject_plan *plan, const float *const sample[3],
-                           const hush_accum_params *ap, float *variance, int threads);
+                           const float *const sample[3], const hush_accum_params *ap,
+                           float *variance, int threads);
 
 #endif

@@ -30,7 +30,7 @@ static const char *const asvgf_rule_names[] = {"schied", "higginson"};
 static const hush_param_info asvgf_params[P_ASVGF_COUNT] = {
     SVGF_PARAM_ROWS
     {"gradient_iterations", HUSH_PARAM_INT, 3, 0, HUSH_GRADIENT_MAX_ITERATIONS,
-     "a-trous levels (5x5 B3, steps 1, 2, 4, ...) reconstructing the temporal gradient on the "
+     "a-trous levels (3x3 (1 2 1)/4, steps 1, 2, 4, ...) reconstructing the temporal gradient on the "
      "3x3-stratum grid, guided by depth, normal (sigma_z, sigma_n) and luminance (0: the raw "
      "per-stratum gradient; Schied 2018 §4.3)",
      NULL},
@@ -38,14 +38,17 @@ static const hush_param_info asvgf_params[P_ASVGF_COUNT] = {
      "luminance weight of the gradient reconstruction, relative: exp(-|l_p - l_q| / "
      "(gradient_sigma_l max(l_p, l_q) + 1e-4))",
      NULL},
-    {"gradient_exponent", HUSH_PARAM_FLOAT, 1.0, 0.01, 100.0,
+    {"gradient_exponent", HUSH_PARAM_FLOAT, 2.0, 0.01, 100.0,
      "lambda = min(|delta| / max(current, previous), 1)^exponent, of the reconstructed "
-     "luminances (1: Schied 2018; 2: Higginson 2023)",
+     "luminances (1: Schied 2018; 2: Higginson 2023, the default with history_rule higginson: "
+     "moving-light 160x90 relMSE 0.098 -> 0.076, svgf 0.059)",
      NULL},
-    {"history_rule", HUSH_PARAM_ENUM, 0, 0, 1,
+    {"history_rule", HUSH_PARAM_ENUM, 1, 0, 1,
      "how lambda shortens the history: schied, a = (1 - lambda) max(alpha, 1/N) + lambda; or "
      "higginson, N' = min((N - 1)(1 - lambda)^10 + 1, max_age), a = mix(1/N', 1, lambda); the "
-     "history length becomes min(N, 1/a) where a exceeds the blend's weight",
+     "history length becomes min(N, 1/a) where a exceeds the blend's weight (higginson by "
+     "default: where some light remains, lambda = 1 - c/p < 1 and schied keeps that stale "
+     "fraction; light-off 96x54, lit region at the change: +19% over the truth vs +1%)",
      asvgf_rule_names},
 };
 

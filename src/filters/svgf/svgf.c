@@ -23,9 +23,11 @@
  * spatial estimate), atrous.c (one fused pass per level: Gaussian of the
  * variance, weights, colour and variance), weights.h (one exp per tap),
  * padded.c (row padding so every inner loop is branch-free), samples.c
- * (§4.3), progressive.c (§4.2). Every pixel is computed on its own (the
- * progressive scatter breaks depth ties by source index): the result does
- * not depend on the thread count.
+ * (§4.3), progressive.c (§4.2); svgf.h (the parameter and image tables and
+ * svgf_run, shared with the "asvgf" class of asvgf.c, whose adaptive
+ * temporal stage, adaptive.c, svgf_run calls when given one). Every pixel
+ * is computed on its own (the progressive scatter breaks depth ties by
+ * source index): the result does not depend on the thread count.
  */
 #include "filters/albedo.h"
 #include "filters/emission.h"
@@ -257,8 +259,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   hush__accum_blend(&c->acc, &st->rp.plan, (const float *const *)c->color.plane, &fc->ap,
                     st->var.plane[0], threads);
   if (fc->ad)
-    svgf_adaptive_history(fc->ad, &c->acc, had_history, &st->rp.plan,
-                          (const float *const *)c->color.plane, &fc->ap, st->var.plane[0], threads);
+    svgf_adaptive_history(fc->ad, &c->acc, had_history, (const float *const *)c->color.plane,
+                          &fc->ap, st->var.plane[0], threads);
   if (fc->holes) {
     float *const cur[6] = {
         hush__accum_color(&c->acc)->plane[0],   hush__accum_color(&c->acc)->plane[1],
