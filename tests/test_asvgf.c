@@ -100,7 +100,8 @@ static void test_lambda_extremes(void) {
     hush_gradient_params p = default_params();
     p.iterations = iters;
     for (int sy = 0; sy < hs; sy++)
-      for (int sx = 0; sx < ws; sx++) put_sample(&g, sx, sy, 0.3f + 0.01f * sx, 0.3f + 0.01f * sx, (sx + sy) % 9);
+      for (int sx = 0; sx < ws; sx++)
+        put_sample(&g, sx, sy, 0.3f + 0.01f * sx, 0.3f + 0.01f * sx, (sx + sy) % 9);
     compute(&g, &p, 2);
     int zero = 1;
     for (size_t i = 0; i < (size_t)g.w * g.h; i++) zero &= g.lambda[i] == 0.0f;
@@ -513,7 +514,8 @@ static float region_mean(const float *v, const unsigned char *mask) {
  * truth (32 spp) after at most 2 frames, svgf's is not. */
 static void test_light_off(hush_device dev) {
   REQUIRE(system("rm -rf '" WORK "' && mkdir -p '" WORK "'") == 0);
-  REQUIRE(cli("render --scene builtin:light-off --out " WORK "/seq --gradients --quiet --size 96x54 "
+  REQUIRE(cli("render --scene builtin:light-off --out " WORK
+              "/seq --gradients --quiet --size 96x54 "
               "--frames 10 --path static") == 0);
   REQUIRE(cli("render --scene builtin:light-off --out " WORK "/ref --quiet --size 96x54 --first 7 "
               "--frames 3 --spp 32 --path static") == 0);

@@ -290,7 +290,8 @@ static void expand(const float *ls, const float *zs, int ws, int hs, const float
   const size_t rw = rep_row(W);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int sy = 0; sy < hs; sy++) {
-    float *z = zr + (size_t)sy * rw + GRADIENT_REP_PAD, *l = lr + (size_t)sy * rw + GRADIENT_REP_PAD;
+    float *z = zr + (size_t)sy * rw + GRADIENT_REP_PAD,
+          *l = lr + (size_t)sy * rw + GRADIENT_REP_PAD;
     for (int x = -GRADIENT_REP_PAD; x < (int)W + GRADIENT_REP_PAD; x++) {
       /* the pads repeat the edge strata (the last one may be partial) */
       const int sx = x < 0 ? 0 : x >= (int)W ? ws - 1 : x / 3;
@@ -348,7 +349,8 @@ void hush__gradient_lambda(const float *const gradient[3], const hush_gradient_g
 
   int iterations = params->iterations;
   iterations = iterations < 0 ? 0 : iterations;
-  iterations = iterations > HUSH_GRADIENT_MAX_ITERATIONS ? HUSH_GRADIENT_MAX_ITERATIONS : iterations;
+  iterations =
+      iterations > HUSH_GRADIENT_MAX_ITERATIONS ? HUSH_GRADIENT_MAX_ITERATIONS : iterations;
   level_ctx L;
   L.ws = ws;
   L.hs = hs;

@@ -75,7 +75,8 @@ void hush__gradient_lambda(const float *const gradient[3], const hush_gradient_g
 /* How lambda shortens the history (parameter `history_rule`). */
 typedef enum hush_history_rule {
   HUSH_HISTORY_SCHIED = 0,   /* a = (1 - lambda) max(alpha, 1/N) + lambda */
-  HUSH_HISTORY_HIGGINSON = 1 /* N' = min((N-1)(1 - lambda)^10 + 1, max_age), a = mix(1/N', 1, lambda) */
+  /* N' = min((N-1)(1 - lambda)^10 + 1, max_age), a = mix(1/N', 1, lambda) */
+  HUSH_HISTORY_HIGGINSON = 1
 } hush_history_rule;
 
 /*

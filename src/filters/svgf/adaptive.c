@@ -21,8 +21,9 @@ void svgf_adaptive_free(svgf_adaptive *ad) {
 
 hush_status svgf_adaptive_import(hush_filter f, svgf_adaptive *ad) {
   hush_status s;
-  if ((s = hush__filter_scratch(f, &ad->gradient, 3)) || (s = hush__filter_scratch(f, &ad->lambda, 1)) ||
-      (s = hush__filter_scratch(f, &ad->lum, 1)) || (s = hush__filter_scratch(f, &ad->lowered, 1)))
+  if ((s = hush__filter_scratch(f, &ad->gradient, 3)) ||
+      (s = hush__filter_scratch(f, &ad->lambda, 1)) || (s = hush__filter_scratch(f, &ad->lum, 1)) ||
+      (s = hush__filter_scratch(f, &ad->lowered, 1)))
     return s;
   if (!ad->scratch) {
     ad->scratch = malloc(hush__gradient_scratch_floats(f->width, f->height) * sizeof(float));
@@ -44,7 +45,8 @@ static void luminance(const float *const color[3], const float *const second[3],
   if (second) {
     const float *restrict r2 = second[0], *restrict g2 = second[1], *restrict b2 = second[2];
 #pragma omp parallel for simd schedule(static) num_threads(threads)
-    for (size_t i = 0; i < n; i++) lum[i] = hush_luminance(r[i] + r2[i], g[i] + g2[i], b[i] + b2[i]);
+    for (size_t i = 0; i < n; i++)
+      lum[i] = hush_luminance(r[i] + r2[i], g[i] + g2[i], b[i] + b2[i]);
   } else {
 #pragma omp parallel for simd schedule(static) num_threads(threads)
     for (size_t i = 0; i < n; i++) lum[i] = hush_luminance(r[i], g[i], b[i]);
@@ -79,7 +81,8 @@ static void rescale(const svgf_adaptive *ad, hush_accum *acc, const float *const
                     int threads) {
   float *restrict age = hush__accum_age(acc)->plane[0];
   hush_planar *color = hush__accum_color(acc), *mom = hush__accum_moments(acc);
-  float *restrict cr = color->plane[0], *restrict cg = color->plane[1], *restrict cb = color->plane[2];
+  float *restrict cr = color->plane[0], *restrict cg = color->plane[1],
+                  *restrict cb = color->plane[2];
   float *restrict m1p = mom->plane[0], *restrict m2p = mom->plane[1];
   const float *restrict xr = sample[0], *restrict xg = sample[1], *restrict xb = sample[2];
   const float *restrict low = ad->lowered.plane[0];

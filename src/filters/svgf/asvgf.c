@@ -30,9 +30,9 @@ static const char *const asvgf_rule_names[] = {"schied", "higginson"};
 static const hush_param_info asvgf_params[P_ASVGF_COUNT] = {
     SVGF_PARAM_ROWS
     {"gradient_iterations", HUSH_PARAM_INT, 3, 0, HUSH_GRADIENT_MAX_ITERATIONS,
-     "a-trous levels (3x3 (1 2 1)/4, steps 1, 2, 4, ...) reconstructing the temporal gradient on the "
-     "3x3-stratum grid, guided by depth, normal (sigma_z, sigma_n) and luminance (0: the raw "
-     "per-stratum gradient; Schied 2018 §4.3)",
+     "a-trous levels (3x3 (1 2 1)/4, steps 1, 2, 4, ...) reconstructing the temporal gradient "
+     "on the 3x3-stratum grid, guided by depth, normal (sigma_z, sigma_n) and luminance (0: the "
+     "raw per-stratum gradient; Schied 2018 §4.3)",
      NULL},
     {"gradient_sigma_l", HUSH_PARAM_FLOAT, 4.0, 1e-6, 1e6,
      "luminance weight of the gradient reconstruction, relative: exp(-|l_p - l_q| / "
