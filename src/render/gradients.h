@@ -16,11 +16,14 @@
  * (floor x, floor y), in some stratum of the new grid; a stratum takes at
  * most one sample (the landing sample of largest previous luminance, then
  * the lowest source stratum). If that pixel's own primary ray sees the same
- * surface (the visibility test, see gradients.c), the pixel is shaded with
- * the forward-projected sample and the previous frame's random numbers
- * instead of a fresh sample: its "color" is that re-shaded sample and its
- * G-buffer (vis, normal, position, depth ...) the sample's first hit. The
- * other pixels are rendered as usual with fresh numbers.
+ * surface (the visibility test, see gradients.c), the forward-projected
+ * sample is re-shaded with the previous frame's random numbers. By default
+ * (landing FRESH) that only measures the gradient and the pixel keeps its
+ * fresh sample, so the image is the render without gradients bit for bit;
+ * with landing SAMPLE (A-SVGF as published) the pixel's "color" is the
+ * re-shaded sample and its G-buffer (vis, normal, position, depth ...) the
+ * sample's first hit, which biases the image upwards with the brightest
+ * selection (docs/renderer.md). The other pixels are rendered as usual.
  *
  * Both luminances of a gradient sample come from the same code path
  * (hush__integrator_first_hit + hush__integrator_shade from the visibility
