@@ -40,8 +40,11 @@ hush_status hush__gradients_init(hush_device device, hush_gradients *g, uint32_t
   g->accepted = calloc(n, sizeof *g->accepted);
   g->current = calloc(n, sizeof *g->current);
   g->previous = calloc(n, sizeof *g->previous);
+  g->reshade_rays = calloc(n, sizeof *g->reshade_rays);
+  g->select = HUSH_GRADIENT_SELECT_BRIGHTEST;
+  g->landing_mode = HUSH_GRADIENT_LANDING_FRESH;
   if (!g->sources || !g->next || !g->claim || !g->landing || !g->accepted || !g->current ||
-      !g->previous) {
+      !g->previous || !g->reshade_rays) {
     hush__gradients_free(g);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "gradients: out of memory");
   }
@@ -56,6 +59,7 @@ void hush__gradients_free(hush_gradients *g) {
   free(g->accepted);
   free(g->current);
   free(g->previous);
+  free(g->reshade_rays);
   memset(g, 0, sizeof *g);
 }
 
@@ -85,6 +89,7 @@ hush_status hush__gradients_begin(hush_device device, hush_gradients *g,
     g->claim[t] = -1;
     g->accepted[t] = -1;
     g->current[t] = g->previous[t] = 0.0f;
+    g->reshade_rays[t] = 0;
   }
   if (!g->have_sources) return HUSH_OK;
   const hush_scene *sc = ctx->scene;
@@ -149,6 +154,15 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
   hush__rand_init(&rng, p->sampler, p->seed, src->seed_frame, src->seed_x, src->seed_y, 0, 1);
   hush_path_result r;
   hush__integrator_shade(&ctx->it, ctx->cam.eye, &f, &rng, x, y, &r);
+  if (g->landing_mode == HUSH_GRADIENT_LANDING_FRESH) {
+    float rgb[3];
+    sample_color(p->split_lobes, &r, rgb);
+    g->current[t] = hush_luminance(rgb[0], rgb[1], rgb[2]);
+    g->previous[t] = src->luminance;
+    g->accepted[t] = (int32_t)((y % S) * S + x % S);
+    g->reshade_rays[t] = r.rays + 1u; /* + the primary ray of the visibility test */
+    return 0; /* the pixel takes its own fresh sample */
+  }
   memset(out, 0, sizeof *out);
   sample_color(p->split_lobes, &r, out->color);
   memcpy(out->direct, r.direct, sizeof out->direct);
@@ -191,9 +205,24 @@ static hush_status write_layer(const hush_gradients *g, hush_frame out) {
   return HUSH_OK;
 }
 
-/* Stratum t's sample for the next frame: its brightest pixel that sees a
- * triangle, re-shaded from the visibility buffer with the numbers the pixel
- * was shaded with. Returns the rays traced. */
+/* A well-mixed 32-bit hash (lowbias32): the random selection must not
+ * depend on the thread count, so it is a function of (seed, frame, stratum). */
+static uint32_t hash32(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352dU;
+  x ^= x >> 15;
+  x *= 0x846ca68bU;
+  x ^= x >> 16;
+  return x;
+}
+
+/* Stratum t's sample for the next frame: one of its pixels that see a
+ * triangle (the brightest, or one at random), re-shaded from the visibility
+ * buffer with the numbers the pixel was shaded with. A landing pixel whose
+ * colour is a re-shaded sample (landing SAMPLE) is never chosen: its
+ * numbers are an older frame's, and a bright sample would chain from frame
+ * to frame and stay (a lasting bias, measured in docs/asvgf.md). Returns the
+ * rays traced. */
 static uint64_t choose_source(const hush_gradients *g, const hush_render_ctx *ctx,
                               const hush_integrator *it, const float *color, const float *vis,
                               uint32_t t, hush_gradient_source *src) {
@@ -202,35 +231,35 @@ static uint64_t choose_source(const hush_gradients *g, const hush_render_ctx *ct
   const uint32_t x0 = (t % g->strata_x) * S, y0 = (t / g->strata_x) * S;
   const uint32_t x1 = x0 + S < g->width ? x0 + S : g->width;
   const uint32_t y1 = y0 + S < g->height ? y0 + S : g->height;
-  float best = -1.0f;
-  size_t best_i = 0;
-  uint32_t bx = 0, by = 0;
+  const int32_t reused = g->landing_mode == HUSH_GRADIENT_LANDING_SAMPLE ? g->accepted[t] : -1;
+  size_t candidates[S * S];
+  float lum[S * S];
+  uint32_t count = 0;
   for (uint32_t y = y0; y < y1; y++)
     for (uint32_t x = x0; x < x1; x++) {
       const size_t i = (size_t)y * g->width + x;
       if (!(vis[3 * i] >= 0.0f)) continue; /* sky, sphere light, hole */
+      if (reused >= 0 && (uint32_t)reused == (y - y0) * S + (x - x0)) continue;
       const float l = hush_luminance(color[3 * i], color[3 * i + 1], color[3 * i + 2]);
-      if (!(l > best)) continue;
-      best = l;
-      best_i = i;
-      bx = x;
-      by = y;
+      if (!(l >= 0.0f)) continue; /* NaN */
+      lum[count] = l;
+      candidates[count++] = i;
     }
-  if (best < 0.0f) return 0;
+  if (!count) return 0;
+  uint32_t pick = 0;
+  if (g->select == HUSH_GRADIENT_SELECT_RANDOM) {
+    pick = hash32(hash32(ctx->params.seed ^ hash32(ctx->frame)) ^ t) % count;
+  } else {
+    for (uint32_t k = 1; k < count; k++)
+      if (lum[k] > lum[pick]) pick = k;
+  }
+  const size_t best_i = candidates[pick];
+  const uint32_t bx = (uint32_t)(best_i % g->width), by = (uint32_t)(best_i / g->width);
   src->x = bx;
   src->y = by;
-  /* a pixel that was itself a gradient sample was shaded with older numbers */
-  const int32_t acc = g->accepted[t];
-  if (acc >= 0 && (uint32_t)acc == (by - y0) * S + (bx - x0)) {
-    const hush_gradient_source *old = &g->sources[g->claim[t]];
-    src->seed_frame = old->seed_frame;
-    src->seed_x = old->seed_x;
-    src->seed_y = old->seed_y;
-  } else {
-    src->seed_frame = ctx->frame;
-    src->seed_x = bx;
-    src->seed_y = by;
-  }
+  src->seed_frame = ctx->frame;
+  src->seed_x = bx;
+  src->seed_y = by;
   const uint32_t tri = (uint32_t)vis[3 * best_i];
   const float u = vis[3 * best_i + 1], v = vis[3 * best_i + 2];
   hush_first_hit f;
@@ -266,6 +295,7 @@ hush_status hush__gradients_end(hush_device device, hush_gradients *g, const hus
   it.path_end_fn = NULL;
   const int n = (int)(g->strata_x * g->strata_y);
   uint64_t total = 0;
+  for (int t = 0; t < n; t++) total += g->reshade_rays[t];
 #pragma omp parallel for schedule(dynamic, 64) num_threads(threads) reduction(+ : total)
   for (int t = 0; t < n; t++)
     total += choose_source(g, ctx, &it, lc->pixels, lv->pixels, (uint32_t)t, &g->next[t]);

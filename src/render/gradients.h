@@ -16,11 +16,14 @@
  * (floor x, floor y), in some stratum of the new grid; a stratum takes at
  * most one sample (the landing sample of largest previous luminance, then
  * the lowest source stratum). If that pixel's own primary ray sees the same
- * surface (the visibility test, see gradients.c), the pixel is shaded with
- * the forward-projected sample and the previous frame's random numbers
- * instead of a fresh sample: its "color" is that re-shaded sample and its
- * G-buffer (vis, normal, position, depth ...) the sample's first hit. The
- * other pixels are rendered as usual with fresh numbers.
+ * surface (the visibility test, see gradients.c), the forward-projected
+ * sample is re-shaded with the previous frame's random numbers. By default
+ * (landing FRESH) that only measures the gradient and the pixel keeps its
+ * fresh sample, so the image is the render without gradients bit for bit;
+ * with landing SAMPLE (A-SVGF as published) the pixel's "color" is the
+ * re-shaded sample and its G-buffer (vis, normal, position, depth ...) the
+ * sample's first hit, which biases the image upwards with the brightest
+ * selection (docs/renderer.md). The other pixels are rendered as usual.
  *
  * Both luminances of a gradient sample come from the same code path
  * (hush__integrator_first_hit + hush__integrator_shade from the visibility
@@ -61,8 +64,27 @@ typedef struct hush_gradient_source {
 
 /* State carried from frame to frame. All arrays have one entry per stratum
  * (strata_x * strata_y, row-major) and are owned. */
+/* Which pixel of a stratum gives the next frame's sample. */
+typedef enum hush_gradient_select {
+  HUSH_GRADIENT_SELECT_BRIGHTEST, /* largest luminance (Q2RTX; catches a light going off) */
+  HUSH_GRADIENT_SELECT_RANDOM     /* uniform among the stratum's surface pixels (Schied 2018) */
+} hush_gradient_select;
+
+/* What the landing pixel's colour is. */
+typedef enum hush_gradient_landing {
+  /* a fresh sample, as every other pixel; the re-shaded sample only
+   * measures the gradient (one extra path per stratum). Unbiased. */
+  HUSH_GRADIENT_LANDING_FRESH,
+  /* the re-shaded sample itself (A-SVGF as published). With the brightest
+   * selection a ninth of the pixels then repeat their stratum's brightest
+   * sample of the frame before: the image is biased upwards (docs/asvgf.md). */
+  HUSH_GRADIENT_LANDING_SAMPLE
+} hush_gradient_landing;
+
 typedef struct hush_gradients {
   uint32_t width, height;
+  hush_gradient_select select;   /* set by hush__gradients_init to BRIGHTEST */
+  hush_gradient_landing landing_mode; /* set by hush__gradients_init to FRESH */
   uint32_t strata_x, strata_y; /* ceil(width / 3), ceil(height / 3) */
   int have_sources;        /* sources hold the last rendered frame's samples */
   hush_gradient_source *sources; /* by the stratum of the last frame they were chosen in */
@@ -72,6 +94,7 @@ typedef struct hush_gradients {
   uint32_t *landing;       /* its landing pixel, y * width + x */
   int32_t *accepted;       /* after the visibility test: index in the stratum 0..8, or -1 */
   float *current, *previous; /* luminances of accepted samples */
+  uint32_t *reshade_rays;  /* rays of re-shades not taken as the pixel's sample (landing FRESH) */
 } hush_gradients;
 
 hush_status hush__gradients_init(hush_device device, hush_gradients *g, uint32_t width,

@@ -68,6 +68,13 @@ static const char *const help_text =
     "                       and re-shaded with its old random numbers; layer\n"
     "                       gradient (current and previous luminance, landing\n"
     "                       pixel in the stratum 0..8 or -1); needs --spp 1\n"
+    "  --gradient-select R  brightest (default) or random: the pixel of a stratum\n"
+    "                       whose sample is re-shaded in the next frame\n"
+    "  --gradient-landing M fresh (default): the landing pixel keeps its own fresh\n"
+    "                       sample, the re-shaded one measures the gradient only\n"
+    "                       (unbiased, +1 path per stratum); sample: the landing\n"
+    "                       pixel shows the re-shaded sample (A-SVGF as published;\n"
+    "                       with brightest, biased upwards). Both imply --gradients\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
     "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
@@ -99,6 +106,8 @@ typedef struct render_options {
   int png, quiet;
   int export_bmfr;
   int gradients;           /* --gradients */
+  int gradient_select;     /* hush_gradient_select, --gradient-select */
+  int gradient_landing;    /* hush_gradient_landing, --gradient-landing */
   double spp_fraction;     /* 1: every pixel */
   hush_progressive progressive;
   hush_exr_type exr_type;
@@ -200,6 +209,22 @@ static void parse_options(int argc, char **argv, render_options *o) {
         cli_usage_error(a.cmd, "--export: unknown layout '%s' (bmfr)", v);
       o->export_bmfr = 1;
     } else if (cli_switch(&a, arg, "--gradients")) {
+      o->gradients = 1;
+    } else if (cli_option(&a, arg, "--gradient-select", &v)) {
+      if (strcmp(v, "brightest") == 0)
+        o->gradient_select = HUSH_GRADIENT_SELECT_BRIGHTEST;
+      else if (strcmp(v, "random") == 0)
+        o->gradient_select = HUSH_GRADIENT_SELECT_RANDOM;
+      else
+        cli_usage_error(a.cmd, "--gradient-select: unknown rule '%s' (brightest, random)", v);
+      o->gradients = 1;
+    } else if (cli_option(&a, arg, "--gradient-landing", &v)) {
+      if (strcmp(v, "fresh") == 0)
+        o->gradient_landing = HUSH_GRADIENT_LANDING_FRESH;
+      else if (strcmp(v, "sample") == 0)
+        o->gradient_landing = HUSH_GRADIENT_LANDING_SAMPLE;
+      else
+        cli_usage_error(a.cmd, "--gradient-landing: unknown mode '%s' (fresh, sample)", v);
       o->gradients = 1;
     } else if (cli_switch(&a, arg, "--png")) {
       o->png = 1;
@@ -538,6 +563,8 @@ static int render_frames(render_run *r, int argc, char **argv) {
   if (o->gradients) {
     st = hush__gradients_init(r->device, &gradients, W, H);
     if (st != HUSH_OK) return fail(r, st, "gradients");
+    gradients.select = (hush_gradient_select)o->gradient_select;
+    gradients.landing_mode = (hush_gradient_landing)o->gradient_landing;
     params.gradients = &gradients;
   }
   const double t0 = hush__now_ms();
