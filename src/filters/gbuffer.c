@@ -5,6 +5,8 @@
  */
 #include "filters/gbuffer.h"
 
+#include <math.h>
+
 static const hush_image_view *bound(hush_filter f, int image) {
   return image >= 0 ? hush__filter_view(f, image) : NULL;
 }
@@ -52,12 +54,79 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, i
 hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
                                     const hush_gbuffer_inputs *in, const hush_frame_info *info,
                                     const hush_reproject_params *params, int threads) {
+  const int position = in->has_position && !in->has_holes;
   return hush__reprojector_build(
-      f->device, rp, in->has_position ? (const float *const *)in->position.plane : NULL,
+      f->device, rp, position ? (const float *const *)in->position.plane : NULL,
       in->use_motion ? (const float *const *)in->motion.plane : NULL, info, params, threads);
 }
 
+/* Unit hole normals (the fill averages unit vectors) and +z on all the
+ * background, as svgf_normalize_holes. */
+static void normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
+                            int threads) {
+  const long long c = (long long)count;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long long i = 0; i < c; i++) {
+    if (!(depth[i] > 0.0f)) {
+      n[0][i] = n[1][i] = 0.0f;
+      n[2][i] = 1.0f;
+      continue;
+    }
+    if (!hush__holes_is_hole(spp[i])) continue;
+    const float l2 = n[0][i] * n[0][i] + n[1][i] * n[1][i] + n[2][i] * n[2][i];
+    if (!(l2 > 1e-12f)) continue;
+    const float s = 1.0f / sqrtf(l2);
+    for (int k = 0; k < 3; k++) n[k][i] *= s;
+  }
+}
+
+hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojector *rp,
+                                     hush_gbuffer_inputs *in, hush_planar *const *extra,
+                                     int extra_count, int threads) {
+  in->has_holes = 0;
+  if (!bound(f, spp_image)) return HUSH_OK;
+  hush_status s;
+  if ((s = hush__filter_scratch(f, &in->spp, 1))) return s;
+  if ((s = hush__filter_import(f, spp_image, &in->spp))) return s;
+  const size_t n = hush__planar_pixels(&in->spp);
+  if (!hush__holes_any(in->spp.plane[0], n, threads)) return HUSH_OK;
+
+  hush_gbuffer_store *g = hush__reprojector_next(rp);
+  float *planes[HUSH_HOLES_MAX_PLANES];
+  int count = 0;
+  planes[count++] = g->depth.plane[0];
+  for (int k = 0; k < 3; k++) planes[count++] = g->normal.plane[k];
+  if (in->use_motion)
+    for (int k = 0; k < 2; k++) planes[count++] = in->motion.plane[k];
+  if (in->has_position)
+    for (int k = 0; k < 3; k++) planes[count++] = in->position.plane[k];
+  for (int e = 0; e < extra_count; e++)
+    for (int k = 0; extra[e] && k < extra[e]->channels && count < HUSH_HOLES_MAX_PLANES; k++)
+      planes[count++] = extra[e]->plane[k];
+  if ((s = hush__holes_reserve(f->device, &in->holes, f->width, f->height, count))) return s;
+  if ((s = hush__filter_scratch(f, &in->depth_data, 1))) return s;
+  hush__holes_fill(in->holes.pyramid, f->width, f->height, in->spp.plane[0], planes, count,
+                   threads);
+  normalize_holes(in->spp.plane[0], g->depth.plane[0], g->normal.plane, n, threads);
+  g->has_id = 0;
+  in->has_holes = 1;
+  return HUSH_OK;
+}
+
+const float *hush__gbuffer_depth_with_data(hush_gbuffer_inputs *in, const float *depth,
+                                           const float *age, int threads) {
+  if (!age || !in->depth_data.plane[0]) return depth;
+  float *out = in->depth_data.plane[0];
+  const long long n = (long long)hush__planar_pixels(&in->depth_data);
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+  for (long long i = 0; i < n; i++) out[i] = age[i] > 0.0f ? depth[i] : 0.0f;
+  return out;
+}
+
 void hush__gbuffer_inputs_free(hush_gbuffer_inputs *in) {
+  hush__planar_free(&in->depth_data);
   hush__planar_free(&in->position);
   hush__planar_free(&in->motion);
+  hush__planar_free(&in->spp);
+  hush__holes_free(&in->holes);
 }

@@ -36,6 +36,7 @@
 #include "filters/bmfr/regression.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/holes.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
@@ -148,6 +149,7 @@ enum {
   I_MOTION,
   I_ALBEDO,
   I_EMISSION,
+  I_SPP,
   I_OUTPUT,
   I_FITTED,
   I_HISTORY_LENGTH,
@@ -167,6 +169,10 @@ static const hush_image_info bmfr_images[I_COUNT] = {
     {"emission", HUSH_IMAGE_INPUT, 0, 3,
      "radiance the camera sees directly at the first hit (lights, sky): kept out of the fit "
      "(color - emission), added back before TAA"},
+    {"spp", HUSH_IMAGE_INPUT, 0, 1,
+     "samples per pixel; 0 marks a hole (`hush render --spp-fraction`): it keeps its "
+     "accumulated history and gets the fit; never sampled, it stays out of the fit and is "
+     "filled from around (docs/holes.md)"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
     {"fitted", HUSH_IMAGE_OUTPUT, 0, 3,
      "phase II result: this frame's block fit of the accumulated (demodulated) radiance"},
@@ -483,6 +489,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
     return s;
   if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
+  hush_planar *const fill[2] = {need_albedo ? &st->albedo : NULL, emis ? &st->emission : NULL};
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, threads))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- phase I: reproject + accumulate the demodulated 1 spp radiance */
@@ -499,8 +507,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   ap.alpha_min = hush__param_f(f, P_ALPHA);
   ap.alpha_moments_min = ap.alpha_min;
   ap.max_age = hush__param_i(f, P_MAX_AGE);
-  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap, NULL,
-                    threads);
+  hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
+                          hush__gbuffer_holes_spp(&st->gin), &ap, NULL, threads);
   hush__filter_timing_stage(f, "accumulate");
 
   /* ---- phase II: features, fit, weighted sum, per block */
@@ -516,7 +524,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   fr.n = B * B;
   fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
-  fr.depth = gb->depth.plane[0];
+  fr.depth = hush__gbuffer_depth_with_data(
+      &st->gin, gb->depth.plane[0], st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,
+      threads); /* never-sampled holes: out of the fit */
   for (int c = 0; c < 3; c++) {
     if (set.needs & (1u << BMFR_SRC_NORMAL)) fr.base[BMFR_BASE_NORMAL + c] = gb->normal.plane[c];
     if (set.needs & (1u << BMFR_SRC_POSITION))
@@ -542,6 +552,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                        hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
                        st->fhist[cur].plane, threads);
   st->flatest = cur;
+  if (st->acc.empty) /* never-sampled holes: filled from around */
+    hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
+                     hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
   hush__filter_timing_stage(f, "accumulate_fitted");
 
   /* ---- remodulate, TAA, export: with TAA, the remodulation is fused into
