@@ -31,6 +31,7 @@ typedef enum holes_pattern {
 
 typedef struct holes_result {
   float *out;          /* W x H x 3, the last output (caller frees) */
+  float *extra;        /* W x H, the last extra output (caller frees; NULL: none) */
   double mean;         /* of the output's luminance */
   double truth_mean;   /* of the truth's */
   double mean_rel_err; /* mean |out - truth| / truth (luminance) */
@@ -82,10 +83,12 @@ static void holes_bind(hush_filter f, const char *name, void *data, hush_format 
 /*
  * Runs filter `name` (sets: "param=value" strings, NULL-terminated, may be
  * NULL) on `frames` frames of W x H. Binds color, depth, normal, position,
- * albedo (0.8) and, unless HOLES_FULL, spp.
+ * albedo (0.8) and, unless HOLES_FULL, spp; and the 1-channel output
+ * `extra` unless NULL.
  */
-static void holes_run(const char *name, const char *const *sets, holes_pattern pattern, int W,
-                      int H, int frames, float pan, holes_result *r) {
+static void holes_run_extra(const char *name, const char *const *sets, holes_pattern pattern,
+                            int W, int H, int frames, float pan, const char *extra,
+                            holes_result *r) {
   memset(r, 0, sizeof *r);
   const size_t n = (size_t)W * H;
   float *color = calloc(3 * n, sizeof(float)), *depth = calloc(n, sizeof(float));
@@ -93,6 +96,7 @@ static void holes_run(const char *name, const char *const *sets, holes_pattern p
   float *albedo = calloc(3 * n, sizeof(float)), *spp = calloc(n, sizeof(float));
   float *truth = calloc(3 * n, sizeof(float));
   r->out = calloc(3 * n, sizeof(float));
+  r->extra = extra ? calloc(n, sizeof(float)) : NULL;
   REQUIRE(color && depth && normal && position && albedo && spp && truth && r->out);
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);
@@ -113,6 +117,7 @@ static void holes_run(const char *name, const char *const *sets, holes_pattern p
   if (strcmp(name, "taa") != 0) holes_bind(f, "albedo", albedo, HUSH_FORMAT_FLOAT3, W, H);
   if (pattern != HOLES_FULL) holes_bind(f, "spp", spp, HUSH_FORMAT_FLOAT, W, H);
   holes_bind(f, "output", r->out, HUSH_FORMAT_FLOAT3, W, H);
+  if (extra) holes_bind(f, extra, r->extra, HUSH_FORMAT_FLOAT, W, H);
   REQUIRE(hush_filter_commit(f) == HUSH_OK);
 
   holes_cam prev, cur;
@@ -186,6 +191,11 @@ static void holes_run(const char *name, const char *const *sets, holes_pattern p
   free(albedo);
   free(spp);
   free(truth);
+}
+
+static void holes_run(const char *name, const char *const *sets, holes_pattern pattern, int W,
+                      int H, int frames, float pan, holes_result *r) {
+  holes_run_extra(name, sets, pattern, W, H, frames, pan, NULL, r);
 }
 
 /*

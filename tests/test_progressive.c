@@ -253,7 +253,29 @@ static void test_filters_with_holes(void) {
   holes_check_filter("svgf", NULL, 8, 0.01, 0.03, 0.30); /* a-trous: the ramp's corners blur */
 }
 
+/* svgf's 7x7 spatial variance (Dundr §4.4) counts only pixels with data: on
+ * the first frame at 1/4 spp the smooth ramp has a tiny variance; counting
+ * the empty pixels (moments 0) as samples made it about l^2 p (1 - p),
+ * ~0.02 here. */
+static void test_svgf_spatial_variance_holes(void) {
+  holes_result r;
+  holes_run_extra("svgf", NULL, HOLES_QUARTER, 48, 32, 1, 0.0f, "variance_estimate", &r);
+  float worst = 0.0f;
+  int nonfinite = 0;
+  for (size_t i = 0; i < 48 * 32; i++) {
+    worst = r.extra[i] > worst ? r.extra[i] : worst;
+    nonfinite += !isfinite(r.extra[i]);
+  }
+  CHECK_MSG(worst < 1e-3f && nonfinite == 0,
+            "svgf, 1/4 spp, frame 0: spatial variance up to %g (%d non-finite): empty pixels "
+            "counted",
+            (double)worst, nonfinite);
+  free(r.out);
+  free(r.extra);
+}
+
 int main(void) {
+  test_svgf_spatial_variance_holes();
   test_filters_with_holes();
   test_fractions();
   test_quarter_order();
