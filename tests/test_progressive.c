@@ -251,6 +251,10 @@ static void test_filters_with_holes(void) {
   holes_check_filter("taa", taa, 8, 0.01, 0.03, 0.15);
   holes_check_filter("bmfr", NULL, 8, 0.01, 0.02, 0.10);
   holes_check_filter("svgf", NULL, 8, 0.01, 0.03, 0.30); /* a-trous: the ramp's corners blur */
+  static const char *const bypass[] = {"emission_bypass=true", NULL};
+  holes_check_lamp("accumulate", bypass, 8);
+  holes_check_lamp("bmfr", bypass, 8);
+  holes_check_lamp("svgf", bypass, 8);
 }
 
 /* svgf's 7x7 spatial variance (Dundr §4.4) counts only pixels with data: on

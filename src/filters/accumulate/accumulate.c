@@ -222,9 +222,9 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
                      hush__accum_age(&st->acc)->plane[0], result->plane, 3, threads);
   }
   if (emis) {
-    const hush_planar *e = hush__emission_accumulate(
+    const hush_planar *e = hush__emission_accumulate_holes(
         &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
-        threads);
+        hush__gbuffer_holes_spp(&st->gin), threads);
     hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }

@@ -569,9 +569,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       hush__remodulate(&st->albedo, result, threads);
       result = &st->albedo;
     }
-    const hush_planar *e = hush__emission_accumulate(
+    const hush_planar *e = hush__emission_accumulate_holes(
         &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
-        threads);
+        hush__gbuffer_holes_spp(&st->gin), threads);
     hush__emission_add(&st->emission, e, result, threads);
     rgb = st->emission;
     if (with_taa) {

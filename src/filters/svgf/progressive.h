@@ -3,7 +3,8 @@
  * §4.2): frames where some pixels were not traced (`hush render
  * --spp-fraction`: spp 0, every other layer 0).
  *
- *  - §4.2.1 the G-buffer holes (depth, normal, albedo, position) are filled
+ *  - §4.2.1 the G-buffer holes (depth, normal, albedo, position; and the
+ *    emission, with emission_bypass, so that lamps have no holes) are filled
  *    from a pyramid of 3x3 averages of the traced pixels, looked up
  *    bilinearly from the finest level without holes;
  *  - §4.2.4 the previous frame's state (each pixel's accumulated colour,
@@ -31,7 +32,7 @@
 
 #include <stdint.h>
 
-#define SVGF_PYRAMID_MAX_PLANES 10
+#define SVGF_PYRAMID_MAX_PLANES 13 /* depth, normal, position, albedo, emission */
 
 typedef struct svgf_progressive {
   uint32_t width, height;

@@ -580,6 +580,8 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     for (int k = 0; k < 3; k++) planes[count++] = st->gin.position.plane[k];
     if (demod)
       for (int k = 0; k < 3; k++) planes[count++] = st->albedo.plane[k];
+    if (emis) /* the lamps too (docs/holes.md) */
+      for (int k = 0; k < 3; k++) planes[count++] = st->emission.plane[k];
     svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
     svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
                          threads);
@@ -658,9 +660,9 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     result = &st->albedo;
   }
   if (emis) {
-    const hush_planar *e = hush__emission_accumulate(
+    const hush_planar *e = hush__emission_accumulate_holes(
         &st->eh, &st->rp.plan, hush__accum_age(&st->comp[0].acc)->plane[0], fc.ap.alpha_min,
-        &st->emission, threads);
+        &st->emission, holes ? st->spp.plane[0] : NULL, threads);
     hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }
