@@ -249,7 +249,7 @@ static void test_resolve_holes(hush_device dev, int threads) {
     const hush_planar *hist = hush__taa_output(&a);
     reference(&plan, (const float *const *)color.plane, (const float *const *)hist->plane, &p, W,
               H, expect.plane);
-    CHECK(hush__taa_resolve_holes(&a, &plan, (const float *const *)color.plane, spp, &p,
+    CHECK(hush__taa_resolve_holes(&a, &plan, (const float *const *)color.plane, spp, 0, &p,
                                   valid.plane[0], threads) == 0);
     CHECK_MSG(max_rel_diff(hush__taa_output(&a), expect.plane, n) < 2e-5f,
               "all traced, tonemap %d: %g", tonemap,
@@ -268,9 +268,9 @@ static void test_resolve_holes(hush_device dev, int threads) {
   hush__taa_resolve(&b, NULL, (const float *const *)color.plane, &p, threads);
   float *const *hist = hush__taa_output(&a)->plane; /* the history of both */
   for (int k = 0; k < 3; k++) memcpy(expect.plane[k], hist[k], n * sizeof(float));
-  const int missing = hush__taa_resolve_holes(&a, &plan, (const float *const *)color.plane, spp,
+  const int missing = hush__taa_resolve_holes(&a, &plan, (const float *const *)color.plane, spp, 0,
                                               &p, valid.plane[0], threads);
-  hush__taa_resolve_holes(&b, &plan, (const float *const *)garbage.plane, spp, &p, valid.plane[0],
+  hush__taa_resolve_holes(&b, &plan, (const float *const *)garbage.plane, spp, 0, &p, valid.plane[0],
                           threads);
   CHECK_MSG(max_rel_diff(hush__taa_output(&a), hush__taa_output(&b)->plane, n) == 0.0f,
             "the colour at a hole was read");

@@ -27,6 +27,7 @@ typedef struct hush_gbuffer_inputs {
   hush_holes holes; /* pyramid scratch */
   int has_holes;    /* this frame has pixels with spp 0 */
   hush_planar depth_data; /* 1, allocated with the first holes: see below */
+  hush_planar surface;    /* 1, frames with holes: 1 where depth > 0, filled */
 } hush_gbuffer_inputs;
 
 /*
@@ -52,7 +53,11 @@ hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
  * G-buffer (depth, normal, position, motion) and of the `extra` planes
  * (e.g. albedo, emission; NULL entries skipped) by the pyramid of Dundr 2018
  * §4.2.1 (holes.h), so that a hole reprojects and is tested like a traced
- * pixel; hole normals are renormalised and every background normal is +z
+ * pixel. A hole is background (depth, normal, position 0) where most of
+ * the pixels its fill averaged are, else a surface with their average
+ * depth, normal and position (never a mix of the two: a depth between an
+ * object's and the sky's is a surface that is nowhere); hole normals are
+ * renormalised and every background normal is +z
  * (so that the background's holes fill from around it). In such a frame
  * the plan reprojects from depth (the filled depth keeps a hole on its own
  * pixel under a still camera; a filled position, an average of its

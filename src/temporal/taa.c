@@ -265,10 +265,11 @@ void hush__taa_resolve(hush_taa *taa, const hush_reproject_plan *plan, const flo
 
 /* ---- frames with holes (docs/holes.md; Dundr 2018 §4.2.6) ---------------- */
 
-/* The box of the traced pixels (spp > 0) of the 3x3 neighbourhood of (x, y)
- * in the YCoCg planes v: lo, hi and the sum; returns how many. */
-static int traced_box(const float *const v[3], const float *spp, int x, int y, int W, int H,
-                      float lo[3], float hi[3], float sum[3]) {
+/* The box of the traced pixels (spp > 0; all with every_pixel) of the 3x3
+ * neighbourhood of (x, y) in the YCoCg planes v: lo, hi and the sum;
+ * returns how many. */
+static int traced_box(const float *const v[3], const float *spp, int every_pixel, int x, int y,
+                      int W, int H, float lo[3], float hi[3], float sum[3]) {
   int m = 0;
   for (int k = 0; k < 3; k++) {
     lo[k] = 3.0e38f;
@@ -279,7 +280,7 @@ static int traced_box(const float *const v[3], const float *spp, int x, int y, i
     for (int i = x - 1; i <= x + 1; i++) {
       if (j < 0 || i < 0 || j >= H || i >= W) continue;
       const size_t q = (size_t)j * W + i;
-      if (!(spp[q] > 0.0f)) continue;
+      if (!every_pixel && !(spp[q] > 0.0f)) continue;
       for (int k = 0; k < 3; k++) {
         lo[k] = minf(lo[k], v[k][q]);
         hi[k] = maxf(hi[k], v[k][q]);
@@ -293,13 +294,13 @@ static int traced_box(const float *const v[3], const float *spp, int x, int y, i
 /* Pixel (x, y) of a frame with holes; returns 0 where it has nothing (no
  * history, no traced neighbour). */
 static int resolve_hole_pixel(const hush_planar *cur, const hush_reproject_plan *plan,
-                              const float *const *prev, const float *spp,
+                              const float *const *prev, const float *spp, int hole_color,
                               const hush_taa_params *params, hush_planar *out, int x, int y) {
   const int W = (int)cur->width, H = (int)cur->height;
   const size_t i = (size_t)y * W + x;
   const float *const v[3] = {cur->plane[0], cur->plane[1], cur->plane[2]};
   float lo[3], hi[3], sum[3], h[3] = {0.0f, 0.0f, 0.0f}, m[3];
-  const int boxed = traced_box(v, spp, x, y, W, H, lo, hi, sum);
+  const int boxed = traced_box(v, spp, hole_color, x, y, W, H, lo, hi, sum);
   int n = 0;
   if (plan) {
     int32_t idx[9];
@@ -329,7 +330,9 @@ static int resolve_hole_pixel(const hush_planar *cur, const hush_reproject_plan 
   for (int k = 0; k < 3; k++) {
     if (traced) /* a new sample: the usual blend */
       m[k] = n ? h[k] + params->alpha * (v[k][i] - h[k]) : v[k][i];
-    else /* only new samples update the history: a hole keeps it */
+    else if (hole_color) /* only new samples update the history: a hole keeps it */
+      m[k] = n ? h[k] : v[k][i];
+    else
       m[k] = n ? h[k] : boxed ? sum[k] / (float)boxed : 0.0f;
   }
   const float r = m[0] + m[1] - m[2], g = m[0] + m[2], b = m[0] - m[1] - m[2];
@@ -341,7 +344,7 @@ static int resolve_hole_pixel(const hush_planar *cur, const hush_reproject_plan 
 }
 
 int hush__taa_resolve_holes(hush_taa *taa, const hush_reproject_plan *plan,
-                            const float *const *color, const float *spp,
+                            const float *const *color, const float *spp, int hole_color,
                             const hush_taa_params *params, float *valid, int threads) {
   hush_planar *cur = &taa->current;
   const int W = (int)cur->width, H = (int)cur->height;
@@ -367,8 +370,8 @@ int hush__taa_resolve_holes(hush_taa *taa, const hush_reproject_plan *plan,
 #pragma omp for schedule(static) reduction(| : missing)
     for (int y = 0; y < H; y++)
       for (int x = 0; x < W; x++) {
-        const int ok =
-            resolve_hole_pixel(cur, use_history ? plan : NULL, prev, spp, params, out, x, y);
+        const int ok = resolve_hole_pixel(cur, use_history ? plan : NULL, prev, spp, hole_color,
+                                          params, out, x, y);
         valid[(size_t)y * W + x] = ok ? 1.0f : 0.0f;
         missing |= !ok;
       }

@@ -71,6 +71,7 @@ enum {
   P_PROGRESSIVE,
   P_PROGRESSIVE_EPSILON,
   P_EMISSION_BYPASS,
+  P_PROGRESSIVE_TAA,
   P_COUNT
 };
 
@@ -146,6 +147,11 @@ static const hush_param_info svgf_params[P_COUNT] = {
      "with 'emission' bound: filter color minus emission and add the emission back (lights seen "
      "directly stay exact and do not bleed, but their 1 spp edges stay aliased: on the cornell-box "
      "relMSE 0.040 -> 0.008, RMSE 0.126 -> 0.174; docs/bmfr.md)",
+     NULL},
+    {"progressive_taa", HUSH_PARAM_BOOL, 0, 0, 1,
+     "progressive, with taa: only the traced pixels blend into the TAA history, a hole keeps "
+     "it clamped to its box (Dundr 2018 §4.2.6: 'only new samples would get updated'; "
+     "docs/holes.md)",
      NULL},
 };
 
@@ -674,7 +680,11 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;
     tp.tonemap = 1;
-    hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
+    if (holes && hush__param_i(f, P_PROGRESSIVE_TAA)) /* the filtered frame is whole */
+      hush__taa_resolve_holes(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
+                              st->spp.plane[0], 1, &tp, st->prog.scratch.plane[0], threads);
+    else
+      hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
     rgb = *hush__taa_output(&st->taa);
   }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);

@@ -135,7 +135,7 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
      * history, no traced neighbour) are filled from around */
     hush_taa *t = &st->taa;
     if (hush__taa_resolve_holes(t, &st->rp.plan, (const float *const *)st->color.plane,
-                                st->gin.spp.plane[0], &tp, st->valid.plane[0], threads))
+                                st->gin.spp.plane[0], 0, &tp, st->valid.plane[0], threads))
       hush__holes_fill(st->gin.holes.pyramid, f->width, f->height, st->valid.plane[0],
                        t->history[t->latest].plane, 3, threads);
   } else {
