@@ -260,6 +260,10 @@ static void test_filters_with_holes(void) {
   holes_check_lamp("accumulate", bypass, 8);
   holes_check_lamp("bmfr", bypass, 8);
   holes_check_lamp("svgf", bypass, 8);
+  holes_check_sky("accumulate", NULL, 12);
+  holes_check_sky("taa", NULL, 12);
+  holes_check_sky("bmfr", NULL, 12);
+  holes_check_sky("svgf", NULL, 12);
 }
 
 /* svgf's 7x7 spatial variance (Dundr §4.4) counts only pixels with data: on

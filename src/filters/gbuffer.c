@@ -60,40 +60,6 @@ hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
       in->use_motion ? (const float *const *)in->motion.plane : NULL, info, params, threads);
 }
 
-/* 1 where a pixel hit a surface (depth > 0), else 0 (background). */
-static void surface_flags(const float *depth, float *surface, size_t count, int threads) {
-  const long long c = (long long)count;
-#pragma omp parallel for simd schedule(static) num_threads(threads)
-  for (long long i = 0; i < c; i++) surface[i] = depth[i] > 0.0f ? 1.0f : 0.0f;
-}
-
-/*
- * A hole is a surface where most of the valid pixels its fill averaged hit
- * one (filled surface flag s > 1/2), else background. Background pixels
- * hold depth, normal and position 0, so the filled values are sums over
- * the surfaces alone times 1/s: divided by s they are the surfaces'
- * averages. Without this a hole between the sky and an object got a depth
- * between the object's and 0, a surface that is nowhere, which reprojected
- * onto whatever lay there (a lamp seen against the sky smeared over it).
- */
-static void surface_or_background(hush_gbuffer_inputs *in, hush_gbuffer_store *g, size_t count,
-                                  int threads) {
-  const float *spp = in->spp.plane[0], *sf = in->surface.plane[0];
-  float *z = g->depth.plane[0];
-  float *const *nrm = g->normal.plane;
-  float *const *pos = in->has_position ? in->position.plane : NULL;
-  const long long c = (long long)count;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long long i = 0; i < c; i++) {
-    if (!hush__holes_is_hole(spp[i])) continue;
-    const int surface = sf[i] > 0.5f;
-    const float k = surface ? 1.0f / sf[i] : 0.0f;
-    z[i] *= k;
-    for (int a = 0; a < 3; a++) nrm[a][i] *= k;
-    for (int a = 0; pos && a < 3; a++) pos[a][i] *= k;
-  }
-}
-
 /* Unit hole normals (the fill averages unit vectors) and +z on all the
  * background, as svgf_normalize_holes. */
 static void normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
@@ -127,10 +93,8 @@ hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojec
 
   hush_gbuffer_store *g = hush__reprojector_next(rp);
   if ((s = hush__filter_scratch(f, &in->surface, 1))) return s;
-  surface_flags(g->depth.plane[0], in->surface.plane[0], n, threads);
   float *planes[HUSH_HOLES_MAX_PLANES];
   int count = 0;
-  planes[count++] = in->surface.plane[0];
   planes[count++] = g->depth.plane[0];
   for (int k = 0; k < 3; k++) planes[count++] = g->normal.plane[k];
   if (in->use_motion)
@@ -144,7 +108,12 @@ hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojec
   if ((s = hush__filter_scratch(f, &in->depth_data, 1))) return s;
   hush__holes_fill(in->holes.pyramid, f->width, f->height, in->spp.plane[0], planes, count,
                    threads);
-  surface_or_background(in, g, n, threads);
+  /* depth, normal (and position): a surface's average or the background */
+  float *const geometry[7] = {g->depth.plane[0],    g->normal.plane[0], g->normal.plane[1],
+                              g->normal.plane[2],   in->position.plane[0], in->position.plane[1],
+                              in->position.plane[2]};
+  hush__holes_split_background(in->holes.pyramid, f->width, f->height, in->spp.plane[0],
+                               in->surface.plane[0], geometry, in->has_position ? 7 : 4, threads);
   normalize_holes(in->spp.plane[0], g->depth.plane[0], g->normal.plane, n, threads);
   g->has_id = 0;
   in->has_holes = 1;

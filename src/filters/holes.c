@@ -123,3 +123,20 @@ void hush__holes_fill(float *pyramid, uint32_t width, uint32_t height, const flo
       }
   }
 }
+
+void hush__holes_split_background(float *pyramid, uint32_t width, uint32_t height,
+                                  const float *valid, float *surface, float *const *planes,
+                                  int count, int threads) {
+  const long long n = (long long)width * height;
+  const float *depth = planes[0];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+  for (long long i = 0; i < n; i++) surface[i] = depth[i] > 0.0f ? 1.0f : 0.0f;
+  float *const one[1] = {surface};
+  hush__holes_fill(pyramid, width, height, valid, one, 1, threads);
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long long i = 0; i < n; i++) {
+    if (!hush__holes_is_hole(valid[i])) continue;
+    const float k = surface[i] > 0.5f ? 1.0f / surface[i] : 0.0f;
+    for (int c = 0; c < count; c++) planes[c][i] *= k;
+  }
+}

@@ -40,6 +40,22 @@ size_t hush__holes_pyramid_floats(uint32_t width, uint32_t height, int planes);
 void hush__holes_fill(float *pyramid, uint32_t width, uint32_t height, const float *valid,
                       float *const *planes, int count, int threads);
 
+/*
+ * After a fill of the G-buffer: each hole is background (depth <= 0) or a
+ * surface by the majority of the valid pixels the fill averages (the same
+ * pyramid, on the flag depth > 0, into `surface`, 1 plane of scratch). A
+ * surface hole's geometry planes (planes[0] the depth, then e.g. normal
+ * and position, all 0 on the background) are divided by that fraction: the
+ * average over the surfaces alone; a background hole's are set to 0.
+ * Without this a hole between an object and the sky got a depth between
+ * the object's and 0, a surface that is nowhere, which reprojects onto
+ * whatever lies there (a lamp seen against the sky dragged a trail).
+ * pyramid: as hush__holes_fill for 1 plane.
+ */
+void hush__holes_split_background(float *pyramid, uint32_t width, uint32_t height,
+                                  const float *valid, float *surface, float *const *planes,
+                                  int count, int threads);
+
 /* The scratch of hush__holes_fill for up to `planes` planes, allocated on
  * first use (hush__holes_reserve) and owned by the struct. */
 typedef struct hush_holes {

@@ -30,6 +30,7 @@ hush_status svgf_progressive_init(hush_device device, svgf_progressive *p, uint3
   if (!s) s = hush__planar_init(device, &p->depth, 1, W, H);
   if (!s) s = hush__planar_init(device, &p->near_far, 2, W, H);
   if (!s) s = hush__planar_init(device, &p->scratch, 2, W, H);
+  if (!s) s = hush__planar_init(device, &p->background, 1, W, H);
   if (!s) {
     p->pyramid_floats = hush__holes_pyramid_floats(W, H, SVGF_PYRAMID_MAX_PLANES);
     p->src = malloc(n * sizeof *p->src);
@@ -47,6 +48,7 @@ void svgf_progressive_free(svgf_progressive *p) {
   hush__planar_free(&p->depth);
   hush__planar_free(&p->near_far);
   hush__planar_free(&p->scratch);
+  hush__planar_free(&p->background);
   free(p->src);
   free(p->keys);
   hush__free_floats(p->pyramid);
@@ -62,6 +64,18 @@ int svgf_has_holes(const float *spp, size_t n, int threads) {
 void svgf_fill_holes(svgf_progressive *p, const float *spp, float *const *planes, int count,
                      int threads) {
   hush__holes_fill(p->pyramid, p->width, p->height, spp, planes, count, threads);
+}
+
+void svgf_split_background(svgf_progressive *p, const float *spp, float *const *geometry,
+                           int count, int threads) {
+  /* scratch is free until the near/far passes of svgf_forward_scatter */
+  hush__holes_split_background(p->pyramid, p->width, p->height, spp, p->scratch.plane[1],
+                               geometry, count, threads);
+  const long long n = (long long)p->width * p->height;
+  const float *z = geometry[0];
+  float *bg = p->background.plane[0];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+  for (long long i = 0; i < n; i++) bg[i] = is_hole(spp[i]) && !(z[i] > 0.0f) ? 1.0f : 0.0f;
 }
 
 void svgf_normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
@@ -214,7 +228,7 @@ void svgf_forward_state(const svgf_progressive *p, const float *spp,
       const size_t t = (size_t)y * W + x;
       if (!is_hole(spp[t])) continue;
       int32_t s[9];
-      const int m = prev ? landed_around(p, x, y, s) : 0;
+      const int m = prev && !(p->background.plane[0][t] > 0.0f) ? landed_around(p, x, y, s) : 0;
       if (m > 0) {
         for (int k = 0; k < 6; k++) {
           float sum = 0.0f;
@@ -251,7 +265,9 @@ void svgf_carry_positions(svgf_progressive *p, const float *spp, const float *co
     for (int x = 0; x < W; x++) {
       const size_t t = (size_t)y * W + x;
       int32_t s[9];
-      const int m = is_hole(spp[t]) && have ? landed_around(p, x, y, s) : 0;
+      const int m = is_hole(spp[t]) && have && !(p->background.plane[0][t] > 0.0f)
+                        ? landed_around(p, x, y, s)
+                        : 0;
       if (m > 0) {
         float acc[4] = {0, 0, 0, 0};
         for (int i = 0; i < m; i++)

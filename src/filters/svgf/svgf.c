@@ -589,6 +589,7 @@ static hush_status svgf_execute(hush_filter f, void *state, const hush_frame_inf
     if (emis) /* the lamps too (docs/holes.md) */
       for (int k = 0; k < 3; k++) planes[count++] = st->emission.plane[k];
     svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
+    svgf_split_background(&st->prog, st->spp.plane[0], planes, 7, threads); /* docs/holes.md */
     svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
                          threads);
   }
