@@ -8,6 +8,8 @@
 #include "check.h"
 #include "holes_check.h"
 
+#include "core/image.h"
+#include "filters/holes.h"
 #include "io/frame.h"
 #include "render/camera.h"
 #include "render/lights.h"
@@ -240,6 +242,65 @@ static void test_render_holes(void) {
   hush_device_release(dev);
 }
 
+/* ---- the pyramid fill and the background/surface split ------------------------------ */
+
+/* An object (depth 5, normal +z, motion (1, 0.5)) on the left and in a
+ * disc, the background (depth 0, normal 0, motion (-2, 0)) elsewhere, one
+ * pixel in four traced: every hole ends up exactly the object's or exactly
+ * the background's (never a depth or motion in between), the ones far
+ * from the boundary the right one, and traced pixels unchanged. */
+static void test_split_background(void) {
+  const uint32_t W = 37, H = 23;
+  const size_t n = (size_t)W * H;
+  float *valid = malloc(n * sizeof(float)), *g[6], *sc[3], *truth = malloc(n * sizeof(float));
+  float *pyr = malloc(hush__holes_pyramid_floats(W, H, 6) * sizeof(float));
+  REQUIRE(valid && truth && pyr);
+  for (int k = 0; k < 6; k++) REQUIRE((g[k] = malloc(n * sizeof(float))) != NULL);
+  for (int k = 0; k < 3; k++) REQUIRE((sc[k] = malloc(n * sizeof(float))) != NULL);
+  for (uint32_t y = 0; y < H; y++)
+    for (uint32_t x = 0; x < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      const float dx = (float)x - 27.0f, dy = (float)y - 11.0f;
+      const int obj = x < 12 || dx * dx + dy * dy < 36.0f;
+      truth[i] = (float)obj;
+      valid[i] = (x % 2 == 1 && y % 2 == 0) ? 1.0f : 0.0f;
+      const float v[6] = {obj ? 5.0f : 0.0f, 0.0f, 0.0f, obj ? 1.0f : 0.0f, obj ? 1.0f : -2.0f,
+                          obj ? 0.5f : 0.0f};
+      for (int k = 0; k < 6; k++) g[k][i] = valid[i] > 0.0f ? v[k] : 0.0f;
+    }
+  hush__holes_fill(pyr, W, H, valid, g, 6, 2);
+  float *const geometry[4] = {g[0], g[1], g[2], g[3]}, *const motion[2] = {g[4], g[5]};
+  hush__holes_split_background(pyr, W, H, valid, sc, geometry, 4, motion, 2);
+  int mixed = 0, wrong_far = 0;
+  for (uint32_t y = 0; y < H; y++)
+    for (uint32_t x = 0; x < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      const int obj = fabsf(g[0][i] - 5.0f) < 1e-5f * 5.0f && fabsf(g[3][i] - 1.0f) < 1e-5f &&
+                      fabsf(g[4][i] - 1.0f) < 1e-5f &&
+                      fabsf(g[5][i] - 0.5f) < 1e-5f;
+      const int bg = g[0][i] == 0.0f && g[3][i] == 0.0f && fabsf(g[4][i] + 2.0f) < 1e-5f &&
+                     fabsf(g[5][i]) < 1e-5f;
+      mixed += !obj && !bg;
+      int same = 1; /* the 7x7 around is all object or all background */
+      for (int j = -3; j <= 3; j++)
+        for (int k = -3; k <= 3; k++) {
+          const int xx = (int)x + k, yy = (int)y + j;
+          if (xx >= 0 && yy >= 0 && xx < (int)W && yy < (int)H)
+            same &= truth[(size_t)yy * W + xx] == truth[i];
+        }
+      wrong_far += same && (truth[i] > 0.0f ? !obj : !bg);
+    }
+  CHECK_MSG(mixed == 0 && wrong_far == 0,
+            "split: %d pixels neither object nor background, %d far from the boundary on the "
+            "wrong side",
+            mixed, wrong_far);
+  for (int k = 0; k < 6; k++) free(g[k]);
+  for (int k = 0; k < 3; k++) free(sc[k]);
+  free(valid);
+  free(truth);
+  free(pyr);
+}
+
 /* ---- every temporal filter at 1/4 spp (docs/holes.md) -------------------------------- */
 
 /* The issue's acceptance: at 1/4 spp with a still camera every pixel is
@@ -288,6 +349,7 @@ static void test_svgf_spatial_variance_holes(void) {
 }
 
 int main(void) {
+  test_split_background();
   test_svgf_spatial_variance_holes();
   test_filters_with_holes();
   test_fractions();

@@ -92,7 +92,7 @@ hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojec
   if (!hush__holes_any(in->spp.plane[0], n, threads)) return HUSH_OK;
 
   hush_gbuffer_store *g = hush__reprojector_next(rp);
-  if ((s = hush__filter_scratch(f, &in->surface, 1))) return s;
+  if ((s = hush__filter_scratch(f, &in->surface, 3))) return s;
   float *planes[HUSH_HOLES_MAX_PLANES];
   int count = 0;
   planes[count++] = g->depth.plane[0];
@@ -113,7 +113,8 @@ hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojec
                               g->normal.plane[2],   in->position.plane[0], in->position.plane[1],
                               in->position.plane[2]};
   hush__holes_split_background(in->holes.pyramid, f->width, f->height, in->spp.plane[0],
-                               in->surface.plane[0], geometry, in->has_position ? 7 : 4, threads);
+                               in->surface.plane, geometry, in->has_position ? 7 : 4,
+                               in->use_motion ? in->motion.plane : NULL, threads);
   normalize_holes(in->spp.plane[0], g->depth.plane[0], g->normal.plane, n, threads);
   g->has_id = 0;
   in->has_holes = 1;

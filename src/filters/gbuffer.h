@@ -27,7 +27,7 @@ typedef struct hush_gbuffer_inputs {
   hush_holes holes; /* pyramid scratch */
   int has_holes;    /* this frame has pixels with spp 0 */
   hush_planar depth_data; /* 1, allocated with the first holes: see below */
-  hush_planar surface;    /* 1, frames with holes: hush__holes_split_background's */
+  hush_planar surface;    /* 3, frames with holes: hush__holes_split_background's scratch */
 } hush_gbuffer_inputs;
 
 /*

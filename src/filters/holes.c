@@ -125,18 +125,31 @@ void hush__holes_fill(float *pyramid, uint32_t width, uint32_t height, const flo
 }
 
 void hush__holes_split_background(float *pyramid, uint32_t width, uint32_t height,
-                                  const float *valid, float *surface, float *const *planes,
-                                  int count, int threads) {
+                                  const float *valid, float *const *scratch, float *const *planes,
+                                  int count, float *const *motion, int threads) {
   const long long n = (long long)width * height;
   const float *depth = planes[0];
+  float *surface = scratch[0];
 #pragma omp parallel for simd schedule(static) num_threads(threads)
   for (long long i = 0; i < n; i++) surface[i] = depth[i] > 0.0f ? 1.0f : 0.0f;
-  float *const one[1] = {surface};
-  hush__holes_fill(pyramid, width, height, valid, one, 1, threads);
+  if (motion)
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+    for (long long i = 0; i < n; i++) {
+      scratch[1][i] = motion[0][i] * surface[i];
+      scratch[2][i] = motion[1][i] * surface[i];
+    }
+  hush__holes_fill(pyramid, width, height, valid, scratch, motion ? 3 : 1, threads);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (long long i = 0; i < n; i++) {
     if (!hush__holes_is_hole(valid[i])) continue;
-    const float k = surface[i] > 0.5f ? 1.0f / surface[i] : 0.0f;
+    const float sf = surface[i];
+    const int on_surface = sf > 0.5f;
+    const float k = on_surface ? 1.0f / sf : 0.0f;
     for (int c = 0; c < count; c++) planes[c][i] *= k;
+    for (int c = 0; motion && c < 2; c++) {
+      /* fill(m) = fill(m s) + fill(m (1 - s)), the same weights */
+      const float ms = scratch[1 + c][i];
+      motion[c][i] = on_surface ? ms / sf : (motion[c][i] - ms) / (1.0f - sf);
+    }
   }
 }

@@ -43,18 +43,21 @@ void hush__holes_fill(float *pyramid, uint32_t width, uint32_t height, const flo
 /*
  * After a fill of the G-buffer: each hole is background (depth <= 0) or a
  * surface by the majority of the valid pixels the fill averages (the same
- * pyramid, on the flag depth > 0, into `surface`, 1 plane of scratch). A
- * surface hole's geometry planes (planes[0] the depth, then e.g. normal
- * and position, all 0 on the background) are divided by that fraction: the
- * average over the surfaces alone; a background hole's are set to 0.
- * Without this a hole between an object and the sky got a depth between
- * the object's and 0, a surface that is nowhere, which reprojects onto
+ * pyramid, on the flag depth > 0, into scratch[0]). A surface hole's
+ * geometry planes (planes[0] the depth, then e.g. normal and position, all
+ * 0 on the background) are divided by that fraction: the average over the
+ * surfaces alone; a background hole's are set to 0. motion (2 planes, or
+ * NULL), filled over all pixels (the background's motion is real), becomes
+ * the average over the surfaces or over the background alone (by the fill
+ * of motion x flag, in scratch[1] and scratch[2]). Without this a hole
+ * between an object and the sky got a depth (and motion) between the
+ * object's and the sky's, a surface that is nowhere, which reprojects onto
  * whatever lies there (a lamp seen against the sky dragged a trail).
- * pyramid: as hush__holes_fill for 1 plane.
+ * pyramid: as hush__holes_fill for 3 planes; scratch: 1 plane, 3 with motion.
  */
 void hush__holes_split_background(float *pyramid, uint32_t width, uint32_t height,
-                                  const float *valid, float *surface, float *const *planes,
-                                  int count, int threads);
+                                  const float *valid, float *const *scratch, float *const *planes,
+                                  int count, float *const *motion, int threads);
 
 /* The scratch of hush__holes_fill for up to `planes` planes, allocated on
  * first use (hush__holes_reserve) and owned by the struct. */

@@ -69,8 +69,9 @@ void svgf_fill_holes(svgf_progressive *p, const float *spp, float *const *planes
 void svgf_split_background(svgf_progressive *p, const float *spp, float *const *geometry,
                            int count, int threads) {
   /* scratch is free until the near/far passes of svgf_forward_scatter */
-  hush__holes_split_background(p->pyramid, p->width, p->height, spp, p->scratch.plane[1],
-                               geometry, count, threads);
+  float *const surface[1] = {p->scratch.plane[1]};
+  hush__holes_split_background(p->pyramid, p->width, p->height, spp, surface, geometry, count,
+                               NULL, threads);
   const long long n = (long long)p->width * p->height;
   const float *z = geometry[0];
   float *bg = p->background.plane[0];
