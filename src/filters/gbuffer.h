@@ -57,7 +57,9 @@ hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
  * the pixels its fill averaged are, else a surface with their average
  * depth, normal and position (never a mix of the two: a depth between an
  * object's and the sky's is a surface that is nowhere); hole normals are
- * renormalised and every background normal is +z
+ * renormalised and every background normal is +z; a surface hole's normal
+ * is then the previous frame's where its centre came from a surface (world
+ * normals do not depend on the camera: "keep the history")
  * (so that the background's holes fill from around it). In such a frame
  * the plan reprojects from depth (the filled depth keeps a hole on its own
  * pixel under a still camera; a filled position, an average of its
@@ -67,7 +69,8 @@ hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
  */
 hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojector *rp,
                                      hush_gbuffer_inputs *in, hush_planar *const *extra,
-                                     int extra_count, int threads);
+                                     int extra_count, const hush_frame_info *info,
+                                     int threads);
 
 /* this frame's 'spp' plane when it has holes, else NULL */
 static inline const float *hush__gbuffer_holes_spp(const hush_gbuffer_inputs *in) {

@@ -182,7 +182,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   /* holes: the G-buffer, albedo and emission filled from around */
   hush_planar *const fill[2] = {demod ? &st->albedo : NULL, emis ? &st->emission : NULL};
-  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, threads))) return s;
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, info, threads))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- reproject */

@@ -490,7 +490,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   hush_planar *const fill[2] = {need_albedo ? &st->albedo : NULL, emis ? &st->emission : NULL};
-  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, threads))) return s;
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, info, threads))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- phase I: reproject + accumulate the demodulated 1 spp radiance */

@@ -114,7 +114,7 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
-  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, NULL, 0, threads))) return s;
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, NULL, 0, info, threads))) return s;
   if (st->gin.has_holes && (s = hush__filter_scratch(f, &st->valid, 1))) return s;
   hush__filter_timing_stage(f, "import");
 
