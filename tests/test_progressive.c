@@ -314,8 +314,6 @@ static void test_filters_with_holes(void) {
   holes_check_filter("svgf", NULL, 8, 0.01, 0.03, 0.30); /* a-trous: the ramp's corners blur */
   /* §4.2.6: only traced pixels blend into svgf's TAA history */
   static const char *const ptaa[] = {"taa=true", "progressive_taa=true", NULL};
-  static const char *const staa[] = {"taa=true", NULL};
-  holes_check_filter("svgf", staa, 8, 0.01, 0.03, 0.30);
   holes_check_filter("svgf", ptaa, 8, 0.01, 0.03, 0.30);
   static const char *const bypass[] = {"emission_bypass=true", NULL};
   holes_check_lamp("accumulate", bypass, 8);
