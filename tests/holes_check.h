@@ -254,7 +254,7 @@ static void holes_run(const char *name, const char *const *sets, holes_pattern p
  */
 static void holes_check_filter(const char *name, const char *const *sets, int frames,
                                double mean_tol, double err_tol, double max_tol) {
-  const int W = 48, H = 32;
+  const int W = 40, H = 24;
   holes_result full, full_spp, quarter, moving;
   holes_run(name, sets, HOLES_FULL, W, H, frames, 0.0f, &full);
   holes_run(name, sets, HOLES_FULL_SPP, W, H, frames, 0.0f, &full_spp);
@@ -294,7 +294,7 @@ static void holes_check_filter(const char *name, const char *const *sets, int fr
  * keeps the emission it had.
  */
 static void holes_check_lamp(const char *name, const char *const *sets, int frames) {
-  const int W = 48, H = 32;
+  const int W = 40, H = 24;
   holes_result still, moving;
   holes_run_lamp(name, sets, HOLES_QUARTER, W, H, frames, 0.0f, NULL, 1, &still);
   holes_run_lamp(name, sets, HOLES_QUARTER, W, H, frames, 0.05f, NULL, 1, &moving);
