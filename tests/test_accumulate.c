@@ -949,7 +949,7 @@ static void test_misuse(hush_device dev) {
   const hush_filter_class_info *ci = hush_filter_class_find("accumulate");
   REQUIRE(ci != NULL);
   CHECK(ci->param_count == 11 && strcmp(ci->params[0].name, "nonfinite") == 0);
-  CHECK(ci->image_count == 11);
+  CHECK(ci->image_count == 12);
   for (uint32_t k = 0; k < ci->param_count; k++) CHECK(ci->params[k].doc && ci->params[k].doc[0]);
 
   /* execute before commit */
@@ -1365,6 +1365,109 @@ static void test_module_accum(hush_device dev) {
   gpair_free(&g);
 }
 
+/*
+ * Frames with holes (hush__accum_blend_holes, docs/holes.md): a hole keeps
+ * its history exactly, its age not increased; never sampled it stays
+ * empty (age 0); an empty tap never darkens a neighbour (weights
+ * renormalised); without holes the result is hush__accum_blend's, bit for
+ * bit.
+ */
+static void test_module_holes(hush_device dev) {
+  const int W = 9, H = 5;
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 0.0f, 0.0f);
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  hush_accum acc;
+  REQUIRE(hush__accum_init(dev, &acc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  const hush_accum_params ap = {0.0f, 0.0f, 256};
+  float *s[3], *spp = malloc(n * sizeof(float)), *var = malloc(n * sizeof(float));
+  REQUIRE(spp && var);
+  for (int c = 0; c < 3; c++) REQUIRE((s[c] = malloc(n * sizeof(float))) != NULL);
+  /* frame 0: even columns traced (2, 4, 6), odd ones holes (sample 0) */
+  for (size_t i = 0; i < n; i++) {
+    const int traced = (i % W) % 2 == 0;
+    spp[i] = traced ? 1.0f : 0.0f;
+    for (int c = 0; c < 3; c++) s[c][i] = traced ? 2.0f * (float)(c + 1) : 0.0f;
+  }
+  hush__accum_blend_holes(&acc, &plan, (const float *const *)s, spp, &ap, var, 2);
+  int bad = 0;
+  for (size_t i = 0; i < n; i++) {
+    const int traced = (i % W) % 2 == 0;
+    bad += hush__accum_age(&acc)->plane[0][i] != (traced ? 1.0f : 0.0f);
+    bad += hush__accum_color(&acc)->plane[2][i] != (traced ? 6.0f : 0.0f);
+    bad += var[i] != 0.0f;
+  }
+  CHECK_MSG(bad == 0 && acc.empty, "frame 0: %d pixels wrong", bad);
+  /* frame 1: the other columns (8), the even ones holes: every pixel has data */
+  for (size_t i = 0; i < n; i++) {
+    const int traced = (i % W) % 2 == 1;
+    spp[i] = traced ? 1.0f : 0.0f;
+    for (int c = 0; c < 3; c++) s[c][i] = traced ? 8.0f : 0.0f;
+  }
+  hush__accum_blend_holes(&acc, &plan, (const float *const *)s, spp, &ap, var, 1);
+  bad = 0;
+  for (size_t i = 0; i < n; i++) {
+    const int traced = (i % W) % 2 == 1;
+    bad += hush__accum_age(&acc)->plane[0][i] != 1.0f;
+    bad += hush__accum_color(&acc)->plane[0][i] != (traced ? 8.0f : 2.0f);
+    bad += hush__accum_color(&acc)->plane[1][i] != (traced ? 8.0f : 4.0f);
+  }
+  CHECK_MSG(bad == 0 && !acc.empty, "frame 1: %d pixels wrong (holes keep their history)", bad);
+
+  /* half-pixel motion: every pixel gathers half from an empty pixel; the
+   * empty half weighs nothing, so the history is the traced neighbour's */
+  gpair g2;
+  gpair_init(&g2, W, H, 0.5f, 0.0f);
+  REQUIRE(gpair_build(dev, &g2, &plan, &p) == HUSH_OK);
+  hush__accum_reset(&acc);
+  for (size_t i = 0; i < n; i++) {
+    const int traced = (i % W) % 2 == 0;
+    spp[i] = traced ? 1.0f : 0.0f;
+    for (int c = 0; c < 3; c++) s[c][i] = traced ? 3.0f : 0.0f;
+  }
+  hush__accum_blend_holes(&acc, &plan, (const float *const *)s, spp, &ap, NULL, 2);
+  for (size_t i = 0; i < n; i++) spp[i] = 0.0f; /* all holes */
+  hush__accum_blend_holes(&acc, &plan, (const float *const *)s, spp, &ap, NULL, 2);
+  bad = 0;
+  for (size_t i = 0; i < n; i++) {
+    if ((int)(i % W) == W - 1) continue; /* its right tap is outside */
+    bad += fabsf(hush__accum_color(&acc)->plane[0][i] - 3.0f) > 1e-6f;
+    bad += hush__accum_age(&acc)->plane[0][i] != 1.0f;
+  }
+  CHECK_MSG(bad == 0, "%d pixels darkened by an empty tap", bad);
+  gpair_free(&g2);
+
+  /* no holes, no empty history: hush__accum_blend bit for bit */
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  hush_accum ref;
+  REQUIRE(hush__accum_init(dev, &ref, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush__accum_reset(&acc);
+  uint32_t counter = 0;
+  bad = 0;
+  for (int fr = 0; fr < 3; fr++) {
+    for (int c = 0; c < 3; c++)
+      for (size_t i = 0; i < n; i++) s[c][i] = hush_rng_float(7, (uint32_t)fr, counter++);
+    hush__accum_blend(&ref, &plan, (const float *const *)s, &ap, NULL, 2);
+    hush__accum_blend_holes(&acc, &plan, (const float *const *)s, NULL, &ap, NULL, 2);
+    for (int c = 0; c < 3; c++)
+      bad += memcmp(hush__accum_color(&ref)->plane[c], hush__accum_color(&acc)->plane[c],
+                    n * sizeof(float)) != 0;
+  }
+  CHECK_MSG(bad == 0, "without holes: %d planes differ from hush__accum_blend", bad);
+  hush__accum_free(&ref);
+  for (int c = 0; c < 3; c++) free(s[c]);
+  free(spp);
+  free(var);
+  hush__accum_free(&acc);
+  hush__reproject_plan_free(&plan);
+  gpair_free(&g);
+}
+
 /* A uniform float in [0, 1) from a running counter. */
 static float urand(uint32_t *counter) { return hush_rng_float(11, 0, (*counter)++); }
 
@@ -1622,6 +1725,7 @@ int main(void) {
   REQUIRE(dev != NULL);
   test_module_plan(dev);
   test_module_accum(dev);
+  test_module_holes(dev);
   test_module_floor();
   test_module_fast_paths(dev, 53, 31);
   test_module_fast_paths(dev, 9, 1);

@@ -217,6 +217,120 @@ static void test_resolve(hush_device dev, hush_taa_box box, int tonemap, int thr
   hush__planar_free(&modulated);
 }
 
+/*
+ * Frames with holes (hush__taa_resolve_holes; Dundr 2018 §4.2.6, docs/holes.md):
+ * with every pixel traced it is the definition above; a hole never blends
+ * its (absent) sample: it keeps its history, clamped to the box of its
+ * traced neighbours, or takes their mean without history, or is flagged
+ * (valid 0) with neither; the colour at a hole is never read.
+ */
+static void test_resolve_holes(hush_device dev, int threads) {
+  const int W = 29, H = 17;
+  const size_t n = (size_t)W * H;
+  hush_planar color, garbage, expect, valid;
+  REQUIRE(hush__planar_init(dev, &color, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &garbage, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &expect, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &valid, 1, W, H) == HUSH_OK);
+  float *spp = malloc(n * sizeof(float));
+  REQUIRE(spp);
+  for (int k = 0; k < 3; k++)
+    for (size_t i = 0; i < n; i++) color.plane[k][i] = 0.1f + 2.0f * frand() * frand();
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  random_plan(&plan, W, H);
+  for (int tonemap = 0; tonemap < 2; tonemap++) {
+    /* every pixel traced: the definition */
+    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, tonemap};
+    hush_taa a;
+    REQUIRE(hush__taa_init(dev, &a, W, H) == HUSH_OK);
+    for (size_t i = 0; i < n; i++) spp[i] = 1.0f;
+    hush__taa_resolve(&a, NULL, (const float *const *)color.plane, &p, threads);
+    const hush_planar *hist = hush__taa_output(&a);
+    reference(&plan, (const float *const *)color.plane, (const float *const *)hist->plane, &p, W,
+              H, expect.plane);
+    CHECK(hush__taa_resolve_holes(&a, &plan, (const float *const *)color.plane, spp, 0, &p,
+                                  valid.plane[0], threads) == 0);
+    CHECK_MSG(max_rel_diff(hush__taa_output(&a), expect.plane, n) < 2e-5f,
+              "all traced, tonemap %d: %g", tonemap,
+              (double)max_rel_diff(hush__taa_output(&a), expect.plane, n));
+    hush__taa_free(&a);
+  }
+  /* one pixel in eight traced, linear values: the hole rules one by one */
+  hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 0};
+  for (size_t i = 0; i < n; i++) spp[i] = frand() < 0.125f ? 1.0f : 0.0f;
+  for (int k = 0; k < 3; k++)
+    for (size_t i = 0; i < n; i++) garbage.plane[k][i] = spp[i] > 0.0f ? color.plane[k][i] : 1e6f;
+  hush_taa a, b;
+  REQUIRE(hush__taa_init(dev, &a, W, H) == HUSH_OK);
+  REQUIRE(hush__taa_init(dev, &b, W, H) == HUSH_OK);
+  hush__taa_resolve(&a, NULL, (const float *const *)color.plane, &p, threads);
+  hush__taa_resolve(&b, NULL, (const float *const *)color.plane, &p, threads);
+  float *const *hist = hush__taa_output(&a)->plane; /* the history of both */
+  for (int k = 0; k < 3; k++) memcpy(expect.plane[k], hist[k], n * sizeof(float));
+  const int missing = hush__taa_resolve_holes(&a, &plan, (const float *const *)color.plane, spp, 0,
+                                              &p, valid.plane[0], threads);
+  hush__taa_resolve_holes(&b, &plan, (const float *const *)garbage.plane, spp, 0, &p, valid.plane[0],
+                          threads);
+  CHECK_MSG(max_rel_diff(hush__taa_output(&a), hush__taa_output(&b)->plane, n) == 0.0f,
+            "the colour at a hole was read");
+  const hush_planar *out = hush__taa_output(&a);
+  int bad_keep = 0, bad_box = 0, bad_mean = 0, bad_flag = 0, flagged = 0, kept = 0;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      if (spp[i] > 0.0f) continue;
+      float lo[3] = {1e30f, 1e30f, 1e30f}, hi[3] = {-1e30f, -1e30f, -1e30f}, sum[3] = {0, 0, 0};
+      int m = 0;
+      for (int j = y - 1; j <= y + 1; j++)
+        for (int q = x - 1; q <= x + 1; q++) {
+          if (j < 0 || q < 0 || j >= H || q >= W || !(spp[(size_t)j * W + q] > 0.0f)) continue;
+          float c[3], v[3];
+          for (int k = 0; k < 3; k++) c[k] = color.plane[k][(size_t)j * W + q];
+          ycocg(c, v);
+          for (int k = 0; k < 3; k++) {
+            lo[k] = fminf(lo[k], v[k]);
+            hi[k] = fmaxf(hi[k], v[k]);
+            sum[k] += c[k];
+          }
+          m++;
+        }
+      int32_t idx[9];
+      float w[9];
+      const int taps = hush__reproject_taps(&plan, i, idx, w);
+      float o[3], ov[3], h[3];
+      for (int k = 0; k < 3; k++) o[k] = out->plane[k][i];
+      ycocg(o, ov);
+      if (taps) {
+        for (int k = 0; k < 3; k++) h[k] = hush__reproject_apply(expect.plane[k], idx, w, taps);
+        if (!m) {
+          kept++;
+          for (int k = 0; k < 3; k++) bad_keep += fabsf(o[k] - h[k]) > 1e-5f * (1.0f + h[k]);
+        } else {
+          for (int k = 0; k < 3; k++) bad_box += ov[k] < lo[k] - 1e-5f || ov[k] > hi[k] + 1e-5f;
+        }
+      } else if (m) {
+        for (int k = 0; k < 3; k++) bad_mean += fabsf(o[k] - sum[k] / (float)m) > 1e-5f;
+      } else {
+        flagged++;
+        bad_flag += valid.plane[0][i] != 0.0f;
+      }
+    }
+  CHECK_MSG(!bad_keep && !bad_box && !bad_mean && !bad_flag,
+            "holes: %d kept wrong (of %d), %d outside the traced box, %d not the traced mean, "
+            "%d not flagged",
+            bad_keep, kept, bad_box, bad_mean, bad_flag);
+  CHECK(kept > 0 && flagged > 0 && missing == 1);
+  hush__taa_free(&a);
+  hush__taa_free(&b);
+  hush__reproject_plan_free(&plan);
+  hush__planar_free(&color);
+  hush__planar_free(&garbage);
+  hush__planar_free(&expect);
+  hush__planar_free(&valid);
+  free(spp);
+}
+
 int main(void) {
   hush_device dev = hush_device_new(NULL);
   REQUIRE(dev != NULL);
@@ -224,6 +338,8 @@ int main(void) {
     for (int tonemap = 0; tonemap < 2; tonemap++)
       for (int threads = 1; threads <= 2; threads++)
         test_resolve(dev, (hush_taa_box)box, tonemap, threads);
+  test_resolve_holes(dev, 1);
+  test_resolve_holes(dev, 2);
   hush_device_release(dev);
   return check_summary();
 }

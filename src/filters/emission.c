@@ -47,10 +47,31 @@ const hush_planar *hush__emission_accumulate(hush_emission_history *h,
                                              const hush_reproject_plan *plan, const float *age,
                                              float alpha_min, const hush_planar *emission,
                                              int threads) {
+  return hush__emission_accumulate_holes(h, plan, age, alpha_min, emission, NULL, threads);
+}
+
+const hush_planar *hush__emission_accumulate_holes(hush_emission_history *h,
+                                                   const hush_reproject_plan *plan,
+                                                   const float *age, float alpha_min,
+                                                   const hush_planar *emission, const float *spp,
+                                                   int threads) {
   const int prev = h->latest, cur = 1 - prev;
-  hush__temporal_blend(plan, h->valid ? (const float *const *)h->hist[prev].plane : NULL,
-                       (const float *const *)emission->plane, 3, age, alpha_min,
-                       h->hist[cur].plane, threads);
+  const float *const *hist = (const float *const *)h->hist[prev].plane;
+  hush__temporal_blend(plan, h->valid ? hist : NULL, (const float *const *)emission->plane, 3,
+                       age, alpha_min, h->hist[cur].plane, threads);
+  if (spp && h->valid) {
+    /* a hole takes no new sample: the history through the plan, as is */
+    const long long n = (long long)plan->width * plan->height;
+    float *const *out = h->hist[cur].plane;
+#pragma omp parallel for schedule(static) num_threads(threads)
+    for (long long i = 0; i < n; i++) {
+      if (spp[i] > 0.0f) continue;
+      int32_t idx[9];
+      float w[9];
+      const int taps = hush__reproject_taps(plan, (size_t)i, idx, w);
+      for (int c = 0; c < 3 && taps; c++) out[c][i] = hush__reproject_apply(hist[c], idx, w, taps);
+    }
+  }
   h->latest = cur;
   h->valid = 1;
   return &h->hist[cur];

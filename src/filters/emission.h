@@ -45,4 +45,14 @@ const hush_planar *hush__emission_accumulate(hush_emission_history *h,
                                              float alpha_min, const hush_planar *emission,
                                              int threads);
 
+/* As hush__emission_accumulate in a frame with holes (spp not > 0; NULL:
+ * none; docs/holes.md): a hole with a history keeps it (gathered through
+ * the plan, no new sample); without one it takes this frame's emission,
+ * which the caller filled (hush__gbuffer_fill_holes). */
+const hush_planar *hush__emission_accumulate_holes(hush_emission_history *h,
+                                                   const hush_reproject_plan *plan,
+                                                   const float *age, float alpha_min,
+                                                   const hush_planar *emission, const float *spp,
+                                                   int threads);
+
 #endif

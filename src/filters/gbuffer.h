@@ -9,6 +9,7 @@
 #define HUSH_FILTERS_GBUFFER_H
 
 #include "filters/filter.h"
+#include "filters/holes.h"
 #include "temporal/reproject.h"
 
 /* Class image indices of the G-buffer inputs; -1 where the class has none. */
@@ -17,10 +18,16 @@ typedef struct hush_gbuffer_images {
 } hush_gbuffer_images;
 
 /* The position and motion planes between import and build (allocated on
- * first use, freed with hush__gbuffer_inputs_free), and what was bound. */
+ * first use, freed with hush__gbuffer_inputs_free), and what was bound;
+ * the 'spp' plane and the pyramid of hush__gbuffer_fill_holes. */
 typedef struct hush_gbuffer_inputs {
   hush_planar position, motion;
   int has_position, use_motion;
+  hush_planar spp;  /* 1: this frame's 'spp' (allocated when bound) */
+  hush_holes holes; /* pyramid scratch */
+  int has_holes;    /* this frame has pixels with spp 0 */
+  hush_planar depth_data; /* 1, allocated with the first holes: see below */
+  hush_planar surface;    /* 3, frames with holes: hush__holes_split_background's scratch */
 } hush_gbuffer_inputs;
 
 /*
@@ -39,6 +46,42 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *image
 hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
                                     const hush_gbuffer_inputs *in, const hush_frame_info *info,
                                     const hush_reproject_params *params, int threads);
+
+/*
+ * Holes (docs/holes.md): imports image spp_image (-1 or unbound: no holes)
+ * and, where some pixel has spp 0, fills the holes of the imported
+ * G-buffer (depth, normal, position, motion) and of the `extra` planes
+ * (e.g. albedo, emission; NULL entries skipped) by the pyramid of Dundr 2018
+ * §4.2.1 (holes.h), so that a hole reprojects and is tested like a traced
+ * pixel. A hole is background (depth, normal, position 0) where most of
+ * the pixels its fill averaged are, else a surface with their average
+ * depth, normal and position (never a mix of the two: a depth between an
+ * object's and the sky's is a surface that is nowhere); hole normals are
+ * renormalised and every background normal is +z; a surface hole's normal
+ * is then the previous frame's where its centre came from a surface (world
+ * normals do not depend on the camera: "keep the history")
+ * (so that the background's holes fill from around it). In such a frame
+ * the plan reprojects from depth (the filled depth keeps a hole on its own
+ * pixel under a still camera; a filled position, an average of its
+ * neighbours', would not) and the id test is off (ids do not average).
+ * Sets in->has_holes; without holes nothing changes (bit for bit).
+ * Call after hush__gbuffer_import and the filter's own imports.
+ */
+hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojector *rp,
+                                     hush_gbuffer_inputs *in, hush_planar *const *extra,
+                                     int extra_count, const hush_frame_info *info,
+                                     int threads);
+
+/* this frame's 'spp' plane when it has holes, else NULL */
+static inline const float *hush__gbuffer_holes_spp(const hush_gbuffer_inputs *in) {
+  return in->has_holes ? in->spp.plane[0] : NULL;
+}
+
+/* depth where the pixel has data (age > 0), else 0, in in->depth_data:
+ * the pixels a fit may use. Returns depth itself when age is NULL (or no
+ * frame with holes was seen). */
+const float *hush__gbuffer_depth_with_data(hush_gbuffer_inputs *in, const float *depth,
+                                           const float *age, int threads);
 
 void hush__gbuffer_inputs_free(hush_gbuffer_inputs *in);
 

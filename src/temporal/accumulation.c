@@ -265,6 +265,105 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
   }
   acc->latest = dst;
   acc->has_history = 1;
+  acc->empty = 0;
+}
+
+/* Pixel i of a frame with holes: the history gathered from the non-empty
+ * taps (renormalised), then a blend (traced) or the history kept (hole). */
+static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, const int nc) {
+  const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
+  int32_t idx[9];
+  float w[9];
+  const int n = b->plan ? hush__reproject_taps(b->plan, i, idx, w) : 0;
+  float wsum = 0.0f;
+  for (int t = 0; t < n; t++) {
+    w[t] = b->pa[idx[t]] > 0.0f ? w[t] : 0.0f;
+    wsum += w[t];
+  }
+  const int has = wsum > 0.0f;
+  const float inv = has ? 1.0f / wsum : 0.0f;
+  float s[4] = {0.0f, 0.0f, 0.0f, 0.0f}, h[4] = {0.0f, 0.0f, 0.0f, 0.0f};
+  for (int c = 0; c < nc; c++) {
+    s[c] = b->sample[c][i];
+    if (has) h[c] = hush__reproject_apply(b->pc[c], idx, w, n) * inv;
+  }
+  blend_px q = {s[0], s[1], s[2], s[3], h[0], h[1], h[2], h[3], 0.0f, 0.0f, 0.0f,
+                0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
+  if (has) {
+    q.hm1 = hush__reproject_apply(b->pm1, idx, w, n) * inv;
+    q.hm2 = hush__reproject_apply(b->pm2, idx, w, n) * inv;
+    q.ha = hush__reproject_apply(b->pa, idx, w, n) * inv;
+  }
+  if (!spp || spp[i] > 0.0f) {
+    blend_compute(&p, &q, has, nc); /* traced */
+  } else {
+    /* a hole: no new sample; the history as it was, or nothing */
+    float age = has ? hush__floorf_vec(q.ha + 0.5f) : 0.0f;
+    age = age > p.max_age ? p.max_age : age;
+    age = has && age < 1.0f ? 1.0f : age;
+    q.c0 = q.h0;
+    q.c1 = q.h1;
+    q.c2 = q.h2;
+    q.c3 = q.h3;
+    q.m1 = q.hm1;
+    q.m2 = q.hm2;
+    q.age = age;
+    const float m1sq = q.m1 * q.m1;
+    const float v = q.m2 - m1sq;
+    q.var = v > 0.0f ? v : 0.0f;
+  }
+  const float out[4] = {q.c0, q.c1, q.c2, q.c3};
+  for (int c = 0; c < nc; c++) b->oc[c][i] = out[c];
+  b->om1[i] = q.m1;
+  b->om2[i] = q.m2;
+  b->oa[i] = q.age;
+  if (b->variance) b->variance[i] = q.var;
+  return !(q.age > 0.0f);
+}
+
+void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
+                             const float *const *sample, const float *spp,
+                             const hush_accum_params *params, float *variance, int threads) {
+  if (!spp && !(acc->has_history && acc->empty)) {
+    hush__accum_blend(acc, plan, sample, params, variance, threads);
+    return;
+  }
+  if (threads < 1) threads = 1;
+  const int src = acc->latest, dst = 1 - acc->latest;
+  const int nc = acc->channels;
+  const long long count = (long long)acc->width * acc->height;
+  blend_ctx b;
+  memset(&b, 0, sizeof b);
+  b.plan = acc->has_history ? plan : NULL;
+  b.W = acc->width;
+  for (int c = 0; c < nc; c++) {
+    b.sample[c] = sample[c];
+    b.pc[c] = acc->color[src].plane[c];
+    b.oc[c] = acc->color[dst].plane[c];
+  }
+  b.pm1 = acc->moments[src].plane[0];
+  b.pm2 = acc->moments[src].plane[1];
+  b.pa = acc->age[src].plane[0];
+  b.om1 = acc->moments[dst].plane[0];
+  b.om2 = acc->moments[dst].plane[1];
+  b.oa = acc->age[dst].plane[0];
+  b.variance = variance;
+  b.alpha_min = params->alpha_min;
+  b.alpha_mom_min = params->alpha_moments_min;
+  b.max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
+  int empty = 0;
+#pragma omp parallel for reduction(| : empty) schedule(static) num_threads(threads)
+  for (long long i = 0; i < count; i++) {
+    switch (nc) {
+    case 1: empty |= blend_pixel_holes(&b, (size_t)i, spp, 1); break;
+    case 2: empty |= blend_pixel_holes(&b, (size_t)i, spp, 2); break;
+    case 3: empty |= blend_pixel_holes(&b, (size_t)i, spp, 3); break;
+    default: empty |= blend_pixel_holes(&b, (size_t)i, spp, 4); break;
+    }
+  }
+  acc->latest = dst;
+  acc->has_history = 1;
+  acc->empty = empty;
 }
 
 #define BLEND_MAX 8

@@ -17,6 +17,7 @@
  *             c  = (1 - a) sum w_t c_t + a new
  *             m  = (1 - am) sum w_t m_t + am (l, l^2)
  *   variance = max(0, m2 - m1^2)
+ * (frames with holes: hush__accum_blend_holes below).
  * l is the luminance of the new sample: Rec. 709 of the first three channels
  * for 3 or 4 channels, channel 0 for 1 or 2.
  *
@@ -46,6 +47,7 @@ typedef struct hush_accum {
   hush_planar age[2];     /* 1 plane: history length, >= 1 (a float) */
   int latest;             /* the set written by the last blend */
   int has_history;        /* set[latest] holds a frame */
+  int empty;              /* set[latest] has pixels of age 0 (never sampled) */
 } hush_accum;
 
 hush_status hush__accum_init(hush_device device, hush_accum *acc, int channels, uint32_t width,
@@ -65,6 +67,22 @@ void hush__accum_reset(hush_accum *acc);
 void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
                        const float *const *sample, const hush_accum_params *params,
                        float *variance, int threads);
+
+/*
+ * As hush__accum_blend, for frames with holes (docs/holes.md): spp (1
+ * plane, NULL: none) marks the pixels without a sample this frame (spp not
+ * > 0). Such a pixel takes no new sample: it keeps the history gathered
+ * through the plan (colour, moments) and its age, rounded, not increased;
+ * with no history it has none (age 0, colour and moments 0: "empty").
+ * Every history is gathered from the taps of non-empty pixels only, their
+ * weights renormalised, so that an empty pixel never darkens a neighbour.
+ * With spp NULL and no empty pixel in the history this is exactly
+ * hush__accum_blend (bit for bit); otherwise per pixel (not vectorised).
+ * acc->empty tells whether any pixel is left empty.
+ */
+void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
+                             const float *const *sample, const float *spp,
+                             const hush_accum_params *params, float *variance, int threads);
 
 static inline hush_planar *hush__accum_color(hush_accum *acc) { return &acc->color[acc->latest]; }
 static inline hush_planar *hush__accum_moments(hush_accum *acc) {

@@ -262,3 +262,121 @@ void hush__taa_resolve(hush_taa *taa, const hush_reproject_plan *plan, const flo
                        const hush_taa_params *params, int threads) {
   hush__taa_resolve_modulated(taa, plan, color, NULL, params, threads);
 }
+
+/* ---- frames with holes (docs/holes.md; Dundr 2018 §4.2.6) ---------------- */
+
+/* The box of the traced pixels (spp > 0; all with every_pixel) of the 3x3
+ * neighbourhood of (x, y) in the YCoCg planes v: lo, hi and the sum;
+ * returns how many. */
+static int traced_box(const float *const v[3], const float *spp, int every_pixel, int x, int y,
+                      int W, int H, float lo[3], float hi[3], float sum[3]) {
+  int m = 0;
+  for (int k = 0; k < 3; k++) {
+    lo[k] = 3.0e38f;
+    hi[k] = -3.0e38f;
+    sum[k] = 0.0f;
+  }
+  for (int j = y - 1; j <= y + 1; j++)
+    for (int i = x - 1; i <= x + 1; i++) {
+      if (j < 0 || i < 0 || j >= H || i >= W) continue;
+      const size_t q = (size_t)j * W + i;
+      if (!every_pixel && !(spp[q] > 0.0f)) continue;
+      for (int k = 0; k < 3; k++) {
+        lo[k] = minf(lo[k], v[k][q]);
+        hi[k] = maxf(hi[k], v[k][q]);
+        sum[k] += v[k][q];
+      }
+      m++;
+    }
+  return m;
+}
+
+/* Pixel (x, y) of a frame with holes; returns 0 where it has nothing (no
+ * history, no traced neighbour). */
+static int resolve_hole_pixel(const hush_planar *cur, const hush_reproject_plan *plan,
+                              const float *const *prev, const float *spp, int hole_color,
+                              const hush_taa_params *params, hush_planar *out, int x, int y) {
+  const int W = (int)cur->width, H = (int)cur->height;
+  const size_t i = (size_t)y * W + x;
+  const float *const v[3] = {cur->plane[0], cur->plane[1], cur->plane[2]};
+  float lo[3], hi[3], sum[3], h[3] = {0.0f, 0.0f, 0.0f}, m[3];
+  const int boxed = traced_box(v, spp, hole_color, x, y, W, H, lo, hi, sum);
+  int n = 0;
+  if (plan) {
+    int32_t idx[9];
+    float w[9];
+    n = hush__reproject_taps(plan, i, idx, w);
+    float hr = 0.0f, hg = 0.0f, hb = 0.0f;
+    if (n) {
+      hr = hush__reproject_apply(prev[0], idx, w, n);
+      hg = hush__reproject_apply(prev[1], idx, w, n);
+      hb = hush__reproject_apply(prev[2], idx, w, n);
+    }
+    const float s = params->tonemap ? tonemap_scale(hr, hg, hb) : 1.0f;
+    h[0] = ycocg_y(hr * s, hg * s, hb * s);
+    h[1] = ycocg_co(hr * s, hg * s, hb * s);
+    h[2] = ycocg_cg(hr * s, hg * s, hb * s);
+  }
+  if (n && boxed) {
+    if (params->box == HUSH_TAA_CLIP) {
+      const float f = minf(minf(clip_fraction(h[0], lo[0], hi[0]), clip_fraction(h[1], lo[1], hi[1])),
+                           minf(clip_fraction(h[2], lo[2], hi[2]), 1.0f));
+      for (int k = 0; k < 3; k++) h[k] = clip_to(h[k], lo[k], hi[k], f);
+    } else {
+      for (int k = 0; k < 3; k++) h[k] = clampf(h[k], lo[k], hi[k]);
+    }
+  }
+  const int traced = spp[i] > 0.0f;
+  for (int k = 0; k < 3; k++) {
+    if (traced) /* a new sample: the usual blend */
+      m[k] = n ? h[k] + params->alpha * (v[k][i] - h[k]) : v[k][i];
+    else if (hole_color) /* only new samples update the history: a hole keeps it */
+      m[k] = n ? h[k] : v[k][i];
+    else
+      m[k] = n ? h[k] : boxed ? sum[k] / (float)boxed : 0.0f;
+  }
+  const float r = m[0] + m[1] - m[2], g = m[0] + m[2], b = m[0] - m[1] - m[2];
+  const float u = params->tonemap ? untonemap_scale(r, g, b) : 1.0f;
+  out->plane[0][i] = r * u;
+  out->plane[1][i] = g * u;
+  out->plane[2][i] = b * u;
+  return traced || n || boxed;
+}
+
+int hush__taa_resolve_holes(hush_taa *taa, const hush_reproject_plan *plan,
+                            const float *const *color, const float *spp, int hole_color,
+                            const hush_taa_params *params, float *valid, int threads) {
+  hush_planar *cur = &taa->current;
+  const int W = (int)cur->width, H = (int)cur->height;
+  const int tonemap = params->tonemap;
+  const int use_history = taa->has_history && plan;
+  const float *const *prev = (const float *const *)taa->history[taa->latest].plane;
+  hush_planar *out = &taa->history[1 - taa->latest];
+  if (threads < 1) threads = 1;
+  int missing = 0;
+#pragma omp parallel num_threads(threads)
+  {
+#pragma omp for schedule(static)
+    for (int y = 0; y < H; y++) {
+      const size_t row = (size_t)y * W;
+      for (int x = 0; x < W; x++) {
+        const float r = color[0][row + x], g = color[1][row + x], b = color[2][row + x];
+        const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
+        cur->plane[0][row + x] = ycocg_y(r * s, g * s, b * s);
+        cur->plane[1][row + x] = ycocg_co(r * s, g * s, b * s);
+        cur->plane[2][row + x] = ycocg_cg(r * s, g * s, b * s);
+      }
+    }
+#pragma omp for schedule(static) reduction(| : missing)
+    for (int y = 0; y < H; y++)
+      for (int x = 0; x < W; x++) {
+        const int ok = resolve_hole_pixel(cur, use_history ? plan : NULL, prev, spp, hole_color,
+                                          params, out, x, y);
+        valid[(size_t)y * W + x] = ok ? 1.0f : 0.0f;
+        missing |= !ok;
+      }
+  }
+  taa->latest = 1 - taa->latest;
+  taa->has_history = 1;
+  return missing;
+}

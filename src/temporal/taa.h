@@ -52,6 +52,23 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
                                  const float *const *color, const float *const *albedo,
                                  const hush_taa_params *params, int threads);
 
+/*
+ * A frame with holes (spp not > 0; docs/holes.md), as Dundr 2018 §4.2.6
+ * asks ("an additional buffer for blending: only new samples would get
+ * updated there"): a traced pixel blends as usual; a hole keeps its
+ * history, clamped or clipped to the box. Without hole_color (a raw frame:
+ * the colour of a hole is 0, ignored) the box is that of the traced pixels
+ * of the 3x3 neighbourhood, a hole without history takes the box's mean,
+ * and with neither it gets 0 and valid[i] = 0 (else 1) for the caller to
+ * fill (holes.h) in the output, which is the next history; returns 1 when
+ * some valid[i] is 0. With hole_color (a filtered frame, whole: svgf) the
+ * box is the whole 3x3 neighbourhood and a hole without history takes its
+ * colour. Per pixel (not vectorised).
+ */
+int hush__taa_resolve_holes(hush_taa *taa, const hush_reproject_plan *plan,
+                            const float *const *color, const float *spp, int hole_color,
+                            const hush_taa_params *params, float *valid, int threads);
+
 static inline const hush_planar *hush__taa_output(const hush_taa *taa) {
   return &taa->history[taa->latest];
 }

@@ -15,6 +15,7 @@
 #include "filters/emission.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/holes.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 
@@ -75,6 +76,7 @@ enum {
   I_MOTION,
   I_ALBEDO,
   I_EMISSION,
+  I_SPP,
   I_OUTPUT,
   I_VARIANCE,
   I_HISTORY_LENGTH,
@@ -93,12 +95,15 @@ static const hush_image_info accumulate_images[I_COUNT] = {
     {"emission", HUSH_IMAGE_INPUT, 0, 3,
      "radiance the camera sees directly at the first hit (lights, sky): kept out of the "
      "accumulation (color - emission), added back to the output"},
+    {"spp", HUSH_IMAGE_INPUT, 0, 1,
+     "samples per pixel; 0 marks a hole (`hush render --spp-fraction`): it keeps its history "
+     "(age not increased), never sampled it is filled from around (docs/holes.md)"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "accumulated radiance"},
     {"variance", HUSH_IMAGE_OUTPUT, 0, 1,
      "luminance variance from the accumulated moments (of the demodulated signal when "
      "demodulating)"},
     {"history_length", HUSH_IMAGE_OUTPUT, 0, 1,
-     "frames accumulated per pixel (1: no history was reused)"},
+     "frames accumulated per pixel (1: no history was reused; 0: a hole never sampled)"},
 };
 
 static const hush_filter_class_info accumulate_info = {
@@ -175,6 +180,9 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
     return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
+  /* holes: the G-buffer, albedo and emission filled from around */
+  hush_planar *const fill[2] = {demod ? &st->albedo : NULL, emis ? &st->emission : NULL};
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, info, threads))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- reproject */
@@ -195,20 +203,28 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS_MIN);
   ap.max_age = hush__param_i(f, P_MAX_AGE);
   const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE);
-  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap,
-                    var_view ? st->variance.plane[0] : NULL, threads);
+  hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
+                          hush__gbuffer_holes_spp(&st->gin), &ap,
+                          var_view ? st->variance.plane[0] : NULL, threads);
   hush__filter_timing_stage(f, "accumulate");
 
   /* ---- export */
-  const hush_planar *result = hush__accum_color(&st->acc);
+  hush_planar *result = hush__accum_color(&st->acc);
   if (demod) {
     hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
   }
+  /* pixels never sampled (age 0) output the fill of those around them;
+   * the accumulation ignores their colour (empty taps weigh 0) */
+  if (st->acc.empty) {
+    if ((s = hush__holes_reserve(f->device, &st->gin.holes, f->width, f->height, 3))) return s;
+    hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
+                     hush__accum_age(&st->acc)->plane[0], result->plane, 3, threads);
+  }
   if (emis) {
-    const hush_planar *e = hush__emission_accumulate(
+    const hush_planar *e = hush__emission_accumulate_holes(
         &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
-        threads);
+        hush__gbuffer_holes_spp(&st->gin), threads);
     hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }

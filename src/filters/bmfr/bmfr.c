@@ -38,6 +38,7 @@
 #include "filters/bmfr/regression.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/holes.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
@@ -182,6 +183,7 @@ enum {
   I_ALBEDO,
   I_EMISSION,
   I_GRADIENT,
+  I_SPP,
   I_OUTPUT,
   I_FITTED,
   I_HISTORY_LENGTH,
@@ -205,6 +207,10 @@ static const hush_image_info bmfr_images[I_COUNT] = {
      "temporal gradient samples (`hush render --gradients`), read with temporal_gradients on: "
      "per 3x3 stratum, at its top-left pixel, the current and previous luminance and the "
      "landing index 0..8 (-1: none)"},
+    {"spp", HUSH_IMAGE_INPUT, 0, 1,
+     "samples per pixel; 0 marks a hole (`hush render --spp-fraction`): it keeps its "
+     "accumulated history and gets the fit; never sampled, it stays out of the fit and is "
+     "filled from around (docs/holes.md)"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "filtered radiance"},
     {"fitted", HUSH_IMAGE_OUTPUT, 0, 3,
      "phase II result: this frame's block fit of the accumulated (demodulated) radiance"},
@@ -525,6 +531,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
   if (adaptive && (s = bmfr_adaptive_import(f, &st->ad, I_GRADIENT))) return s;
+  hush_planar *const fill[2] = {need_albedo ? &st->albedo : NULL, emis ? &st->emission : NULL};
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, info, threads))) return s;
   hush__filter_timing_stage(f, "import");
 
   /* ---- phase I: reproject + accumulate the demodulated 1 spp radiance */
@@ -542,8 +550,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   ap.alpha_moments_min = ap.alpha_min;
   ap.max_age = hush__param_i(f, P_MAX_AGE);
   const int had_history = st->acc.has_history;
-  hush__accum_blend(&st->acc, &st->rp.plan, (const float *const *)st->color.plane, &ap, NULL,
-                    threads);
+  hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
+                          hush__gbuffer_holes_spp(&st->gin), &ap, NULL, threads);
   hush__filter_timing_stage(f, "accumulate");
   if (adaptive) {
     st->ad.params.iterations = hush__param_i(f, P_GRADIENT_ITERATIONS);
@@ -572,7 +580,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   fr.n = B * B;
   fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
-  fr.depth = gb->depth.plane[0];
+  fr.depth = hush__gbuffer_depth_with_data(
+      &st->gin, gb->depth.plane[0], st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,
+      threads); /* never-sampled holes: out of the fit */
   for (int c = 0; c < 3; c++) {
     if (set.needs & (1u << BMFR_SRC_NORMAL)) fr.base[BMFR_BASE_NORMAL + c] = gb->normal.plane[c];
     if (set.needs & (1u << BMFR_SRC_POSITION))
@@ -598,6 +608,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                        hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
                        st->fhist[cur].plane, threads);
   st->flatest = cur;
+  if (st->acc.empty) /* never-sampled holes: filled from around */
+    hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
+                     hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
   hush__filter_timing_stage(f, "accumulate_fitted");
 
   /* ---- remodulate, TAA, export: with TAA, the remodulation is fused into
@@ -612,9 +625,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       hush__remodulate(&st->albedo, result, threads);
       result = &st->albedo;
     }
-    const hush_planar *e = hush__emission_accumulate(
+    const hush_planar *e = hush__emission_accumulate_holes(
         &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
-        threads);
+        hush__gbuffer_holes_spp(&st->gin), threads);
     hush__emission_add(&st->emission, e, result, threads);
     rgb = st->emission;
     if (with_taa) {

@@ -6,6 +6,7 @@
 
 #include "core/device.h"
 #include "core/hmath.h"
+#include "filters/holes.h"
 #include "filters/svgf/weights.h"
 
 #include <math.h>
@@ -18,18 +19,6 @@
 static inline int is_hole(float spp) { return !(spp > 0.0f); }
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
-/* Floats of all pyramid levels above 0 for `planes` planes (+1 validity). */
-static size_t pyramid_size(uint32_t W, uint32_t H, int planes) {
-  size_t total = 0;
-  uint32_t w = W, h = H;
-  while (w > 1 || h > 1) {
-    w = (w + 2) / 3;
-    h = (h + 2) / 3;
-    total += (size_t)w * h * (size_t)(planes + 1);
-  }
-  return total;
-}
-
 hush_status svgf_progressive_init(hush_device device, svgf_progressive *p, uint32_t W,
                                   uint32_t H) {
   memset(p, 0, sizeof *p);
@@ -41,8 +30,9 @@ hush_status svgf_progressive_init(hush_device device, svgf_progressive *p, uint3
   if (!s) s = hush__planar_init(device, &p->depth, 1, W, H);
   if (!s) s = hush__planar_init(device, &p->near_far, 2, W, H);
   if (!s) s = hush__planar_init(device, &p->scratch, 2, W, H);
+  if (!s) s = hush__planar_init(device, &p->background, 1, W, H);
   if (!s) {
-    p->pyramid_floats = pyramid_size(W, H, SVGF_PYRAMID_MAX_PLANES);
+    p->pyramid_floats = hush__holes_pyramid_floats(W, H, SVGF_PYRAMID_MAX_PLANES);
     p->src = malloc(n * sizeof *p->src);
     p->keys = malloc(n * sizeof *p->keys);
     p->pyramid = p->pyramid_floats ? hush__alloc_floats(p->pyramid_floats) : NULL;
@@ -58,6 +48,7 @@ void svgf_progressive_free(svgf_progressive *p) {
   hush__planar_free(&p->depth);
   hush__planar_free(&p->near_far);
   hush__planar_free(&p->scratch);
+  hush__planar_free(&p->background);
   free(p->src);
   free(p->keys);
   hush__free_floats(p->pyramid);
@@ -65,87 +56,27 @@ void svgf_progressive_free(svgf_progressive *p) {
 }
 
 int svgf_has_holes(const float *spp, size_t n, int threads) {
-  int holes = 0;
-  const long long count = (long long)n;
-#pragma omp parallel for reduction(| : holes) schedule(static) num_threads(threads)
-  for (long long i = 0; i < count; i++) holes |= is_hole(spp[i]);
-  return holes;
+  return hush__holes_any(spp, n, threads);
 }
 
-/* ---- §4.2.1 hole filling by a pyramid ------------------------------------ */
-
-typedef struct level {
-  int w, h;
-  float *v[SVGF_PYRAMID_MAX_PLANES]; /* values */
-  float *ok;                          /* 1 where valid (level 0: NULL, from spp) */
-} level;
+/* ---- §4.2.1 hole filling by a pyramid (shared: filters/holes.h) --------- */
 
 void svgf_fill_holes(svgf_progressive *p, const float *spp, float *const *planes, int count,
                      int threads) {
-  level lv[32];
-  int L = 1;
-  lv[0].w = (int)p->width;
-  lv[0].h = (int)p->height;
-  for (int k = 0; k < count; k++) lv[0].v[k] = planes[k];
-  lv[0].ok = NULL;
-  float *mem = p->pyramid;
-  /* down: 3x3 averages of the valid pixels, until a level has no hole */
-  int holes = 1;
-  while (holes && (lv[L - 1].w > 1 || lv[L - 1].h > 1) && L < 32) {
-    const level *f = &lv[L - 1];
-    level *c = &lv[L];
-    c->w = (f->w + 2) / 3;
-    c->h = (f->h + 2) / 3;
-    const size_t n = (size_t)c->w * c->h;
-    for (int k = 0; k < count; k++, mem += n) c->v[k] = mem;
-    c->ok = mem;
-    mem += n;
-    holes = 0;
-#pragma omp parallel for reduction(| : holes) schedule(static) num_threads(threads)
-    for (int y = 0; y < c->h; y++)
-      for (int x = 0; x < c->w; x++) {
-        float sum[SVGF_PYRAMID_MAX_PLANES] = {0};
-        float m = 0.0f;
-        for (int j = 3 * y; j < 3 * y + 3 && j < f->h; j++)
-          for (int i = 3 * x; i < 3 * x + 3 && i < f->w; i++) {
-            const size_t q = (size_t)j * f->w + i;
-            const float ok = f->ok ? f->ok[q] : (float)!is_hole(spp[q]);
-            for (int k = 0; k < count; k++) sum[k] += ok * f->v[k][q];
-            m += ok;
-          }
-        const size_t o = (size_t)y * c->w + x;
-        for (int k = 0; k < count; k++) c->v[k][o] = m > 0.0f ? sum[k] / m : 0.0f;
-        c->ok[o] = m > 0.0f ? 1.0f : 0.0f;
-        holes |= !(m > 0.0f);
-      }
-    L++;
-  }
-  /* up: every hole of a level from the bilinear lookup of the one above
-   * (filled already; the top is whole, or all zero without any sample) */
-  for (int l = L - 2; l >= 0; l--) {
-    const level *c = &lv[l + 1];
-    level *f = &lv[l];
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (int y = 0; y < f->h; y++)
-      for (int x = 0; x < f->w; x++) {
-        const size_t o = (size_t)y * f->w + x;
-        const int ok = f->ok ? f->ok[o] > 0.0f : !is_hole(spp[o]);
-        if (ok) continue;
-        const float sx = ((float)x + 0.5f) / 3.0f - 0.5f, sy = ((float)y + 0.5f) / 3.0f - 0.5f;
-        const int x0 = clampi((int)floorf(sx), 0, c->w - 1), y0 = clampi((int)floorf(sy), 0, c->h - 1);
-        const int x1 = clampi(x0 + 1, 0, c->w - 1), y1 = clampi(y0 + 1, 0, c->h - 1);
-        float fx = sx - (float)x0, fy = sy - (float)y0;
-        fx = fx < 0.0f ? 0.0f : fx > 1.0f ? 1.0f : fx;
-        fy = fy < 0.0f ? 0.0f : fy > 1.0f ? 1.0f : fy;
-        for (int k = 0; k < count; k++) {
-          const float *v = c->v[k];
-          const float top = v[(size_t)y0 * c->w + x0] * (1 - fx) + v[(size_t)y0 * c->w + x1] * fx;
-          const float bot = v[(size_t)y1 * c->w + x0] * (1 - fx) + v[(size_t)y1 * c->w + x1] * fx;
-          f->v[k][o] = top * (1 - fy) + bot * fy;
-        }
-        if (f->ok) f->ok[o] = 1.0f;
-      }
-  }
+  hush__holes_fill(p->pyramid, p->width, p->height, spp, planes, count, threads);
+}
+
+void svgf_split_background(svgf_progressive *p, const float *spp, float *const *geometry,
+                           int count, int threads) {
+  /* scratch is free until the near/far passes of svgf_forward_scatter */
+  float *const surface[1] = {p->scratch.plane[1]};
+  hush__holes_split_background(p->pyramid, p->width, p->height, spp, surface, geometry, count,
+                               NULL, threads);
+  const long long n = (long long)p->width * p->height;
+  const float *z = geometry[0];
+  float *bg = p->background.plane[0];
+#pragma omp parallel for simd schedule(static) num_threads(threads)
+  for (long long i = 0; i < n; i++) bg[i] = is_hole(spp[i]) && !(z[i] > 0.0f) ? 1.0f : 0.0f;
 }
 
 void svgf_normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
@@ -298,7 +229,7 @@ void svgf_forward_state(const svgf_progressive *p, const float *spp,
       const size_t t = (size_t)y * W + x;
       if (!is_hole(spp[t])) continue;
       int32_t s[9];
-      const int m = prev ? landed_around(p, x, y, s) : 0;
+      const int m = prev && !(p->background.plane[0][t] > 0.0f) ? landed_around(p, x, y, s) : 0;
       if (m > 0) {
         for (int k = 0; k < 6; k++) {
           float sum = 0.0f;
@@ -335,7 +266,9 @@ void svgf_carry_positions(svgf_progressive *p, const float *spp, const float *co
     for (int x = 0; x < W; x++) {
       const size_t t = (size_t)y * W + x;
       int32_t s[9];
-      const int m = is_hole(spp[t]) && have ? landed_around(p, x, y, s) : 0;
+      const int m = is_hole(spp[t]) && have && !(p->background.plane[0][t] > 0.0f)
+                        ? landed_around(p, x, y, s)
+                        : 0;
       if (m > 0) {
         float acc[4] = {0, 0, 0, 0};
         for (int i = 0; i < m; i++)

@@ -3,7 +3,8 @@
  * §4.2): frames where some pixels were not traced (`hush render
  * --spp-fraction`: spp 0, every other layer 0).
  *
- *  - §4.2.1 the G-buffer holes (depth, normal, albedo, position) are filled
+ *  - §4.2.1 the G-buffer holes (depth, normal, albedo, position; and the
+ *    emission, with emission_bypass, so that lamps have no holes) are filled
  *    from a pyramid of 3x3 averages of the traced pixels, looked up
  *    bilinearly from the finest level without holes;
  *  - §4.2.4 the previous frame's state (each pixel's accumulated colour,
@@ -31,7 +32,7 @@
 
 #include <stdint.h>
 
-#define SVGF_PYRAMID_MAX_PLANES 10
+#define SVGF_PYRAMID_MAX_PLANES 13 /* depth, normal, position, albedo, emission */
 
 typedef struct svgf_progressive {
   uint32_t width, height;
@@ -40,6 +41,7 @@ typedef struct svgf_progressive {
   hush_planar depth;    /* 1: this frame's traced depth (0 in holes), for near/far */
   hush_planar near_far; /* 2: 27x27 min and max of the traced depths */
   hush_planar scratch;  /* 2 */
+  hush_planar background; /* 1: this frame's holes that are background (svgf_split_background) */
   int32_t *src;         /* per pixel: the previous pixel whose state landed here, or -1 */
   uint64_t *keys;       /* scatter depth test: depth bits << 32 | source */
   float *pyramid;       /* the coarser levels of the hole-filling pyramid */
@@ -56,6 +58,13 @@ int svgf_has_holes(const float *spp, size_t n, int threads);
 /* §4.2.1: fills the holes (spp 0) of `count` planes by the pyramid. */
 void svgf_fill_holes(svgf_progressive *p, const float *spp, float *const *planes, int count,
                      int threads);
+
+/* After svgf_fill_holes: each hole background or a surface by majority
+ * (hush__holes_split_background; geometry: depth first, then normal and
+ * position planes), remembered in p->background for the forward state: a
+ * background hole takes no scattered surface state (below). */
+void svgf_split_background(svgf_progressive *p, const float *spp, float *const *geometry,
+                           int count, int threads);
 
 /* Unit length for the hole pixels' normals (averages of unit vectors), and
  * +z for all background (depth <= 0), so its holes fill from around. */
@@ -75,7 +84,9 @@ void svgf_forward_scatter(svgf_progressive *p, const float *spp, const float *pr
  * Hole pixels of a component's state get the forward-reprojected previous
  * state (prev: 3 colour, 2 moment and 1 age planes, or NULL without a
  * history), averaged over the 3x3 neighbourhood where nothing landed on the
- * pixel itself; with nothing around, the backward-reprojected history that
+ * pixel itself; with nothing around, or for a background hole (the
+ * background has no position and never lands: the states around it are
+ * an object's, and a lamp moving across the sky left a trail of them), the backward-reprojected history that
  * the blend (accumulation.h, alphas as given) mixed with the hole's 0 sample,
  * unmixed again; without that either, age 0 and zeros.
  */
@@ -84,7 +95,8 @@ void svgf_forward_state(const svgf_progressive *p, const float *spp,
                         float alpha_moments_min, int threads);
 
 /* The next state's positions (x, y, z, valid): holes' carried along from
- * the states that landed around them, else position (traced or filled),
+ * the states that landed around them (not a background hole's), else
+ * position (traced or filled),
  * valid where depth > 0. Makes them the history's. */
 void svgf_carry_positions(svgf_progressive *p, const float *spp, const float *const position[3],
                           const float *depth, int threads);

@@ -442,7 +442,10 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     for (int k = 0; k < 3; k++) planes[count++] = st->gin.position.plane[k];
     if (demod)
       for (int k = 0; k < 3; k++) planes[count++] = st->albedo.plane[k];
+    if (emis) /* the lamps too (docs/holes.md) */
+      for (int k = 0; k < 3; k++) planes[count++] = st->emission.plane[k];
     svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
+    svgf_split_background(&st->prog, st->spp.plane[0], planes, 7, threads); /* docs/holes.md */
     svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
                          threads);
   }
@@ -530,9 +533,9 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     result = &st->albedo;
   }
   if (emis) {
-    const hush_planar *e = hush__emission_accumulate(
+    const hush_planar *e = hush__emission_accumulate_holes(
         &st->eh, &st->rp.plan, hush__accum_age(&st->comp[0].acc)->plane[0], fc.ap.alpha_min,
-        &st->emission, threads);
+        &st->emission, holes ? st->spp.plane[0] : NULL, threads);
     hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }
@@ -544,7 +547,11 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;
     tp.tonemap = 1;
-    hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
+    if (holes && hush__param_i(f, P_PROGRESSIVE_TAA)) /* the filtered frame is whole */
+      hush__taa_resolve_holes(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
+                              st->spp.plane[0], 1, &tp, st->prog.scratch.plane[0], threads);
+    else
+      hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
     rgb = *hush__taa_output(&st->taa);
   }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);

@@ -39,6 +39,7 @@ enum {
   P_PROGRESSIVE,
   P_PROGRESSIVE_EPSILON,
   P_EMISSION_BYPASS,
+  P_PROGRESSIVE_TAA,
   P_COUNT
 };
 
@@ -114,6 +115,11 @@ extern const char *const svgf_order_names[];
      "with 'emission' bound: filter color minus emission and add the emission back (lights seen " \
      "directly stay exact and do not bleed, but their 1 spp edges stay aliased: on the cornell-box " \
      "relMSE 0.040 -> 0.008, RMSE 0.126 -> 0.174; docs/bmfr.md)", \
+     NULL}, \
+    {"progressive_taa", HUSH_PARAM_BOOL, 0, 0, 1, \
+     "progressive, with taa: only the traced pixels blend into the TAA history, a hole keeps " \
+     "it clamped to its box (Dundr 2018 §4.2.6: 'only new samples would get updated'; " \
+     "docs/holes.md)", \
      NULL},
 
 enum {

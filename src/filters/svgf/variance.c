@@ -58,6 +58,64 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
   }
 }
 
+/* 1 when a pixel without data (age not > 0: a progressive hole nothing
+ * reached, Dundr §4.2) lies in the 7x7 windows of pixels [x0, x0 + n) of
+ * row y. */
+static int window_has_empty(const float *age, int W, int H, int y, int x0, int n) {
+  int empty = 0;
+  const int xa = clampi(x0 - R, 0, W - 1), xb = clampi(x0 + n - 1 + R, 0, W - 1);
+  for (int dy = -R; dy <= R; dy++) {
+    const float *row = age + (size_t)clampi(y + dy, 0, H - 1) * W;
+    for (int x = xa; x <= xb; x++) empty |= !(row[x] > 0.0f);
+  }
+  return empty;
+}
+
+/*
+ * Pixels [x0, x0 + n) of row y where some pixel of a window has no data:
+ * per pixel, each tap (the centre too) counted only where it has data
+ * (age > 0), with block_pair's weights; no data at all gives variance 0.
+ */
+static void variance_row_valid(const svgf_guide *g, const svgf_padded *m, const float *age,
+                               float min_age, float *var, int y, int x0, int n,
+                               const svgf_exp2_poly *poly, const int squarings) {
+  const int W = g->width, H = g->height;
+  const size_t gs = g->zn->stride, ms = m->stride;
+  const float sigma_z = g->sigma_z;
+  for (int x = x0; x < x0 + n; x++) {
+    const size_t i = (size_t)y * W + x;
+    if (!(age[i] < min_age)) continue;
+    const size_t gp = (size_t)y * gs + x;
+    float sw = 0.0f, s1 = 0.0f, s2 = 0.0f;
+    for (int dy = -R; dy <= R; dy++) {
+      const int yy = clampi(y + dy, 0, H - 1);
+      for (int dx = -R; dx <= R; dx++) {
+        /* the padded planes repeat the edge pixel: so does the age */
+        if (!(age[(size_t)yy * W + clampi(x + dx, 0, W - 1)] > 0.0f)) continue;
+        const size_t gq = (size_t)yy * gs + x + dx, mq = (size_t)yy * ms + x + dx;
+        float w = 1.0f;
+        if (dx || dy) {
+          const float dd = fmaf(sigma_z, fabsf(fmaf(g->gx[i], (float)dx, g->gy[i] * (float)dy)),
+                                SVGF_EPS_Z);
+          const float rdd = g->zon[i] * SVGF_LOG2E * svgf_rcp_pos(dd < 1e30f ? dd : 1e30f);
+          const float d = g->zn->plane[1][gp] * g->zn->plane[1][gq] +
+                          g->zn->plane[2][gp] * g->zn->plane[2][gq] +
+                          g->zn->plane[3][gp] * g->zn->plane[3][gq];
+          w = svgf_tap_weight(fabsf(g->zn->plane[0][gp] - g->zn->plane[0][gq]) * rdd, d,
+                              squarings, g->np.sigma_n_log2e, g->np.dot_floor, poly);
+        }
+        sw += w;
+        s1 += w * m->plane[0][mq];
+        s2 += w * m->plane[1][mq];
+      }
+    }
+    const float inv = sw > 0.0f ? 1.0f / sw : 0.0f;
+    const float e1 = s1 * inv, e2 = s2 * inv;
+    const float est = e2 - e1 * e1;
+    var[i] = est > 0.0f ? est : 0.0f;
+  }
+}
+
 /* Row y (see atrous.c on why SQUARINGS is dispatched outside the region). */
 static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padded *m,
                                             const float *age, float min_age, float *var, int y,
@@ -70,6 +128,10 @@ static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padd
     int need = 0;
     for (int x = 0; x < n; x++) need |= a[x] < min_age;
     if (!need) continue;
+    if (window_has_empty(age, W, g->height, y, x0, n)) {
+      variance_row_valid(g, m, age, min_age, var, y, x0, n, poly, squarings);
+      continue;
+    }
     const float *restrict m1 = svgf_padded_row(m, 0, y) + x0;
     const float *restrict m2 = svgf_padded_row(m, 1, y) + x0;
 #pragma omp simd

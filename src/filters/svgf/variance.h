@@ -7,7 +7,10 @@
  *
  * Vectorised like the a-trous (atrous.h): blocks of pixels, mirrored tap
  * pairs sharing the depth-gradient denominator, padding for the columns;
- * a block with no short-history pixel is skipped.
+ * a block with no short-history pixel is skipped. Progressive frames
+ * (Dundr §4.2): a pixel without data (age 0, a hole nothing reached) is
+ * no sample of the window, the centre included; such blocks go through a
+ * per-pixel path, and a window without data gives variance 0.
  */
 #ifndef HUSH_FILTERS_SVGF_VARIANCE_H
 #define HUSH_FILTERS_SVGF_VARIANCE_H

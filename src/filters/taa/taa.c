@@ -10,6 +10,7 @@
  */
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/holes.h"
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
 
@@ -44,7 +45,7 @@ static const hush_param_info taa_params[P_COUNT] = {
     HUSH_PARAM_USE_ID_ENTRY,
 };
 
-enum { I_COLOR = 0, I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION, I_OUTPUT, I_COUNT };
+enum { I_COLOR = 0, I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION, I_SPP, I_OUTPUT, I_COUNT };
 
 static const hush_image_info taa_images[I_COUNT] = {
     {"color", HUSH_IMAGE_INPUT, 1, 3, "radiance of this frame (e.g. a denoiser's output)"},
@@ -54,6 +55,9 @@ static const hush_image_info taa_images[I_COUNT] = {
      "world-space position (camera reprojection; else reconstructed from depth)"},
     HUSH_IMAGE_ID_ENTRY,
     HUSH_IMAGE_MOTION_ENTRY,
+    {"spp", HUSH_IMAGE_INPUT, 0, 1,
+     "samples per pixel; 0 marks a hole (`hush render --spp-fraction`): only traced pixels "
+     "update the history and form the box, a hole keeps its history (docs/holes.md)"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "anti-aliased radiance"},
 };
 
@@ -72,6 +76,7 @@ typedef struct taa_state {
   hush_taa taa;
   hush_planar color;
   hush_gbuffer_inputs gin; /* position and motion between import and build */
+  hush_planar valid;       /* 1, frames with holes: the output pixels that have data */
 } taa_state;
 
 static void taa_destroy(void *state) {
@@ -81,6 +86,7 @@ static void taa_destroy(void *state) {
   hush__taa_free(&st->taa);
   hush__planar_free(&st->color);
   hush__gbuffer_inputs_free(&st->gin);
+  hush__planar_free(&st->valid);
   free(st);
 }
 
@@ -108,6 +114,8 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
+  if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, NULL, 0, info, threads))) return s;
+  if (st->gin.has_holes && (s = hush__filter_scratch(f, &st->valid, 1))) return s;
   hush__filter_timing_stage(f, "import");
 
   hush_reproject_params rp;
@@ -122,7 +130,18 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
   tp.alpha = hush__param_f(f, P_ALPHA);
   tp.box = (hush_taa_box)hush__param_i(f, P_BOX);
   tp.tonemap = hush__param_i(f, P_TONEMAP);
-  hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)st->color.plane, &tp, threads);
+  if (st->gin.has_holes) {
+    /* only the traced pixels update; pixels with nothing at all (no
+     * history, no traced neighbour) are filled from around */
+    hush_taa *t = &st->taa;
+    if (hush__taa_resolve_holes(t, &st->rp.plan, (const float *const *)st->color.plane,
+                                st->gin.spp.plane[0], 0, &tp, st->valid.plane[0], threads))
+      hush__holes_fill(st->gin.holes.pyramid, f->width, f->height, st->valid.plane[0],
+                       t->history[t->latest].plane, 3, threads);
+  } else {
+    hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)st->color.plane, &tp,
+                      threads);
+  }
   hush__filter_timing_stage(f, "resolve");
 
   hush__view_export(hush__taa_output(&st->taa), hush__filter_view(f, I_OUTPUT), threads);
