@@ -568,8 +568,11 @@ static void test_light_off(hush_device dev) {
   }
   printf("light-off frame 8: %.0f%% of the lit pixels have lambda > 0.8, %.0f%% of the unchanged "
          "ones lambda < 0.1\n", 100.0 * lit_high / n_lit, 100.0 * same_low / n_same);
-  CHECK_MSG(l_lit > 0.9f, "lambda in the lit region %g", (double)l_lit);
-  CHECK_MSG(lit_high > 0.9 * n_lit, "lambda > 0.8 on %d of %d lit pixels", lit_high, n_lit);
+  /* near 1, not 1: the reconstruction's luminance guide at a landing pixel
+   * is its own fresh sample (the renderer's default landing mode), and a
+   * lit stratum next to an unlit one shares some of its weight */
+  CHECK_MSG(l_lit > 0.85f, "lambda in the lit region %g", (double)l_lit);
+  CHECK_MSG(lit_high > 0.85 * n_lit, "lambda > 0.8 on %d of %d lit pixels", lit_high, n_lit);
   /* where nothing changed: mostly 0 (the mean is raised by strata whose
    * brightest sample saw the light indirectly) */
   CHECK_MSG(l_same < 0.25f, "lambda where nothing changed %g", (double)l_same);
