@@ -62,26 +62,6 @@ hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
       in->use_motion ? (const float *const *)in->motion.plane : NULL, info, params, threads);
 }
 
-/* Unit hole normals (the fill averages unit vectors) and +z on all the
- * background, as svgf_normalize_holes. */
-static void normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
-                            int threads) {
-  const long long c = (long long)count;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long long i = 0; i < c; i++) {
-    if (!(depth[i] > 0.0f)) {
-      n[0][i] = n[1][i] = 0.0f;
-      n[2][i] = 1.0f;
-      continue;
-    }
-    if (!hush__holes_is_hole(spp[i])) continue;
-    const float l2 = n[0][i] * n[0][i] + n[1][i] * n[1][i] + n[2][i] * n[2][i];
-    if (!(l2 > 1e-12f)) continue;
-    const float s = 1.0f / sqrtf(l2);
-    for (int k = 0; k < 3; k++) n[k][i] *= s;
-  }
-}
-
 /*
  * A surface hole's normal: the previous frame's at the pixel its centre
  * back-projects to (as reproject.h: motion vectors, or the filled depth on
@@ -169,7 +149,8 @@ hush_status hush__gbuffer_fill_holes(hush_filter f, int spp_image, hush_reprojec
   hush__holes_split_background(in->holes.pyramid, f->width, f->height, in->spp.plane[0],
                                in->surface.plane, geometry, in->has_position ? 7 : 4,
                                in->use_motion ? in->motion.plane : NULL, threads);
-  normalize_holes(in->spp.plane[0], g->depth.plane[0], g->normal.plane, n, threads);
+  hush__holes_normalize_normals(in->spp.plane[0], g->depth.plane[0], g->normal.plane, n,
+                                threads);
   carry_normals(rp, in, g, info, threads);
   g->has_id = 0;
   in->has_holes = 1;

@@ -153,3 +153,21 @@ void hush__holes_split_background(float *pyramid, uint32_t width, uint32_t heigh
     }
   }
 }
+
+void hush__holes_normalize_normals(const float *valid, const float *depth, float *const n[3],
+                                   size_t count, int threads) {
+  const long long c = (long long)count;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (long long i = 0; i < c; i++) {
+    if (!(depth[i] > 0.0f)) {
+      n[0][i] = n[1][i] = 0.0f;
+      n[2][i] = 1.0f;
+      continue;
+    }
+    if (!hush__holes_is_hole(valid[i])) continue;
+    const float l2 = n[0][i] * n[0][i] + n[1][i] * n[1][i] + n[2][i] * n[2][i];
+    if (!(l2 > 1e-12f)) continue;
+    const float s = 1.0f / sqrtf(l2);
+    for (int k = 0; k < 3; k++) n[k][i] *= s;
+  }
+}

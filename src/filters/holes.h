@@ -55,6 +55,13 @@ void hush__holes_fill(float *pyramid, uint32_t width, uint32_t height, const flo
  * whatever lies there (a lamp seen against the sky dragged a trail).
  * pyramid: as hush__holes_fill for 3 planes; scratch: 1 plane, 3 with motion.
  */
+/* After a fill of the normals: unit length for the holes' normals (the fill
+ * averages unit vectors) and +z on all the background (depth <= 0: one
+ * normal for all of it, so that its holes fill from the traced background
+ * around them). */
+void hush__holes_normalize_normals(const float *valid, const float *depth, float *const n[3],
+                                   size_t count, int threads);
+
 void hush__holes_split_background(float *pyramid, uint32_t width, uint32_t height,
                                   const float *valid, float *const *scratch, float *const *planes,
                                   int count, float *const *motion, int threads);

@@ -227,32 +227,40 @@ static HUSH_ALWAYS_INLINE void blend_rows(const blend_ctx *b, int y, const int n
   }
 }
 
+/* The blend's inputs: from the latest history into the other buffer. */
+static void blend_setup(blend_ctx *b, const hush_accum *acc, const hush_reproject_plan *plan,
+                        const float *const *sample, const hush_accum_params *params,
+                        float *variance) {
+  const int src = acc->latest, dst = 1 - acc->latest;
+  memset(b, 0, sizeof *b);
+  b->plan = acc->has_history ? plan : NULL;
+  b->W = acc->width;
+  for (int c = 0; c < acc->channels; c++) {
+    b->sample[c] = sample[c];
+    b->pc[c] = acc->color[src].plane[c];
+    b->oc[c] = acc->color[dst].plane[c];
+  }
+  b->pm1 = acc->moments[src].plane[0];
+  b->pm2 = acc->moments[src].plane[1];
+  b->pa = acc->age[src].plane[0];
+  b->om1 = acc->moments[dst].plane[0];
+  b->om2 = acc->moments[dst].plane[1];
+  b->oa = acc->age[dst].plane[0];
+  b->variance = variance;
+  b->alpha_min = params->alpha_min;
+  b->alpha_mom_min = params->alpha_moments_min;
+  b->max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
+}
+
 void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
                        const float *const *sample, const hush_accum_params *params,
                        float *variance, int threads) {
   if (threads < 1) threads = 1;
-  const int src = acc->latest, dst = 1 - acc->latest;
+  const int dst = 1 - acc->latest;
   const int nc = acc->channels;
   const int H = (int)acc->height;
   blend_ctx b;
-  memset(&b, 0, sizeof b);
-  b.plan = acc->has_history ? plan : NULL;
-  b.W = acc->width;
-  for (int c = 0; c < nc; c++) {
-    b.sample[c] = sample[c];
-    b.pc[c] = acc->color[src].plane[c];
-    b.oc[c] = acc->color[dst].plane[c];
-  }
-  b.pm1 = acc->moments[src].plane[0];
-  b.pm2 = acc->moments[src].plane[1];
-  b.pa = acc->age[src].plane[0];
-  b.om1 = acc->moments[dst].plane[0];
-  b.om2 = acc->moments[dst].plane[1];
-  b.oa = acc->age[dst].plane[0];
-  b.variance = variance;
-  b.alpha_min = params->alpha_min;
-  b.alpha_mom_min = params->alpha_moments_min;
-  b.max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
+  blend_setup(&b, acc, plan, sample, params, variance);
 
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
@@ -329,28 +337,11 @@ void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
     return;
   }
   if (threads < 1) threads = 1;
-  const int src = acc->latest, dst = 1 - acc->latest;
+  const int dst = 1 - acc->latest;
   const int nc = acc->channels;
   const long long count = (long long)acc->width * acc->height;
   blend_ctx b;
-  memset(&b, 0, sizeof b);
-  b.plan = acc->has_history ? plan : NULL;
-  b.W = acc->width;
-  for (int c = 0; c < nc; c++) {
-    b.sample[c] = sample[c];
-    b.pc[c] = acc->color[src].plane[c];
-    b.oc[c] = acc->color[dst].plane[c];
-  }
-  b.pm1 = acc->moments[src].plane[0];
-  b.pm2 = acc->moments[src].plane[1];
-  b.pa = acc->age[src].plane[0];
-  b.om1 = acc->moments[dst].plane[0];
-  b.om2 = acc->moments[dst].plane[1];
-  b.oa = acc->age[dst].plane[0];
-  b.variance = variance;
-  b.alpha_min = params->alpha_min;
-  b.alpha_mom_min = params->alpha_moments_min;
-  b.max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
+  blend_setup(&b, acc, plan, sample, params, variance);
   int empty = 0;
 #pragma omp parallel for reduction(| : empty) schedule(static) num_threads(threads)
   for (long long i = 0; i < count; i++) {

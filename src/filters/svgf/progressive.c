@@ -79,26 +79,6 @@ void svgf_split_background(svgf_progressive *p, const float *spp, float *const *
   for (long long i = 0; i < n; i++) bg[i] = is_hole(spp[i]) && !(z[i] > 0.0f) ? 1.0f : 0.0f;
 }
 
-void svgf_normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
-                          int threads) {
-  const long long c = (long long)count;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (long long i = 0; i < c; i++) {
-    if (!(depth[i] > 0.0f)) {
-      /* background: one normal for all of it, so that its holes can be
-       * filled from the traced background around them */
-      n[0][i] = n[1][i] = 0.0f;
-      n[2][i] = 1.0f;
-      continue;
-    }
-    if (!is_hole(spp[i])) continue;
-    const float l2 = n[0][i] * n[0][i] + n[1][i] * n[1][i] + n[2][i] * n[2][i];
-    if (!(l2 > 1e-12f)) continue;
-    const float s = 1.0f / sqrtf(l2);
-    for (int k = 0; k < 3; k++) n[k][i] *= s;
-  }
-}
-
 /* ---- §4.2.5 near and far traced depth over 27x27 -------------------------- */
 
 /* One 3x3 min/max pass with taps `step` apart: in (2 planes) -> out. */

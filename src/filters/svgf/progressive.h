@@ -66,11 +66,6 @@ void svgf_fill_holes(svgf_progressive *p, const float *spp, float *const *planes
 void svgf_split_background(svgf_progressive *p, const float *spp, float *const *geometry,
                            int count, int threads);
 
-/* Unit length for the hole pixels' normals (averages of unit vectors), and
- * +z for all background (depth <= 0), so its holes fill from around. */
-void svgf_normalize_holes(const float *spp, const float *depth, float *const n[3], size_t count,
-                          int threads);
-
 /*
  * §4.2.4-4.2.5: p->src for this frame from the previous state's positions
  * (p->pos[latest], where prev_age > 0) and this frame's camera; the traced

@@ -33,6 +33,7 @@
 #include "filters/emission.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
+#include "filters/holes.h"
 #include "filters/svgf/adaptive.h"
 #include "filters/svgf/atrous.h"
 #include "filters/svgf/guide.h"
@@ -446,8 +447,8 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
       for (int k = 0; k < 3; k++) planes[count++] = st->emission.plane[k];
     svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
     svgf_split_background(&st->prog, st->spp.plane[0], planes, 7, threads); /* docs/holes.md */
-    svgf_normalize_holes(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
-                         threads);
+    hush__holes_normalize_normals(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
+                                  threads);
   }
   /* a frame without holes carries no positions; a reset forgets them */
   if (!holes || info->history == HUSH_HISTORY_RESET) st->prog.has_pos = 0;
