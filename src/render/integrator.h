@@ -132,6 +132,20 @@ void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_v
                                 const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
                                 hush_first_hit *first, hush_path_result *out);
 
+/* hush__integrator_trace_hit for the lanes of a block of camera rays from
+ * eye (bit i of `lanes`: lane i, direction d[i], closest triangle hits[i],
+ * numbers rng[i], pixel (x[i], y[i]); results in first[i] and out[i]),
+ * with the same results bit for bit: every ray is the same single ray and
+ * every lane's arithmetic its own. The paths advance together one vertex
+ * at a time, which lets a vertex's memory traffic (the next hit's shading
+ * record) overlap the other lanes' work. */
+void hush__integrator_trace_block(const hush_integrator *it, hush_vec3 eye,
+                                  const float d[HUSH_PACKET][3], const hush_hit hits[HUSH_PACKET],
+                                  const hush_rand rng[HUSH_PACKET], const uint32_t x[HUSH_PACKET],
+                                  const uint32_t y[HUSH_PACKET], uint32_t lanes,
+                                  hush_first_hit first[HUSH_PACKET],
+                                  hush_path_result out[HUSH_PACKET]);
+
 /* The first hit of visibility sample (triangle, u, v) at the scene's
  * current frame, seen from eye: what a forward-projected sample needs to be
  * re-shaded. Returns 0 if the point coincides with the eye. */
