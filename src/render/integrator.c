@@ -151,12 +151,14 @@ static void diffuse_share(const float fd[3], const float fs[3], float share[3]) 
   }
 }
 
-/* A next-event shadow ray whose query is deferred (see shade_path): if
- * nothing blocks o + t d for t in (0, tfar), the vertex receives c. */
+/* A next-event shadow ray whose query is deferred (see path_rays): if
+ * nothing blocks o + t d for t in (0, tfar), the vertex receives
+ * f L w / pdf, L the light sample's radiance, evaluated only then. */
 typedef struct shadow_ray {
   int traced;              /* 0: no ray (no light sample, or it cannot contribute) */
   float o[3], d[3], tfar;
-  float c[3];              /* the contribution when unoccluded */
+  hush_light_sample ls;    /* its radiance may be deferred (hush__lights_sample_deferred) */
+  float f[3], w;           /* BSDF value towards the light, MIS weight */
 } shadow_ray;
 
 /* Next event, up to its shadow ray: one light sample, MIS-weighted unless
@@ -168,32 +170,43 @@ static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t
   sr->traced = 0;
   const float u[3] = {hush__rand(rng, base + D_LIGHT_PICK), hush__rand(rng, base + D_LIGHT_UV),
                       hush__rand(rng, base + D_LIGHT_UV + 1)};
-  hush_light_sample ls;
-  if (!hush__lights_sample(it->lights, p, u, &ls)) return;
-  if (!(max3(ls.radiance) > 0.0f)) return;
-  float f[3], pdf_b;
+  hush_light_sample *ls = &sr->ls;
+  if (!hush__lights_sample_deferred(it->lights, p, u, ls)) return;
+  if (!ls->deferred && !(max3(ls->radiance) > 0.0f)) return;
+  float *f = sr->f, pdf_b;
   if (share) {
     float fs[3];
-    hush__bsdf_eval_lobes(b, wo, ls.wi, f, fs, &pdf_b);
+    hush__bsdf_eval_lobes(b, wo, ls->wi, f, fs, &pdf_b);
     diffuse_share(f, fs, share);
     for (int k = 0; k < 3; k++) f[k] += fs[k]; /* hush__bsdf_eval's f, bit for bit */
   } else {
-    hush__bsdf_eval(b, wo, ls.wi, f, &pdf_b);
+    hush__bsdf_eval(b, wo, ls->wi, f, &pdf_b);
   }
   if (!(max3(f) > 0.0f)) return;
-  const hush_vec3 o = offset_origin(p, b->ng, ls.wi);
-  const float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - ray_eps(p) : INFINITY;
+  const hush_vec3 o = offset_origin(p, b->ng, ls->wi);
+  const float tfar = isfinite(ls->dist) ? ls->dist * (1.0f - 1e-4f) - ray_eps(p) : INFINITY;
   if (!(tfar > 0.0f)) return;
   sr->traced = 1;
   sr->o[0] = o.x;
   sr->o[1] = o.y;
   sr->o[2] = o.z;
-  sr->d[0] = ls.wi.x;
-  sr->d[1] = ls.wi.y;
-  sr->d[2] = ls.wi.z;
+  sr->d[0] = ls->wi.x;
+  sr->d[1] = ls->wi.y;
+  sr->d[2] = ls->wi.z;
   sr->tfar = tfar;
-  const float w = last ? 1.0f : power_heuristic(ls.pdf, pdf_b);
-  for (int k = 0; k < 3; k++) sr->c[k] = f[k] * ls.radiance[k] * w / ls.pdf;
+  sr->w = last ? 1.0f : power_heuristic(ls->pdf, pdf_b);
+}
+
+/* What an unblocked shadow ray brings. A deferred sun-and-sky radiance is
+ * evaluated here; where it is 0 the contribution is 0, as if the ray had
+ * not been traced (the sky model is positive above the horizon, so that
+ * does not happen in practice). */
+static void shadow_light(const hush_integrator *it, shadow_ray *sr, float c[3]) {
+  hush_light_sample *ls = &sr->ls;
+  c[0] = c[1] = c[2] = 0.0f;
+  hush__lights_sample_finish(it->lights, ls);
+  if (!(max3(ls->radiance) > 0.0f)) return;
+  for (int k = 0; k < 3; k++) c[k] = sr->f[k] * ls->radiance[k] * sr->w / ls->pdf;
 }
 
 static void call_hook(const hush_integrator *it, uint32_t x, uint32_t y, const hush_rand *rng,
@@ -410,10 +423,21 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   }
   st->go = 1;
   st->next_origin = offset_origin(sp->p, b.ng, bs->wi);
-  const float oo[3] = {st->next_origin.x, st->next_origin.y, st->next_origin.z};
-  const float dd[3] = {bs->wi.x, bs->wi.y, bs->wi.z};
-  hush__scene_intersect(sc, oo, dd, 0.0f, INFINITY, &st->next_tri);
-  hush__scene_prefetch_surface(sc, st->next_tri.triangle);
+}
+
+/* The vertex's rays: the path's next ray first, its hit's shading record
+ * prefetched, then the shadow ray, so the record arrives while Embree
+ * traverses the shadow ray. Neither ray depends on the other. Returns
+ * whether the shadow ray is blocked. */
+static int path_rays(const hush_integrator *it, path_state *st) {
+  if (st->go) {
+    const float oo[3] = {st->next_origin.x, st->next_origin.y, st->next_origin.z};
+    const float dd[3] = {st->bs.wi.x, st->bs.wi.y, st->bs.wi.z};
+    hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &st->next_tri);
+    hush__scene_prefetch_surface(it->scene, st->next_tri.triangle);
+  }
+  const shadow_ray *sr = &st->sr;
+  return sr->traced && hush__scene_occluded(it->scene, sr->o, sr->d, 0.0f, sr->tfar);
 }
 
 /* The vertex's shadow ray answered (`occluded`; ignored when none was
@@ -426,8 +450,7 @@ static void path_resolve(const hush_integrator *it, path_state *st, int occluded
     float c[3] = {0.0f, 0.0f, 0.0f};
     if (st->sr.traced) {
       out->rays++;
-      if (!occluded)
-        for (int k = 0; k < 3; k++) c[k] = st->sr.c[k];
+      if (!occluded) shadow_light(it, &st->sr, c);
     }
     const float one[3] = {1.0f, 1.0f, 1.0f};
     float bc[3];
@@ -457,9 +480,7 @@ static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_firs
   for (;;) {
     path_vertex(it, &st);
     if (st.done) return;
-    const int occluded =
-        st.sr.traced && hush__scene_occluded(it->scene, st.sr.o, st.sr.d, 0.0f, st.sr.tfar);
-    path_resolve(it, &st, occluded);
+    path_resolve(it, &st, path_rays(it, &st));
     if (st.done) return;
   }
 }
@@ -560,12 +581,12 @@ void hush__integrator_trace_block(const hush_integrator *it, hush_vec3 eye,
       path_vertex(it, &st[i]);
       if (st[i].done) active &= ~(1u << i);
     }
+    uint32_t blocked = 0;
+    for (uint32_t i = 0; i < HUSH_PACKET; i++)
+      if ((active >> i) & 1u) blocked |= (uint32_t)path_rays(it, &st[i]) << i;
     for (uint32_t i = 0; i < HUSH_PACKET; i++) {
       if (!((active >> i) & 1u)) continue;
-      const shadow_ray *sr = &st[i].sr;
-      const int occluded =
-          sr->traced && hush__scene_occluded(it->scene, sr->o, sr->d, 0.0f, sr->tfar);
-      path_resolve(it, &st[i], occluded);
+      path_resolve(it, &st[i], (int)((blocked >> i) & 1u));
       if (st[i].done) active &= ~(1u << i);
     }
   }
