@@ -285,6 +285,62 @@ static void test_envmap_shortcuts(void) {
   hush__envmap_free(&m);
 }
 
+/* A sun-and-sky light sample drawn with its radiance deferred
+ * (hush__lights_sample_deferred, then hush__lights_sample_finish) is the
+ * eager sample bit for bit, and is never drawn where the eager one has
+ * no light (sun, sky, emissive triangles). */
+static void test_deferred_light_samples(void) {
+  hush_device device = hush_device_new("threads=1");
+  REQUIRE(device);
+  hush_scene sc;
+  REQUIRE(hush__scene_builtin(device, "cornell", &sc) == HUSH_OK);
+  sc.env.type = HUSH_ENV_SUNSKY;
+  const hush_vec3 sun = hush_v3_normalize(hush_v3(-0.8f, 0.35f, -0.3f));
+  sc.env.sun_direction[0] = sun.x;
+  sc.env.sun_direction[1] = sun.y;
+  sc.env.sun_direction[2] = sun.z;
+  sc.env.turbidity = 3.0f;
+  sc.env.sky_scale = 2.0f;
+  sc.env.sun_scale = 1.0f;
+  sc.env.sun_radius_scale = 10.0f;
+  REQUIRE(hush__scene_commit(device, &sc) == HUSH_OK);
+  hush_lights L;
+  REQUIRE(hush__lights_init(device, &L, &sc) == HUSH_OK);
+  int bad = 0, deferred = 0, eager = 0, refused = 0, below = 0;
+  for (uint32_t i = 0; i < 20000; i++) {
+    const hush_vec3 p = hush_v3(rnd(40, i) - 0.5f, rnd(41, i), rnd(42, i) - 0.5f);
+    const float u[3] = {rnd(43, i), rnd(44, i), rnd(45, i)};
+    hush_light_sample a, b;
+    const int lit = hush__lights_sample(&L, p, u, &a) &&
+                    fmaxf(a.radiance[0], fmaxf(a.radiance[1], a.radiance[2])) > 0.0f;
+    const int drawn = hush__lights_sample_deferred(&L, p, u, &b);
+    if (!lit) {
+      refused++;
+      below += a.wi.y <= 0.0f;
+      bad += drawn && b.deferred;
+      continue;
+    }
+    if (!drawn) {
+      bad++;
+      continue;
+    }
+    deferred += b.deferred;
+    eager += !b.deferred;
+    hush__lights_sample_finish(&L, &b);
+    if (b.deferred || memcmp(a.radiance, b.radiance, sizeof a.radiance) || a.pdf != b.pdf ||
+        a.dist != b.dist || a.wi.x != b.wi.x || a.wi.y != b.wi.y || a.wi.z != b.wi.z)
+      bad++;
+  }
+  CHECK_MSG(bad == 0, "%d deferred light samples differ from eager ones", bad);
+  CHECK_MSG(deferred > 5000 && eager > 1000, "deferred %d, eager %d", deferred, eager);
+  printf("deferred light samples: %d deferred, %d eager, %d without light (%d below the "
+         "horizon)\n",
+         deferred, eager, refused, below);
+  hush__lights_free(&L);
+  hush__scene_free(&sc);
+  hush_device_release(device);
+}
+
 /* ---- rendering helpers -------------------------------------------------------------- */
 
 typedef struct rig {
@@ -995,6 +1051,7 @@ int main(void) {
   test_bsdfs();
   test_envmap();
   test_envmap_shortcuts();
+  test_deferred_light_samples();
   test_furnace();
   test_motion("cornell-moving", HUSH_MOVE_ORBIT, 1);
   test_motion("courtyard", HUSH_MOVE_DOLLY, 1);
