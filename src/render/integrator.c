@@ -69,8 +69,7 @@ static uint32_t shuffle_index(uint32_t n, uint32_t key, uint32_t bits) {
   return x | (n & ~mask);
 }
 
-float hush__rand(const hush_rand *r, uint32_t dim) {
-  if (r->kind != HUSH_SAMPLER_LD) return hush_rng_float(r->pixel_seed, dim, r->sample);
+float hush__rand_ld(const hush_rand *r, uint32_t dim) {
   const uint32_t pair = dim >> 1;
   const uint32_t key = hush_rng_u32(r->pixel_seed, pair, 0x9e3779b9u);
   const uint32_t n = shuffle_index(r->sample, key, r->log2_spp);

@@ -30,6 +30,7 @@
 #define HUSH_RENDER_INTEGRATOR_H
 
 #include "core/hmath.h"
+#include "core/rng.h"
 #include "render/lights.h"
 #include "render/scene.h"
 
@@ -51,9 +52,15 @@ typedef struct hush_rand {
 uint32_t hush__pixel_seed(uint32_t global_seed, uint32_t frame, uint32_t x, uint32_t y);
 void hush__rand_init(hush_rand *r, hush_sampler kind, uint32_t global_seed, uint32_t frame,
                      uint32_t x, uint32_t y, uint32_t sample, uint32_t spp);
+/* The LD sampler's number `dim` (hush__rand). */
+float hush__rand_ld(const hush_rand *r, uint32_t dim);
 /* Number `dim` of the sample, in [0, 1). Dimensions 0 and 1 place the
- * sample in the pixel; the path uses 4 + 8 * depth + i. */
-float hush__rand(const hush_rand *r, uint32_t dim);
+ * sample in the pixel; the path uses 4 + 8 * depth + i. Inline: a path
+ * asks for a dozen, and the default sampler is a few integer operations. */
+static inline float hush__rand(const hush_rand *r, uint32_t dim) {
+  if (r->kind != HUSH_SAMPLER_LD) return hush_rng_float(r->pixel_seed, dim, r->sample);
+  return hush__rand_ld(r, dim);
+}
 
 typedef struct hush_path_vertex {
   uint32_t x, y, sample;
