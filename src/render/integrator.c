@@ -265,12 +265,12 @@ static void first_emission(hush_path_result *out, int depth, const float c[3]) {
   for (int k = 0; k < 3; k++) out->emission[k] = c[k];
 }
 
-/* One path in flight, between its vertices: a path is shaded as a loop of
- * path_vertex (everything up to the vertex's shadow ray, and the path's
- * next ray traced) and path_resolve (the shadow ray's answer added, then on
- * to the next vertex). Between the two the shadow ray is asked — alone
- * (shade_path) or in a packet with the other paths of a pixel block
- * (hush__integrator_trace_block). */
+/* One path in flight, between its vertices. A path is shaded as a loop of
+ * path_vertex (the vertex's shading, up to its two rays), path_rays (the
+ * path's next ray, then the shadow ray) and path_resolve (the shadow ray's
+ * light added, then on to the next hit) — one path alone (shade_path), or
+ * the paths of a pixel block stage by stage (hush__integrator_trace_block).
+ * Each path's numbers and rays are the same either way. */
 typedef struct path_state {
   const hush_first_hit *first;
   const hush_rand *rng;
@@ -323,12 +323,10 @@ static void path_begin(path_state *st, hush_vec3 eye, const hush_first_hit *firs
 }
 
 /* The vertex st->h: emission, the light sample up to its shadow ray
- * (st->sr, not asked yet), and the BSDF sample with the path's next ray
- * traced. The next ray is traced BEFORE the shadow ray is asked, and its
- * hit's shading record is prefetched: the record (a cache miss at
- * incoherent hits) arrives while Embree traverses the shadow ray. Neither
- * depends on the other, and the contributions are added in the
- * estimator's order (path_resolve), so the result is the same. A path that
+ * (st->sr, not asked yet), and the BSDF sample up to the path's next ray
+ * (st->go, st->bs, st->next_origin, not traced yet). The contributions
+ * are added in the estimator's order (emission here, the light sample in
+ * path_resolve), so splitting the vertex changes no result. A path that
  * escapes or meets a sphere light ends here (st->done). */
 static void path_vertex(const hush_integrator *it, path_state *st) {
   const hush_scene *sc = it->scene;

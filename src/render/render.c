@@ -51,7 +51,8 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
  * (hush__scene_intersect_packet), blocks aligned to multiples of BLOCK.
  * A packet's hits may depend on its other lanes (ties), so re-rendering one
  * pixel traces its whole block again: a packet is a pure function of the
- * camera and the block. */
+ * camera and the block. The block's paths are then shaded together,
+ * stage by stage (shade_block), each exactly as it would be alone. */
 #define BLOCK 4u
 _Static_assert(BLOCK * BLOCK == HUSH_PACKET, "a block is one packet");
 
