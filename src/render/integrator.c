@@ -152,12 +152,14 @@ static void diffuse_share(const float fd[3], const float fs[3], float share[3]) 
 
 /* A next-event shadow ray whose query is deferred (see path_rays): if
  * nothing blocks o + t d for t in (0, tfar), the vertex receives
- * f L w / pdf, L the light sample's radiance, evaluated only then. */
+ * f L w / pdf, L the light sample's radiance (and a sun sample's pdf, hence
+ * the MIS weight w) evaluated only then. */
 typedef struct shadow_ray {
   int traced;              /* 0: no ray (no light sample, or it cannot contribute) */
   float o[3], d[3], tfar;
   hush_light_sample ls;    /* its radiance may be deferred (hush__lights_sample_deferred) */
-  float f[3], w;           /* BSDF value towards the light, MIS weight */
+  float f[3], pdf_b;       /* BSDF value and density towards the light */
+  int last;                /* no MIS at the last vertex */
 } shadow_ray;
 
 /* Next event, up to its shadow ray: one light sample, MIS-weighted unless
@@ -172,14 +174,14 @@ static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t
   hush_light_sample *ls = &sr->ls;
   if (!hush__lights_sample_deferred(it->lights, p, u, ls)) return;
   if (!ls->deferred && !(max3(ls->radiance) > 0.0f)) return;
-  float *f = sr->f, pdf_b;
+  float *f = sr->f;
   if (share) {
     float fs[3];
-    hush__bsdf_eval_lobes(b, wo, ls->wi, f, fs, &pdf_b);
+    hush__bsdf_eval_lobes(b, wo, ls->wi, f, fs, &sr->pdf_b);
     diffuse_share(f, fs, share);
     for (int k = 0; k < 3; k++) f[k] += fs[k]; /* hush__bsdf_eval's f, bit for bit */
   } else {
-    hush__bsdf_eval(b, wo, ls->wi, f, &pdf_b);
+    hush__bsdf_eval(b, wo, ls->wi, f, &sr->pdf_b);
   }
   if (!(max3(f) > 0.0f)) return;
   const hush_vec3 o = offset_origin(p, b->ng, ls->wi);
@@ -193,7 +195,7 @@ static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t
   sr->d[1] = ls->wi.y;
   sr->d[2] = ls->wi.z;
   sr->tfar = tfar;
-  sr->w = last ? 1.0f : power_heuristic(ls->pdf, pdf_b);
+  sr->last = last;
 }
 
 /* What an unblocked shadow ray brings. A deferred sun-and-sky radiance is
@@ -205,7 +207,8 @@ static void shadow_light(const hush_integrator *it, shadow_ray *sr, float c[3]) 
   c[0] = c[1] = c[2] = 0.0f;
   hush__lights_sample_finish(it->lights, ls);
   if (!(max3(ls->radiance) > 0.0f)) return;
-  for (int k = 0; k < 3; k++) c[k] = sr->f[k] * ls->radiance[k] * sr->w / ls->pdf;
+  const float w = sr->last ? 1.0f : power_heuristic(ls->pdf, sr->pdf_b);
+  for (int k = 0; k < 3; k++) c[k] = sr->f[k] * ls->radiance[k] * w / ls->pdf;
 }
 
 static void call_hook(const hush_integrator *it, uint32_t x, uint32_t y, const hush_rand *rng,

@@ -874,12 +874,18 @@ static int sample_light(const hush_lights *L, hush_vec3 p, const float u[3], int
       s->wi = hush_v3(r * cosf(phi), r * sinf(phi), z);
     }
     if (defer) {
-      /* hush__lights_env_eval's density, without its radiance */
+      /* hush__lights_env_eval's density, without its radiance; inside the
+       * sun it is positive whatever the map's share, which is then left
+       * for hush__lights_sample_finish too (a map lookup) */
       const float *texel;
       const int in = in_sun(L, s->wi);
-      s->pdf = L->p_env * envmap_lookup(&L->map, s->wi, &texel) + (in ? sun_pdf(L) : 0.0f);
       s->deferred = 1;
-      return s->pdf > 0.0f && (in || s->wi.y > 0.0f);
+      if (in) {
+        s->deferred = 2;
+        return 1;
+      }
+      s->pdf = L->p_env * envmap_lookup(&L->map, s->wi, &texel);
+      return s->pdf > 0.0f && s->wi.y > 0.0f;
     }
     s->pdf = hush__lights_env_eval(L, s->wi, s->radiance);
     return s->pdf > 0.0f;
@@ -919,5 +925,9 @@ void hush__lights_sample_finish(const hush_lights *L, hush_light_sample *s) {
   /* the sky is black below the horizon (sky_table_eval), so this is
    * hush__lights_env_eval's radiance, as hush__lights_sample has it */
   sunsky_radiance(L, s->wi, in_sun(L, s->wi), s->radiance);
+  if (s->deferred == 2) {
+    const float *texel;
+    s->pdf = L->p_env * envmap_lookup(&L->map, s->wi, &texel) + sun_pdf(L);
+  }
   s->deferred = 0;
 }
