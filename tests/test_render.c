@@ -3,6 +3,7 @@
  * integrator, render): BSDF energy, reciprocity and sampling consistency;
  * environment-map importance sampling; the furnace test; motion vectors
  * against reprojected positions; determinism and per-pixel re-rendering;
+ * pixel blocks shaded together equal single paths;
  * G-buffer sanity on the built-in Cornell box.
  */
 #include "check.h"
@@ -284,6 +285,62 @@ static void test_envmap_shortcuts(void) {
   hush__envmap_free(&m);
 }
 
+/* A sun-and-sky light sample drawn with its radiance deferred
+ * (hush__lights_sample_deferred, then hush__lights_sample_finish) is the
+ * eager sample bit for bit, and is never drawn where the eager one has
+ * no light (sun, sky, emissive triangles). */
+static void test_deferred_light_samples(void) {
+  hush_device device = hush_device_new("threads=1");
+  REQUIRE(device);
+  hush_scene sc;
+  REQUIRE(hush__scene_builtin(device, "cornell", &sc) == HUSH_OK);
+  sc.env.type = HUSH_ENV_SUNSKY;
+  const hush_vec3 sun = hush_v3_normalize(hush_v3(-0.8f, 0.35f, -0.3f));
+  sc.env.sun_direction[0] = sun.x;
+  sc.env.sun_direction[1] = sun.y;
+  sc.env.sun_direction[2] = sun.z;
+  sc.env.turbidity = 3.0f;
+  sc.env.sky_scale = 2.0f;
+  sc.env.sun_scale = 1.0f;
+  sc.env.sun_radius_scale = 10.0f;
+  REQUIRE(hush__scene_commit(device, &sc) == HUSH_OK);
+  hush_lights L;
+  REQUIRE(hush__lights_init(device, &L, &sc) == HUSH_OK);
+  int bad = 0, deferred = 0, eager = 0, refused = 0, below = 0;
+  for (uint32_t i = 0; i < 20000; i++) {
+    const hush_vec3 p = hush_v3(rnd(40, i) - 0.5f, rnd(41, i), rnd(42, i) - 0.5f);
+    const float u[3] = {rnd(43, i), rnd(44, i), rnd(45, i)};
+    hush_light_sample a, b;
+    const int lit = hush__lights_sample(&L, p, u, &a) &&
+                    fmaxf(a.radiance[0], fmaxf(a.radiance[1], a.radiance[2])) > 0.0f;
+    const int drawn = hush__lights_sample_deferred(&L, p, u, &b);
+    if (!lit) {
+      refused++;
+      below += a.wi.y <= 0.0f;
+      bad += drawn && b.deferred;
+      continue;
+    }
+    if (!drawn) {
+      bad++;
+      continue;
+    }
+    deferred += b.deferred;
+    eager += !b.deferred;
+    hush__lights_sample_finish(&L, &b);
+    if (b.deferred || memcmp(a.radiance, b.radiance, sizeof a.radiance) || a.pdf != b.pdf ||
+        a.dist != b.dist || a.wi.x != b.wi.x || a.wi.y != b.wi.y || a.wi.z != b.wi.z)
+      bad++;
+  }
+  CHECK_MSG(bad == 0, "%d deferred light samples differ from eager ones", bad);
+  CHECK_MSG(deferred > 5000 && eager > 1000, "deferred %d, eager %d", deferred, eager);
+  printf("deferred light samples: %d deferred, %d eager, %d without light (%d below the "
+         "horizon)\n",
+         deferred, eager, refused, below);
+  hush__lights_free(&L);
+  hush__scene_free(&sc);
+  hush_device_release(device);
+}
+
 /* ---- rendering helpers -------------------------------------------------------------- */
 
 typedef struct rig {
@@ -517,6 +574,133 @@ static void test_determinism(void) {
     hush_frame_release(c);
     hush_frame_release(d);
   }
+  rig_close(&r);
+}
+
+/* ---- pixel blocks ----------------------------------------------------------------------- */
+
+/* Counts the path-vertex hook's calls and hashes what they report, in any
+ * order (the lanes of a block interleave their vertices). */
+typedef struct hook_tally {
+  uint32_t calls;
+  uint32_t hash;
+} hook_tally;
+
+static void tally_vertex(void *user, const hush_path_vertex *v) {
+  hook_tally *t = user;
+  uint32_t c[3];
+  memcpy(c, v->contribution, sizeof c);
+  t->calls++;
+  t->hash += hush_rng_u32(c[0] ^ (c[1] * 3u) ^ (c[2] * 7u), v->y * 4096u + v->x,
+                          (uint32_t)v->depth * 31u + v->triangle);
+}
+
+/* hush__integrator_trace_block shades each lane exactly as
+ * hush__integrator_trace_hit shades it alone (bit for bit: radiance,
+ * layers, first hit, ray count, hook calls), whatever the other lanes are:
+ * every 4 x 4 block of a frame, with full, partial and single-lane masks,
+ * on scenes with glass, sphere lights, sun and sky, alpha masks; several
+ * bounces, lobe split and both samplers. */
+static void test_block_paths(void) {
+  static const char *const scenes[] = {"cornell", "courtyard", "mask"};
+  static const uint32_t masks[] = {0xffffu, 0x6b5du, 0x8001u, 0x0020u};
+  for (int si = 0; si < 3; si++) {
+    rig r;
+    rig_open(&r, scenes[si]);
+    hush_render_params p;
+    hush__render_defaults(&p);
+    p.width = 40;
+    p.height = 28;
+    p.bounces = si == 1 ? 3 : 1;
+    p.split_lobes = si == 0;
+    p.sampler = si == 2 ? HUSH_SAMPLER_LD : HUSH_SAMPLER_RANDOM;
+    hush_render_ctx ctx;
+    hush_frame f = render_at(&r, &p, HUSH_MOVE_ORBIT, 2, &ctx);
+    hook_tally tb = {0, 0}, ts = {0, 0};
+    int lanes_checked = 0, bad = 0, hits = 0;
+    for (uint32_t y0 = 0; y0 < p.height; y0 += 4)
+      for (uint32_t x0 = 0; x0 < p.width; x0 += 4) {
+        float d[HUSH_PACKET][3];
+        uint32_t xs[HUSH_PACKET], ys[HUSH_PACKET], inside = 0;
+        hush_rand rng[HUSH_PACKET];
+        for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+          xs[i] = x0 + i % 4;
+          ys[i] = y0 + i / 4;
+          const hush_vec3 v =
+              hush__camera_ray(&ctx.cam, (float)xs[i] + 0.5f + ctx.cam.jitter[0],
+                               (float)ys[i] + 0.5f + ctx.cam.jitter[1]);
+          d[i][0] = v.x;
+          d[i][1] = v.y;
+          d[i][2] = v.z;
+          hush__rand_init(&rng[i], p.sampler, p.seed, 2, xs[i], ys[i], 0, 1);
+          if (xs[i] < p.width && ys[i] < p.height) inside |= 1u << i;
+        }
+        const float eye[3] = {ctx.cam.eye.x, ctx.cam.eye.y, ctx.cam.eye.z};
+        hush_hit hit[HUSH_PACKET];
+        hush__scene_intersect_packet(&r.scene, eye, (const float(*)[3])d, inside, hit);
+        const uint32_t lanes = inside & masks[(x0 / 4 + y0 / 4) % 4];
+        hush_first_hit fb[HUSH_PACKET];
+        hush_path_result ob[HUSH_PACKET];
+        ctx.it.vertex_fn = tally_vertex;
+        ctx.it.vertex_user = &tb;
+        hush__integrator_trace_block(&ctx.it, ctx.cam.eye, (const float(*)[3])d, hit, rng, xs, ys,
+                                     lanes, fb, ob);
+        ctx.it.vertex_user = &ts;
+        for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+          if (!((lanes >> i) & 1u)) continue;
+          hush_first_hit fs;
+          hush_path_result os;
+          hush__integrator_trace_hit(&ctx.it, ctx.cam.eye, hush_v3(d[i][0], d[i][1], d[i][2]),
+                                     &hit[i], &rng[i], xs[i], ys[i], &fs, &os);
+          lanes_checked++;
+          hits += fs.kind == HUSH_FIRST_TRIANGLE;
+          if (memcmp(&os, &ob[i], sizeof os) || fs.kind != fb[i].kind ||
+              fs.hit.triangle != fb[i].hit.triangle ||
+              memcmp(&fs.surface, &fb[i].surface, sizeof fs.surface) ||
+              memcmp(&fs.p, &fb[i].p, sizeof fs.p))
+            bad++;
+        }
+        ctx.it.vertex_fn = NULL;
+      }
+    CHECK_MSG(bad == 0, "%s: %d of %d block lanes differ from single paths", scenes[si], bad,
+              lanes_checked);
+    CHECK(lanes_checked > 400 && hits > 100);
+    CHECK_MSG(tb.calls == ts.calls && tb.hash == ts.hash && tb.calls > 0,
+              "%s: hook called %u times in blocks, %u alone", scenes[si], tb.calls, ts.calls);
+    hush_frame_release(f);
+    rig_close(&r);
+  }
+}
+
+/* With a progressive pattern the frame shades only some lanes of a block;
+ * every traced pixel still re-renders alone bit for bit. */
+static void test_progressive_pixels(void) {
+  rig r;
+  rig_open(&r, "courtyard");
+  hush_progressive prog;
+  REQUIRE(hush__progressive_init(&prog, 0.25));
+  hush_render_params p;
+  hush__render_defaults(&p);
+  p.width = 37;
+  p.height = 21;
+  p.progressive = &prog;
+  hush_render_ctx ctx;
+  hush_frame f = render_at(&r, &p, HUSH_MOVE_ORBIT, 5, &ctx);
+  const float *color = layer(f, "color"), *spp = layer(f, "spp");
+  int traced = 0, expected = 0, bad = 0;
+  for (uint32_t y = 0; y < p.height; y++)
+    for (uint32_t x = 0; x < p.width; x++) {
+      const size_t i = (size_t)y * p.width + x;
+      expected += hush__progressive_traced(&prog, x, y, 5);
+      if (spp[i] == 0.0f) continue;
+      traced++;
+      hush_pixel_result px;
+      hush__render_pixel(&ctx, x, y, 5, &px);
+      if (memcmp(px.color, color + 3 * i, sizeof px.color)) bad++;
+    }
+  CHECK(traced == expected && traced > 150);
+  CHECK_MSG(bad == 0, "%d of %d progressive pixels re-render differently", bad, traced);
+  hush_frame_release(f);
   rig_close(&r);
 }
 
@@ -867,10 +1051,13 @@ int main(void) {
   test_bsdfs();
   test_envmap();
   test_envmap_shortcuts();
+  test_deferred_light_samples();
   test_furnace();
   test_motion("cornell-moving", HUSH_MOVE_ORBIT, 1);
   test_motion("courtyard", HUSH_MOVE_DOLLY, 1);
   test_determinism();
+  test_block_paths();
+  test_progressive_pixels();
   test_reuse_frame();
   test_cornell_gbuffer();
   test_emission_layer();

@@ -69,8 +69,7 @@ static uint32_t shuffle_index(uint32_t n, uint32_t key, uint32_t bits) {
   return x | (n & ~mask);
 }
 
-float hush__rand(const hush_rand *r, uint32_t dim) {
-  if (r->kind != HUSH_SAMPLER_LD) return hush_rng_float(r->pixel_seed, dim, r->sample);
+float hush__rand_ld(const hush_rand *r, uint32_t dim) {
   const uint32_t pair = dim >> 1;
   const uint32_t key = hush_rng_u32(r->pixel_seed, pair, 0x9e3779b9u);
   const uint32_t n = shuffle_index(r->sample, key, r->log2_spp);
@@ -151,35 +150,65 @@ static void diffuse_share(const float fd[3], const float fs[3], float share[3]) 
   }
 }
 
-/* Next event: one light sample, MIS-weighted unless it is the last vertex.
- * share (may be NULL) receives the diffuse lobe's share of it. */
+/* A next-event shadow ray whose query is deferred (see path_rays): if
+ * nothing blocks o + t d for t in (0, tfar), the vertex receives
+ * f L w / pdf, L the light sample's radiance (and a sun sample's pdf, hence
+ * the MIS weight w) evaluated only then. */
+typedef struct shadow_ray {
+  int traced;              /* 0: no ray (no light sample, or it cannot contribute) */
+  float o[3], d[3], tfar;
+  hush_light_sample ls;    /* its radiance may be deferred (hush__lights_sample_deferred) */
+  float f[3], pdf_b;       /* BSDF value and density towards the light */
+  int last;                /* no MIS at the last vertex */
+} shadow_ray;
+
+/* Next event, up to its shadow ray: one light sample, MIS-weighted unless
+ * it is the last vertex. share (may be NULL) receives the diffuse lobe's
+ * share of it. */
 static void next_event(const hush_integrator *it, const hush_rand *rng, uint32_t base,
-                       const hush_bsdf *b, hush_vec3 p, hush_vec3 wo, int last, float out[3],
-                       float share[3], uint32_t *rays) {
-  out[0] = out[1] = out[2] = 0.0f;
+                       const hush_bsdf *b, hush_vec3 p, hush_vec3 wo, int last, shadow_ray *sr,
+                       float share[3]) {
+  sr->traced = 0;
   const float u[3] = {hush__rand(rng, base + D_LIGHT_PICK), hush__rand(rng, base + D_LIGHT_UV),
                       hush__rand(rng, base + D_LIGHT_UV + 1)};
-  hush_light_sample ls;
-  if (!hush__lights_sample(it->lights, p, u, &ls)) return;
-  if (!(max3(ls.radiance) > 0.0f)) return;
-  float f[3], pdf_b;
+  hush_light_sample *ls = &sr->ls;
+  if (!hush__lights_sample_deferred(it->lights, p, u, ls)) return;
+  if (!ls->deferred && !(max3(ls->radiance) > 0.0f)) return;
+  float *f = sr->f;
   if (share) {
     float fs[3];
-    hush__bsdf_eval_lobes(b, wo, ls.wi, f, fs, &pdf_b);
+    hush__bsdf_eval_lobes(b, wo, ls->wi, f, fs, &sr->pdf_b);
     diffuse_share(f, fs, share);
     for (int k = 0; k < 3; k++) f[k] += fs[k]; /* hush__bsdf_eval's f, bit for bit */
   } else {
-    hush__bsdf_eval(b, wo, ls.wi, f, &pdf_b);
+    hush__bsdf_eval(b, wo, ls->wi, f, &sr->pdf_b);
   }
   if (!(max3(f) > 0.0f)) return;
-  const hush_vec3 o = offset_origin(p, b->ng, ls.wi);
-  const float tfar = isfinite(ls.dist) ? ls.dist * (1.0f - 1e-4f) - ray_eps(p) : INFINITY;
+  const hush_vec3 o = offset_origin(p, b->ng, ls->wi);
+  const float tfar = isfinite(ls->dist) ? ls->dist * (1.0f - 1e-4f) - ray_eps(p) : INFINITY;
   if (!(tfar > 0.0f)) return;
-  (*rays)++;
-  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {ls.wi.x, ls.wi.y, ls.wi.z};
-  if (hush__scene_occluded(it->scene, oo, dd, 0.0f, tfar)) return;
-  const float w = last ? 1.0f : power_heuristic(ls.pdf, pdf_b);
-  for (int k = 0; k < 3; k++) out[k] = f[k] * ls.radiance[k] * w / ls.pdf;
+  sr->traced = 1;
+  sr->o[0] = o.x;
+  sr->o[1] = o.y;
+  sr->o[2] = o.z;
+  sr->d[0] = ls->wi.x;
+  sr->d[1] = ls->wi.y;
+  sr->d[2] = ls->wi.z;
+  sr->tfar = tfar;
+  sr->last = last;
+}
+
+/* What an unblocked shadow ray brings. A deferred sun-and-sky radiance is
+ * evaluated here; where it is 0 the contribution is 0, as if the ray had
+ * not been traced (the sky model is positive above the horizon, so that
+ * does not happen in practice). */
+static void shadow_light(const hush_integrator *it, shadow_ray *sr, float c[3]) {
+  hush_light_sample *ls = &sr->ls;
+  c[0] = c[1] = c[2] = 0.0f;
+  hush__lights_sample_finish(it->lights, ls);
+  if (!(max3(ls->radiance) > 0.0f)) return;
+  const float w = sr->last ? 1.0f : power_heuristic(ls->pdf, sr->pdf_b);
+  for (int k = 0; k < 3; k++) c[k] = sr->f[k] * ls->radiance[k] * w / ls->pdf;
 }
 
 static void call_hook(const hush_integrator *it, uint32_t x, uint32_t y, const hush_rand *rng,
@@ -229,13 +258,6 @@ static void complete_hit(const hush_integrator *it, hush_vec3 o, hush_vec3 d, co
   }
 }
 
-static void trace_ray(const hush_integrator *it, hush_vec3 o, hush_vec3 d, next_hit *h) {
-  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {d.x, d.y, d.z};
-  hush_hit tri;
-  hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &tri);
-  complete_hit(it, o, d, &tri, h);
-}
-
 /* ---- the path ------------------------------------------------------------------ */
 
 /* The emission the camera ray sees at its first hit (hush_path_result's
@@ -246,110 +268,220 @@ static void first_emission(hush_path_result *out, int depth, const float c[3]) {
   for (int k = 0; k < 3; k++) out->emission[k] = c[k];
 }
 
-static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
-                       const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
-  memset(out, 0, sizeof *out);
-  const hush_scene *sc = it->scene;
-  const hush_lights *L = it->lights;
-  float beta[3] = {1.0f, 1.0f, 1.0f};
-  hush_vec3 d = first->dir, origin = eye;
+/* One path in flight, between its vertices. A path is shaded as a loop of
+ * path_vertex (the vertex's shading, up to its two rays), path_rays (the
+ * path's next ray, then the shadow ray) and path_resolve (the shadow ray's
+ * light added, then on to the next hit) — one path alone (shade_path), or
+ * the paths of a pixel block stage by stage (hush__integrator_trace_block).
+ * Each path's numbers and rays are the same either way. */
+typedef struct path_state {
+  const hush_first_hit *first;
+  const hush_rand *rng;
+  hush_path_result *out;
+  uint32_t x, y;
+  float beta[3];           /* throughput from the camera to the vertex */
+  hush_vec3 d, origin;     /* the ray that found the vertex */
   next_hit h;
-  h.kind = first->kind;
-  h.hit = first->hit;
-  h.sphere = first->sphere;
-  h.t = first->t;
-  float prev_pdf = 0.0f;
-  int prev_delta = 1; /* the camera ray sees emission with full weight */
+  float prev_pdf;
+  int prev_delta;          /* the camera ray sees emission with full weight */
   /* split_lobes: the diffuse share of what the path adds; light seen
    * directly counts as diffuse, then the first hit's BSDF sample sets it */
-  float share[3] = {1.0f, 1.0f, 1.0f};
-  for (int depth = 0;; depth++) {
-    const int direct = depth == 0;
-    float vsum[3] = {0.0f, 0.0f, 0.0f};
-    if (h.kind == HUSH_FIRST_SKY) {
-      float le[3];
-      const float pdf_env = hush__lights_env_eval(L, d, le);
-      const float w = prev_delta ? 1.0f : power_heuristic(prev_pdf, pdf_env);
-      add(it, out, vsum, beta, le, w, depth, direct, share);
-      first_emission(out, depth, le);
-      return;
-    }
-    if (h.kind == HUSH_FIRST_SPHERE) {
-      const float w =
-          prev_delta ? 1.0f
-                     : power_heuristic(prev_pdf, hush__lights_sphere_pdf(L, h.sphere, origin));
-      add(it, out, vsum, beta, sc->spheres[h.sphere].radiance, w, depth, direct, share);
-      first_emission(out, depth, sc->spheres[h.sphere].radiance);
-      return;
-    }
-    /* the first hit's surface is read in place (copying it and reading a
-     * field back stalls on store forwarding) */
-    hush_surface later;
-    const hush_surface *sp = &first->surface;
-    if (depth > 0) {
-      const float dd[3] = {d.x, d.y, d.z};
-      hush__scene_surface(sc, &h.hit, dd, &later);
-      sp = &later;
-    }
-    const hush_material *m = &sc->materials[sp->material];
-    if (max3(m->emission) > 0.0f) {
-      float w = 1.0f;
-      if (!prev_delta) {
-        const float cos_l = fabsf(hush_v3_dot(d, sp->ng));
-        const float area = hush__lights_triangle_area(sc, h.hit.triangle);
-        w = power_heuristic(prev_pdf, hush__lights_triangle_pdf(L, h.hit.triangle, area, h.t, cos_l));
-      }
-      add(it, out, vsum, beta, m->emission, w, depth, direct, share);
-      first_emission(out, depth, m->emission);
-    }
-    const hush_vec3 wo = hush_v3_scale(d, -1.0f);
-    hush_bsdf b;
-    hush__bsdf_setup(&b, m, sp, wo);
-    const int last = depth >= it->bounces;
-    const uint32_t base = DIM_PATH + DIMS_PER_VERTEX * (uint32_t)depth;
-    if (hush__bsdf_has_smooth(&b) && hush__lights_any(L)) {
-      float c[3], nee_share[3] = {1.0f, 1.0f, 1.0f};
-      /* at the first hit the light sample is split by lobe; later ones
-       * follow the first hit's split of the path */
-      const int split_here = it->split_lobes && depth == 0;
-      next_event(it, rng, base, &b, sp->p, wo, last, c, split_here ? nee_share : NULL, &out->rays);
-      const float one[3] = {1.0f, 1.0f, 1.0f};
-      float bc[3];
-      for (int k = 0; k < 3; k++) bc[k] = beta[k] * c[k];
-      add(it, out, vsum, one, bc, 1.0f, depth, direct, depth == 0 ? nee_share : share);
-    }
-    call_hook(it, x, y, rng, depth, sp, h.hit.triangle, beta, vsum);
-    if (last) return;
+  float share[3];
+  int depth;
+  int done;
+  /* the vertex in progress */
+  hush_surface later;      /* its surface beyond the first hit */
+  const hush_surface *sp;  /* &first->surface or &later */
+  float vsum[3];           /* what the vertex adds (the hook's contribution) */
+  int nee;                 /* a light sample was taken */
+  shadow_ray sr;
+  float nee_share[3];
+  int go;                  /* the path continues along bs from next_origin */
+  hush_bsdf_sample bs;
+  float nbeta[3];
+  hush_vec3 next_origin;
+  hush_hit next_tri;       /* the next ray's closest triangle, already traced */
+} path_state;
 
-    const float u[3] = {hush__rand(rng, base + D_BSDF_LOBE), hush__rand(rng, base + D_BSDF_UV),
-                        hush__rand(rng, base + D_BSDF_UV + 1)};
-    hush_bsdf_sample bs;
-    if (!hush__bsdf_sample(&b, wo, u, &bs)) return;
-    if (it->split_lobes && depth == 0) {
-      /* the rest of the path is split as the first hit's lobes reflect
-       * the sampled direction: delta lobes are specular, a smooth
-       * direction by the lobes' values there */
-      if (bs.delta) {
-        share[0] = share[1] = share[2] = 0.0f;
-      } else {
-        float fd[3], fs[3], pdf_l;
-        hush__bsdf_eval_lobes(&b, wo, bs.wi, fd, fs, &pdf_l);
-        diffuse_share(fd, fs, share);
-      }
+static void path_begin(path_state *st, hush_vec3 eye, const hush_first_hit *first,
+                       const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
+  memset(out, 0, sizeof *out);
+  st->first = first;
+  st->rng = rng;
+  st->out = out;
+  st->x = x;
+  st->y = y;
+  st->beta[0] = st->beta[1] = st->beta[2] = 1.0f;
+  st->d = first->dir;
+  st->origin = eye;
+  st->h.kind = first->kind;
+  st->h.hit = first->hit;
+  st->h.sphere = first->sphere;
+  st->h.t = first->t;
+  st->prev_pdf = 0.0f;
+  st->prev_delta = 1;
+  st->share[0] = st->share[1] = st->share[2] = 1.0f;
+  st->depth = 0;
+  st->done = 0;
+}
+
+/* The vertex st->h: emission, the light sample up to its shadow ray
+ * (st->sr, not asked yet), and the BSDF sample up to the path's next ray
+ * (st->go, st->bs, st->next_origin, not traced yet). The contributions
+ * are added in the estimator's order (emission here, the light sample in
+ * path_resolve), so splitting the vertex changes no result. A path that
+ * escapes or meets a sphere light ends here (st->done). */
+static void path_vertex(const hush_integrator *it, path_state *st) {
+  const hush_scene *sc = it->scene;
+  const hush_lights *L = it->lights;
+  hush_path_result *out = st->out;
+  const int depth = st->depth, direct = depth == 0;
+  const hush_vec3 d = st->d;
+  float *vsum = st->vsum;
+  vsum[0] = vsum[1] = vsum[2] = 0.0f;
+  st->nee = 0;
+  st->go = 0;
+  if (st->h.kind == HUSH_FIRST_SKY) {
+    float le[3];
+    const float pdf_env = hush__lights_env_eval(L, d, le);
+    const float w = st->prev_delta ? 1.0f : power_heuristic(st->prev_pdf, pdf_env);
+    add(it, out, vsum, st->beta, le, w, depth, direct, st->share);
+    first_emission(out, depth, le);
+    st->done = 1;
+    return;
+  }
+  if (st->h.kind == HUSH_FIRST_SPHERE) {
+    const float w = st->prev_delta ? 1.0f
+                                   : power_heuristic(st->prev_pdf,
+                                                     hush__lights_sphere_pdf(L, st->h.sphere,
+                                                                             st->origin));
+    add(it, out, vsum, st->beta, sc->spheres[st->h.sphere].radiance, w, depth, direct, st->share);
+    first_emission(out, depth, sc->spheres[st->h.sphere].radiance);
+    st->done = 1;
+    return;
+  }
+  /* the first hit's surface is read in place (copying it and reading a
+   * field back stalls on store forwarding) */
+  st->sp = &st->first->surface;
+  if (depth > 0) {
+    const float dd[3] = {d.x, d.y, d.z};
+    hush__scene_surface(sc, &st->h.hit, dd, &st->later);
+    st->sp = &st->later;
+  }
+  const hush_surface *sp = st->sp;
+  const hush_material *m = &sc->materials[sp->material];
+  if (max3(m->emission) > 0.0f) {
+    float w = 1.0f;
+    if (!st->prev_delta) {
+      const float cos_l = fabsf(hush_v3_dot(d, sp->ng));
+      const float area = hush__lights_triangle_area(sc, st->h.hit.triangle);
+      w = power_heuristic(st->prev_pdf,
+                          hush__lights_triangle_pdf(L, st->h.hit.triangle, area, st->h.t, cos_l));
     }
-    for (int k = 0; k < 3; k++) beta[k] *= bs.weight[k];
-    if (!(max3(beta) > 0.0f)) return;
-    if (depth + 1 > it->rr_depth) {
-      const float q = hush_fminf(0.95f, max3(beta));
-      if (hush__rand(rng, base + D_RR) >= q) return;
-      for (int k = 0; k < 3; k++) beta[k] /= q;
+    add(it, out, vsum, st->beta, m->emission, w, depth, direct, st->share);
+    first_emission(out, depth, m->emission);
+  }
+  const hush_vec3 wo = hush_v3_scale(d, -1.0f);
+  hush_bsdf b;
+  hush__bsdf_setup(&b, m, sp, wo);
+  const int last = depth >= it->bounces;
+  const uint32_t base = DIM_PATH + DIMS_PER_VERTEX * (uint32_t)depth;
+  st->nee = hush__bsdf_has_smooth(&b) && hush__lights_any(L);
+  st->sr.traced = 0;
+  st->nee_share[0] = st->nee_share[1] = st->nee_share[2] = 1.0f;
+  if (st->nee)
+    /* at the first hit the light sample is split by lobe; later ones
+     * follow the first hit's split of the path */
+    next_event(it, st->rng, base, &b, sp->p, wo, last, &st->sr,
+               it->split_lobes && depth == 0 ? st->nee_share : NULL);
+  if (last) return;
+
+  const float u[3] = {hush__rand(st->rng, base + D_BSDF_LOBE),
+                      hush__rand(st->rng, base + D_BSDF_UV),
+                      hush__rand(st->rng, base + D_BSDF_UV + 1)};
+  hush_bsdf_sample *bs = &st->bs;
+  if (!hush__bsdf_sample(&b, wo, u, bs)) return;
+  if (it->split_lobes && depth == 0) {
+    /* the rest of the path is split as the first hit's lobes reflect
+     * the sampled direction: delta lobes are specular, a smooth
+     * direction by the lobes' values there (this vertex's light sample
+     * uses nee_share, not share) */
+    if (bs->delta) {
+      st->share[0] = st->share[1] = st->share[2] = 0.0f;
+    } else {
+      float fd[3], fs[3], pdf_l;
+      hush__bsdf_eval_lobes(&b, wo, bs->wi, fd, fs, &pdf_l);
+      diffuse_share(fd, fs, st->share);
     }
-    prev_pdf = bs.pdf;
-    prev_delta = bs.delta;
-    origin = offset_origin(sp->p, b.ng, bs.wi);
-    d = bs.wi;
-    out->rays++;
-    trace_ray(it, origin, d, &h);
+  }
+  for (int k = 0; k < 3; k++) st->nbeta[k] = st->beta[k] * bs->weight[k];
+  if (!(max3(st->nbeta) > 0.0f)) return;
+  if (depth + 1 > it->rr_depth) {
+    const float q = hush_fminf(0.95f, max3(st->nbeta));
+    if (hush__rand(st->rng, base + D_RR) >= q) return;
+    for (int k = 0; k < 3; k++) st->nbeta[k] /= q;
+  }
+  st->go = 1;
+  st->next_origin = offset_origin(sp->p, b.ng, bs->wi);
+}
+
+/* The vertex's rays: the path's next ray first, its hit's shading record
+ * prefetched, then the shadow ray, so the record arrives while Embree
+ * traverses the shadow ray. Neither ray depends on the other. Returns
+ * whether the shadow ray is blocked. */
+static int path_rays(const hush_integrator *it, path_state *st) {
+  if (st->go) {
+    const float oo[3] = {st->next_origin.x, st->next_origin.y, st->next_origin.z};
+    const float dd[3] = {st->bs.wi.x, st->bs.wi.y, st->bs.wi.z};
+    hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &st->next_tri);
+    hush__scene_prefetch_surface(it->scene, st->next_tri.triangle);
+  }
+  const shadow_ray *sr = &st->sr;
+  return sr->traced && hush__scene_occluded(it->scene, sr->o, sr->d, 0.0f, sr->tfar);
+}
+
+/* The vertex's shadow ray answered (`occluded`; ignored when none was
+ * traced): its light is added, the hook called, and the path moves on to
+ * its next hit or ends (st->done). */
+static void path_resolve(const hush_integrator *it, path_state *st, int occluded) {
+  hush_path_result *out = st->out;
+  const int depth = st->depth;
+  if (st->nee) {
+    float c[3] = {0.0f, 0.0f, 0.0f};
+    if (st->sr.traced) {
+      out->rays++;
+      if (!occluded) shadow_light(it, &st->sr, c);
+    }
+    const float one[3] = {1.0f, 1.0f, 1.0f};
+    float bc[3];
+    for (int k = 0; k < 3; k++) bc[k] = st->beta[k] * c[k];
+    add(it, out, st->vsum, one, bc, 1.0f, depth, depth == 0,
+        depth == 0 ? st->nee_share : st->share);
+  }
+  call_hook(it, st->x, st->y, st->rng, depth, st->sp, st->h.hit.triangle, st->beta, st->vsum);
+  if (!st->go) {
+    st->done = 1;
+    return;
+  }
+  for (int k = 0; k < 3; k++) st->beta[k] = st->nbeta[k];
+  st->prev_pdf = st->bs.pdf;
+  st->prev_delta = st->bs.delta;
+  st->origin = st->next_origin;
+  st->d = st->bs.wi;
+  out->rays++;
+  complete_hit(it, st->origin, st->d, &st->next_tri, &st->h);
+  st->depth = depth + 1;
+}
+
+static void shade_path(const hush_integrator *it, hush_vec3 eye, const hush_first_hit *first,
+                       const hush_rand *rng, uint32_t x, uint32_t y, hush_path_result *out) {
+  path_state st;
+  path_begin(&st, eye, first, rng, x, y, out);
+  for (;;) {
+    path_vertex(it, &st);
+    if (st.done) return;
+    path_resolve(it, &st, path_rays(it, &st));
+    if (st.done) return;
   }
 }
 
@@ -391,11 +523,10 @@ void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 
   hush__integrator_trace_hit(it, eye, d, &tri, rng, x, y, first, out);
 }
 
-void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
-                                const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
-                                hush_first_hit *first, hush_path_result *out) {
-  hush_first_hit local;
-  hush_first_hit *f = first ? first : &local;
+/* The first hit of a camera ray from eye along d whose closest triangle
+ * is tri: that triangle's surface, or a sphere light in front, or sky. */
+static void first_hit_of(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                         const hush_hit *tri, hush_first_hit *f) {
   memset(f, 0, sizeof *f);
   f->dir = d;
   next_hit h;
@@ -415,6 +546,54 @@ void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_v
     f->p = hush_v3_add(eye, hush_v3_scale(d, h.t));
     f->n = hush_v3_normalize(hush_v3_sub(f->p, hush_v3(c[0], c[1], c[2])));
   }
+}
+
+void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
+                                const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
+                                hush_first_hit *first, hush_path_result *out) {
+  hush_first_hit local;
+  hush_first_hit *f = first ? first : &local;
+  first_hit_of(it, eye, d, tri, f);
   hush__integrator_shade(it, eye, f, rng, x, y, out);
   out->rays++;
+}
+
+void hush__integrator_trace_block(const hush_integrator *it, hush_vec3 eye,
+                                  const float d[HUSH_PACKET][3], const hush_hit hits[HUSH_PACKET],
+                                  const hush_rand rng[HUSH_PACKET], const uint32_t x[HUSH_PACKET],
+                                  const uint32_t y[HUSH_PACKET], uint32_t lanes,
+                                  hush_first_hit first[HUSH_PACKET],
+                                  hush_path_result out[HUSH_PACKET]) {
+  path_state st[HUSH_PACKET];
+  for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+    if (!((lanes >> i) & 1u)) continue;
+    first_hit_of(it, eye, hush_v3(d[i][0], d[i][1], d[i][2]), &hits[i], &first[i]);
+    path_begin(&st[i], eye, &first[i], &rng[i], x[i], y[i], &out[i]);
+  }
+  /* One vertex of every path at a time: each path_vertex traces its
+   * path's next ray and prefetches the hit's record, which then has the
+   * other lanes' work to arrive in; and each stage's code stays in the
+   * instruction cache across the lanes. */
+  uint32_t active = lanes;
+  while (active) {
+    for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+      if (!((active >> i) & 1u)) continue;
+      path_vertex(it, &st[i]);
+      if (st[i].done) active &= ~(1u << i);
+    }
+    uint32_t blocked = 0;
+    for (uint32_t i = 0; i < HUSH_PACKET; i++)
+      if ((active >> i) & 1u) blocked |= (uint32_t)path_rays(it, &st[i]) << i;
+    for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+      if (!((active >> i) & 1u)) continue;
+      path_resolve(it, &st[i], (int)((blocked >> i) & 1u));
+      if (st[i].done) active &= ~(1u << i);
+    }
+  }
+  for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+    if (!((lanes >> i) & 1u)) continue;
+    if (it->path_end_fn)
+      it->path_end_fn(it->vertex_user, x[i], y[i], rng[i].sample, out[i].radiance);
+    out[i].rays++;
+  }
 }

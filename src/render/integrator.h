@@ -30,6 +30,7 @@
 #define HUSH_RENDER_INTEGRATOR_H
 
 #include "core/hmath.h"
+#include "core/rng.h"
 #include "render/lights.h"
 #include "render/scene.h"
 
@@ -51,9 +52,15 @@ typedef struct hush_rand {
 uint32_t hush__pixel_seed(uint32_t global_seed, uint32_t frame, uint32_t x, uint32_t y);
 void hush__rand_init(hush_rand *r, hush_sampler kind, uint32_t global_seed, uint32_t frame,
                      uint32_t x, uint32_t y, uint32_t sample, uint32_t spp);
+/* The LD sampler's number `dim` (hush__rand). */
+float hush__rand_ld(const hush_rand *r, uint32_t dim);
 /* Number `dim` of the sample, in [0, 1). Dimensions 0 and 1 place the
- * sample in the pixel; the path uses 4 + 8 * depth + i. */
-float hush__rand(const hush_rand *r, uint32_t dim);
+ * sample in the pixel; the path uses 4 + 8 * depth + i. Inline: a path
+ * asks for a dozen, and the default sampler is a few integer operations. */
+static inline float hush__rand(const hush_rand *r, uint32_t dim) {
+  if (r->kind != HUSH_SAMPLER_LD) return hush_rng_float(r->pixel_seed, dim, r->sample);
+  return hush__rand_ld(r, dim);
+}
 
 typedef struct hush_path_vertex {
   uint32_t x, y, sample;
@@ -131,6 +138,20 @@ void hush__integrator_trace(const hush_integrator *it, hush_vec3 eye, hush_vec3 
 void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
                                 const hush_hit *tri, const hush_rand *rng, uint32_t x, uint32_t y,
                                 hush_first_hit *first, hush_path_result *out);
+
+/* hush__integrator_trace_hit for the lanes of a block of camera rays from
+ * eye (bit i of `lanes`: lane i, direction d[i], closest triangle hits[i],
+ * numbers rng[i], pixel (x[i], y[i]); results in first[i] and out[i]),
+ * with the same results bit for bit: every ray is the same single ray and
+ * every lane's arithmetic its own. The paths advance together one vertex
+ * at a time, which lets a vertex's memory traffic (the next hit's shading
+ * record) overlap the other lanes' work. */
+void hush__integrator_trace_block(const hush_integrator *it, hush_vec3 eye,
+                                  const float d[HUSH_PACKET][3], const hush_hit hits[HUSH_PACKET],
+                                  const hush_rand rng[HUSH_PACKET], const uint32_t x[HUSH_PACKET],
+                                  const uint32_t y[HUSH_PACKET], uint32_t lanes,
+                                  hush_first_hit first[HUSH_PACKET],
+                                  hush_path_result out[HUSH_PACKET]);
 
 /* The first hit of visibility sample (triangle, u, v) at the scene's
  * current frame, seen from eye: what a forward-projected sample needs to be

@@ -845,7 +845,9 @@ static int sample_sphere(const hush_lights *L, uint32_t i, hush_vec3 p, float u1
   return s->pdf > 0.0f;
 }
 
-int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hush_light_sample *s) {
+/* hush__lights_sample, with the sun-and-sky radiance left out when `defer`. */
+static int sample_light(const hush_lights *L, hush_vec3 p, const float u[3], int defer,
+                        hush_light_sample *s) {
   memset(s, 0, sizeof *s);
   if (L->group_count == 0) return 0;
   /* pick a group with u[0], then reuse what is left of it */
@@ -862,6 +864,7 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
   const int sun = L->p_sun > 0.0f && (L->p_env <= 0.0f || x >= L->p_env);
   if (L->p_env <= 0.0f && !sun) return 0;
   s->dist = INFINITY;
+  defer = defer && L->env_type == HUSH_ENV_SUNSKY;
   if (sun || L->env_type == HUSH_ENV_CONSTANT) {
     if (sun) {
       s->wi = sample_cone_frame(L->sun_t, L->sun_b, L->sun_dir, L->sun_one_minus_cos, u[1], u[2]);
@@ -869,6 +872,20 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
       const float z = 1.0f - 2.0f * u[1], r = sqrtf(hush_fmaxf(0.0f, 1.0f - z * z));
       const float phi = 2.0f * L_PI * u[2];
       s->wi = hush_v3(r * cosf(phi), r * sinf(phi), z);
+    }
+    if (defer) {
+      /* hush__lights_env_eval's density, without its radiance; inside the
+       * sun it is positive whatever the map's share, which is then left
+       * for hush__lights_sample_finish too (a map lookup) */
+      const float *texel;
+      const int in = in_sun(L, s->wi);
+      s->deferred = 1;
+      if (in) {
+        s->deferred = 2;
+        return 1;
+      }
+      s->pdf = L->p_env * envmap_lookup(&L->map, s->wi, &texel);
+      return s->pdf > 0.0f && s->wi.y > 0.0f;
     }
     s->pdf = hush__lights_env_eval(L, s->wi, s->radiance);
     return s->pdf > 0.0f;
@@ -883,8 +900,34 @@ int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hus
     memcpy(s->radiance, texel, 3 * sizeof(float));
   } else {
     const int in = in_sun(L, s->wi);
+    if (defer) {
+      s->deferred = 1;
+      if (in) s->pdf += sun_pdf(L);
+      return s->pdf > 0.0f && (in || s->wi.y > 0.0f);
+    }
     sunsky_radiance(L, s->wi, in, s->radiance);
     if (in) s->pdf += sun_pdf(L);
   }
   return s->pdf > 0.0f;
+}
+
+int hush__lights_sample(const hush_lights *L, hush_vec3 p, const float u[3], hush_light_sample *s) {
+  return sample_light(L, p, u, 0, s);
+}
+
+int hush__lights_sample_deferred(const hush_lights *L, hush_vec3 p, const float u[3],
+                                 hush_light_sample *s) {
+  return sample_light(L, p, u, 1, s);
+}
+
+void hush__lights_sample_finish(const hush_lights *L, hush_light_sample *s) {
+  if (!s->deferred) return;
+  /* the sky is black below the horizon (sky_table_eval), so this is
+   * hush__lights_env_eval's radiance, as hush__lights_sample has it */
+  sunsky_radiance(L, s->wi, in_sun(L, s->wi), s->radiance);
+  if (s->deferred == 2) {
+    const float *texel;
+    s->pdf = L->p_env * envmap_lookup(&L->map, s->wi, &texel) + sun_pdf(L);
+  }
+  s->deferred = 0;
 }

@@ -109,12 +109,25 @@ typedef struct hush_light_sample {
   float radiance[3];       /* emitted radiance towards the point */
   float pdf;               /* solid angle, including the group choice */
   int delta;               /* never set now: every light has area */
+  int deferred;            /* hush__lights_sample_deferred: 1 radiance not set yet,
+                            * 2 nor pdf (a sun sample: pdf > 0 for sure) */
 } hush_light_sample;
 
 /* Draws a light and a point on it for the shading point p, from u in [0,1)^3.
  * Returns 0 if nothing was drawn (no light, or the point faces away). */
 int hush__lights_sample(const hush_lights *lights, hush_vec3 p, const float u[3],
                         hush_light_sample *s);
+/* The same draw, but the radiance of a sun or sky sample (the sky model:
+ * the costly part, wasted on a blocked shadow ray) is left for
+ * hush__lights_sample_finish: s->deferred is 1 and s->radiance not set. It
+ * returns 0 where hush__lights_sample's radiance would be exactly 0 for
+ * want of light (a sky direction below the horizon outside the sun), so
+ * a caller that skips zero radiance skips the same samples. A sun sample's
+ * density (a map lookup for the sky's share) is deferred too. Finishing
+ * gives hush__lights_sample's radiance and pdf bit for bit. */
+int hush__lights_sample_deferred(const hush_lights *lights, hush_vec3 p, const float u[3],
+                                 hush_light_sample *s);
+void hush__lights_sample_finish(const hush_lights *lights, hush_light_sample *s);
 
 /* Radiance of the environment (sky, map or constant, and the sun disc) along d. */
 void hush__lights_env_radiance(const hush_lights *lights, hush_vec3 d, float out[3]);

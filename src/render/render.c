@@ -51,7 +51,8 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
  * (hush__scene_intersect_packet), blocks aligned to multiples of BLOCK.
  * A packet's hits may depend on its other lanes (ties), so re-rendering one
  * pixel traces its whole block again: a packet is a pure function of the
- * camera and the block. */
+ * camera and the block. The block's paths are then shaded together,
+ * stage by stage (shade_block), each exactly as it would be alone. */
 #define BLOCK 4u
 _Static_assert(BLOCK * BLOCK == HUSH_PACKET, "a block is one packet");
 
@@ -81,24 +82,24 @@ static void trace_block(const hush_render_ctx *ctx, uint32_t x0, uint32_t y0, pr
   hush__scene_intersect_packet(ctx->scene, eye, (const float(*)[3])b->dir, lanes, b->hit);
 }
 
-/* Pixel (x, y), lane `lane` of its traced block b. */
-static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint32_t lane,
-                        uint32_t x, uint32_t y, uint32_t seed_frame, hush_pixel_result *out) {
+/* Pixel (x, y) from its sample 0 (r0, first hit first0, shaded with its
+ * block: shade_block) and its other samples, traced here. */
+static void finish_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint32_t seed_frame,
+                         const hush_path_result *r0, const hush_first_hit *first0,
+                         hush_pixel_result *out) {
   memset(out, 0, sizeof *out);
+  out->first = *first0;
   const hush_render_params *p = &ctx->params;
   double mean = 0.0, m2 = 0.0, sum[3] = {0, 0, 0}, dsum[3] = {0, 0, 0}, esum[3] = {0, 0, 0};
   double diff_sum[3] = {0, 0, 0}, spec_sum[3] = {0, 0, 0};
   for (uint32_t s = 0; s < p->spp; s++) {
-    hush_rand rng;
-    hush__rand_init(&rng, p->sampler, p->seed, seed_frame, x, y, s, p->spp);
-    hush_path_result r;
-    if (s == 0) {
-      const hush_vec3 d = hush_v3(b->dir[lane][0], b->dir[lane][1], b->dir[lane][2]);
-      hush__integrator_trace_hit(&ctx->it, ctx->cam.eye, d, &b->hit[lane], &rng, x, y,
-                                 &out->first, &r);
-    } else {
+    hush_path_result rs;
+    const hush_path_result *r = r0;
+    if (s > 0) {
       /* the other samples spread over the pixel, a box filter, when jitter
        * is on; they are single rays */
+      hush_rand rng;
+      hush__rand_init(&rng, p->sampler, p->seed, seed_frame, x, y, s, p->spp);
       float jx = ctx->cam.jitter[0], jy = ctx->cam.jitter[1];
       if (p->jitter) {
         jx = hush__rand(&rng, 0) - 0.5f;
@@ -106,18 +107,19 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
       }
       const hush_vec3 d = hush__camera_ray(&ctx->cam, (float)x + 0.5f + jx, (float)y + 0.5f + jy);
       hush_first_hit first;
-      hush__integrator_trace(&ctx->it, ctx->cam.eye, d, &rng, x, y, &first, &r);
+      hush__integrator_trace(&ctx->it, ctx->cam.eye, d, &rng, x, y, &first, &rs);
+      r = &rs;
     }
-    out->rays += r.rays;
+    out->rays += r->rays;
     for (int k = 0; k < 3; k++) {
-      sum[k] += r.radiance[k];
-      dsum[k] += r.direct[k];
-      esum[k] += r.emission[k];
-      diff_sum[k] += r.diffuse[k];
-      spec_sum[k] += r.specular[k];
+      sum[k] += r->radiance[k];
+      dsum[k] += r->direct[k];
+      esum[k] += r->emission[k];
+      diff_sum[k] += r->diffuse[k];
+      spec_sum[k] += r->specular[k];
     }
     /* Welford, in double: the same numbers in the same order, any thread */
-    const double l = hush_luminance(r.radiance[0], r.radiance[1], r.radiance[2]);
+    const double l = hush_luminance(r->radiance[0], r->radiance[1], r->radiance[2]);
     const double delta = l - mean;
     mean += delta / (double)(s + 1);
     m2 += delta * (l - mean);
@@ -136,12 +138,53 @@ static void shade_pixel(const hush_render_ctx *ctx, const primary_block *b, uint
   out->variance = p->spp > 1 ? (float)(m2 / (p->spp - 1)) : 0.0f;
 }
 
+/* The pixels of `lanes` of the traced block b (corner x0, y0) with the
+ * numbers of frame seed_frame: sample 0 of all of them together
+ * (hush__integrator_trace_block; each lane's result is its own, whatever
+ * the other lanes), then each pixel's other samples. */
+static void shade_block(const hush_render_ctx *ctx, const primary_block *b, uint32_t x0,
+                        uint32_t y0, uint32_t lanes, uint32_t seed_frame,
+                        hush_pixel_result out[HUSH_PACKET]) {
+  const hush_render_params *p = &ctx->params;
+  hush_rand rng[HUSH_PACKET];
+  uint32_t xs[HUSH_PACKET], ys[HUSH_PACKET];
+  hush_first_hit first[HUSH_PACKET];
+  hush_path_result r0[HUSH_PACKET];
+  for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+    xs[i] = x0 + i % BLOCK;
+    ys[i] = y0 + i / BLOCK;
+    if ((lanes >> i) & 1u)
+      hush__rand_init(&rng[i], p->sampler, p->seed, seed_frame, xs[i], ys[i], 0, p->spp);
+  }
+  hush__integrator_trace_block(&ctx->it, ctx->cam.eye, (const float(*)[3])b->dir, b->hit, rng, xs,
+                               ys, lanes, first, r0);
+  for (uint32_t i = 0; i < HUSH_PACKET; i++)
+    if ((lanes >> i) & 1u) finish_pixel(ctx, xs[i], ys[i], seed_frame, &r0[i], &first[i], &out[i]);
+}
+
+/* The lanes of the block at (x0, y0) that a frame shades: inside the image
+ * and, with a progressive pattern, traced this frame. */
+static uint32_t block_lanes(const hush_render_ctx *ctx, uint32_t x0, uint32_t y0) {
+  const hush_render_params *p = &ctx->params;
+  uint32_t lanes = 0;
+  for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+    const uint32_t x = x0 + i % BLOCK, y = y0 + i / BLOCK;
+    if (x >= p->width || y >= p->height) continue;
+    if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) continue;
+    lanes |= 1u << i;
+  }
+  return lanes;
+}
+
 void hush__render_pixel(const hush_render_ctx *ctx, uint32_t x, uint32_t y, uint32_t seed_frame,
                         hush_pixel_result *out) {
   primary_block b;
   const uint32_t x0 = x - x % BLOCK, y0 = y - y % BLOCK;
+  const uint32_t lane = (y - y0) * BLOCK + (x - x0);
   trace_block(ctx, x0, y0, &b);
-  shade_pixel(ctx, &b, (y - y0) * BLOCK + (x - x0), x, y, seed_frame, out);
+  hush_pixel_result r[HUSH_PACKET];
+  shade_block(ctx, &b, x0, y0, 1u << lane, seed_frame, r);
+  *out = r[lane];
 }
 
 /* Tile edge in pixels (see hush__render_frame), a multiple of BLOCK. */
@@ -382,25 +425,31 @@ hush_status hush__render_frame(hush_device device, const hush_render_ctx *ctx, h
   for (uint32_t t = 0; t < tiles; t++) {
     const uint32_t x0 = (t % tx) * TILE, y0 = (t / tx) * TILE;
     const uint32_t x1 = x0 + TILE < W ? x0 + TILE : W, y1 = y0 + TILE < H ? y0 + TILE : H;
+    /* blocks never straddle tiles (TILE is a multiple of BLOCK) */
     for (uint32_t by = y0; by < y1; by += BLOCK)
       for (uint32_t bx = x0; bx < x1; bx += BLOCK) {
-        primary_block b;
-        int traced = 0;
+        const uint32_t lanes = block_lanes(ctx, bx, by);
         for (uint32_t i = 0; i < HUSH_PACKET; i++) {
           const uint32_t x = bx + i % BLOCK, y = by + i / BLOCK;
-          if (x >= x1 || y >= y1) continue;
-          if (p->progressive && !hush__progressive_traced(p->progressive, x, y, ctx->frame)) {
-            write_hole(ctx, &L, x, y);
-            continue;
-          }
-          if (!traced) trace_block(ctx, bx, by, &b);
-          traced = 1;
-          hush_pixel_result r;
-          /* A-SVGF: a forward-projected gradient sample may take the pixel */
-          if (!p->gradients || !hush__gradients_shade(p->gradients, ctx, x, y, &b.hit[i], &r))
-            shade_pixel(ctx, &b, i, x, y, ctx->frame, &r);
-          write_pixel(ctx, &L, x, y, &r);
-          total += r.rays;
+          if (x < W && y < H && !((lanes >> i) & 1u)) write_hole(ctx, &L, x, y);
+        }
+        if (!lanes) continue;
+        primary_block b;
+        trace_block(ctx, bx, by, &b);
+        hush_pixel_result r[HUSH_PACKET];
+        uint32_t shade = lanes;
+        /* A-SVGF: a forward-projected gradient sample may take a pixel */
+        if (p->gradients)
+          for (uint32_t i = 0; i < HUSH_PACKET; i++)
+            if (((lanes >> i) & 1u) &&
+                hush__gradients_shade(p->gradients, ctx, bx + i % BLOCK, by + i / BLOCK, &b.hit[i],
+                                      &r[i]))
+              shade &= ~(1u << i);
+        shade_block(ctx, &b, bx, by, shade, ctx->frame, r);
+        for (uint32_t i = 0; i < HUSH_PACKET; i++) {
+          if (!((lanes >> i) & 1u)) continue;
+          write_pixel(ctx, &L, bx + i % BLOCK, by + i / BLOCK, &r[i]);
+          total += r[i].rays;
         }
       }
     uint32_t done;

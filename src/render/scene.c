@@ -585,6 +585,16 @@ void hush__scene_surface(const hush_scene *scene, const hush_hit *hit, const flo
   }
 }
 
+void hush__scene_prefetch_surface(const hush_scene *scene, uint32_t triangle) {
+  const rtc_state *rs = scene ? scene->rtc_data : NULL;
+  if (!rs || triangle >= scene->triangle_count) return;
+  /* both lines of the record (the adjacent-line prefetcher may not pair
+   * software prefetches) */
+  const char *r = (const char *)&rs->records[triangle];
+  __builtin_prefetch(r, 0, 3);
+  __builtin_prefetch(r + 64, 0, 3);
+}
+
 hush_vec3 hush__scene_point(const hush_scene *scene, uint32_t triangle, float u, float v,
                             uint32_t frame) {
   if (!scene || triangle >= scene->triangle_count) return hush_v3(0.0f, 0.0f, 0.0f);

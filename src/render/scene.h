@@ -241,6 +241,12 @@ typedef struct hush_surface {
 void hush__scene_surface(const hush_scene *scene, const hush_hit *hit, const float d[3],
                          hush_surface *s);
 
+/* Asks the cache for what hush__scene_surface will read of `triangle`
+ * (its shading record), so that the miss of an incoherent hit overlaps
+ * other work (a shadow ray's traversal). A hint: no effect on results;
+ * triangle UINT32_MAX (no hit) does nothing. */
+void hush__scene_prefetch_surface(const hush_scene *scene, uint32_t triangle);
+
 /* World position of (triangle, u, v) at frame f (forward projection of a
  * visibility-buffer sample into another frame). */
 hush_vec3 hush__scene_point(const hush_scene *scene, uint32_t triangle, float u, float v,
