@@ -75,6 +75,7 @@ static hush_gradient_params default_params(void) {
   p.sigma_n = 128.0f;
   p.sigma_l = 4.0f;
   p.exponent = 1.0f;
+  p.threshold = 0.0f;
   return p;
 }
 
@@ -119,6 +120,19 @@ static void test_lambda_extremes(void) {
     compute(&g, &p, 1);
     CHECK_NEAR(lambda_at(&g, 25, 15), 0.25f, 1e-4f);
     CHECK_NEAR(lambda_at(&g, 49, 30), 0.25f, 1e-4f);
+    /* the noise floor: r = 0.5 with t = 0.2 is (0.5 - 0.2) / 0.8 = 0.375, squared; a gradient
+     * below the floor is 0, a full one stays exactly 1 */
+    p.threshold = 0.2f;
+    compute(&g, &p, 2);
+    CHECK_NEAR(lambda_at(&g, 25, 15), 0.140625f, 1e-4f);
+    p.threshold = 0.6f;
+    compute(&g, &p, 2);
+    CHECK(lambda_at(&g, 25, 15) == 0.0f);
+    for (int sy = 0; sy < hs; sy++)
+      for (int sx = 0; sx < ws; sx++) put_sample(&g, sx, sy, 0.0f, 0.7f, 4);
+    compute(&g, &p, 2);
+    CHECK(lambda_at(&g, 25, 15) == 1.0f);
+    p.threshold = 0.0f;
   }
   /* no sample anywhere: no evidence of change */
   for (int sy = 0; sy < hs; sy++)

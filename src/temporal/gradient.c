@@ -265,11 +265,15 @@ static void level(const level_ctx *L, int threads) {
 /* ---- 3. lambda ----------------------------------------------------------- */
 
 static void stratum_lambda(const float *d, const float *n, const float *v, size_t count,
-                           float exponent, float *lambda, int threads) {
+                           float exponent, float threshold, float *lambda, int threads) {
+  const float t = threshold > 0.0f ? (threshold < 0.99f ? threshold : 0.99f) : 0.0f;
+  const float inv_range = 1.0f / (1.0f - t);
 #pragma omp parallel for simd schedule(static) num_threads(threads)
   for (size_t s = 0; s < count; s++) {
     const int ok = (v[s] > 0.0f) & (n[s] > GRADIENT_NORM_MIN);
-    const float r0 = fabsf(d[s]) / hush__select_bits(ok, n[s], 1.0f);
+    const float q = fabsf(d[s]) / hush__select_bits(ok, n[s], 1.0f);
+    /* the noise floor (t = 0: r0 = q exactly) */
+    const float r0 = hush__select_bits(q > t, (q - t) * inv_range, 0.0f);
     const float r = hush__select_bits(ok & !(r0 < 1.0f), 1.0f, hush__select_bits(ok, r0, 0.0f));
     /* r^exponent, r in [0, 1]; exactly 0 and 1 kept */
     const float pw = exp2_neg(exponent * log2_pos(r));
@@ -373,7 +377,8 @@ void hush__gradient_lambda(const float *const gradient[3], const hush_gradient_g
     cur = 1 - cur;
   }
   const int fin = cur ? G_D1 : G_D0;
-  stratum_lambda(g[fin], g[fin + 1], g[fin + 2], S, params->exponent, g[G_LAMBDA], threads);
+  stratum_lambda(g[fin], g[fin + 1], g[fin + 2], S, params->exponent, params->threshold,
+                 g[G_LAMBDA], threads);
   float *zr = scratch + (size_t)G_PLANES * S, *lr = zr + (size_t)hs * rep_row(width);
   expand(g[G_LAMBDA], g[G_Z], ws, hs, guides->depth, width, height, zr, lr, lambda, threads);
 }

@@ -18,7 +18,8 @@
  *      with weights h * w_z * w_n * w_l * valid_q (SVGF's w_z and w_n;
  *      w_l = exp(-|l_p - l_q| / (sigma_l max(l_p, l_q) + 1e-4)), relative
  *      because no variance is known at stratum resolution).
- *   3. lambda_s = min(|delta~| / norm~, 1) ^ exponent, 0 where norm~ <= 1e-6
+ *   3. lambda_s = (max(0, min(|delta~| / norm~, 1) - t) / (1 - t)) ^ exponent, 0 where
+ *      norm~ <= 1e-6 (t: threshold, 0 in the papers)
  *      or no valid sample reached the stratum (no evidence of change: keep
  *      the history).
  *   4. Per pixel (joint nearest-neighbour upsampling): the lambda of the
@@ -45,6 +46,10 @@ typedef struct hush_gradient_params {
   float sigma_n;  /* normal weight exponent, as SVGF's sigma_n (>= 0) */
   float sigma_l;  /* relative luminance weight (> 0) */
   float exponent; /* lambda = ratio^exponent (> 0): 1 Schied 2018, 2 Higginson 2023 */
+  /* noise floor in [0, 1): the ratio is first mapped to max(0, ratio - t) / (1 - t), so
+   * that gradients of the size 1 spp noise gives (a glossy lobe seen from a moved camera
+   * takes another path with the same numbers) keep the history; 0: none (the papers) */
+  float threshold;
 } hush_gradient_params;
 
 /* The current frame's guides, W x H planar floats, borrowed for the call. */

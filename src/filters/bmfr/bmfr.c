@@ -80,6 +80,7 @@ enum {
   P_GRADIENT_SIGMA_L,
   P_GRADIENT_EXPONENT,
   P_HISTORY_RULE,
+  P_GRADIENT_THRESHOLD,
   P_COUNT
 };
 
@@ -171,6 +172,8 @@ static const hush_param_info bmfr_params[P_COUNT] = {
      "with temporal_gradients: schied, a = (1 - lambda) max(alpha, 1/N) + lambda, or higginson, "
      "N' = min((N - 1)(1 - lambda)^10 + 1, max_age); the count becomes min(N, 1/a), as asvgf",
      history_rule_names},
+    {"gradient_threshold", HUSH_PARAM_FLOAT, 0.0, 0.0, 0.99,
+     "with temporal_gradients: noise floor of the relative gradient, as asvgf", NULL},
 };
 
 enum {
@@ -559,6 +562,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
     st->ad.params.sigma_n = GRADIENT_SIGMA_N;
     st->ad.params.sigma_l = hush__param_f(f, P_GRADIENT_SIGMA_L);
     st->ad.params.exponent = hush__param_f(f, P_GRADIENT_EXPONENT);
+    st->ad.params.threshold = hush__param_f(f, P_GRADIENT_THRESHOLD);
     st->ad.rule = hush__param_i(f, P_HISTORY_RULE) ? HUSH_HISTORY_HIGGINSON : HUSH_HISTORY_SCHIED;
     const hush_gbuffer_store *cur = hush__reprojector_latest(&st->rp);
     bmfr_adaptive_history(&st->ad, &st->acc, had_history, &st->rp.plan,

@@ -22,6 +22,7 @@ enum {
   P_GRADIENT_SIGMA_L,
   P_GRADIENT_EXPONENT,
   P_HISTORY_RULE,
+  P_GRADIENT_THRESHOLD,
   P_ASVGF_COUNT
 };
 
@@ -50,6 +51,11 @@ static const hush_param_info asvgf_params[P_ASVGF_COUNT] = {
      "default: where some light remains, lambda = 1 - c/p < 1 and schied keeps that stale "
      "fraction; light-off 96x54, lit region at the change: +19% over the truth vs +1%)",
      asvgf_rule_names},
+    {"gradient_threshold", HUSH_PARAM_FLOAT, 0.0, 0.0, 0.99,
+     "noise floor of the relative gradient: lambda is computed from max(0, r - t) / (1 - t), "
+     "r = |delta~| / max(current~, previous~), so that gradients of the size of the 1 spp "
+     "noise keep the history (0: none, as the papers)",
+     NULL},
 };
 
 enum { I_GRADIENT = I_COUNT, I_ASVGF_COUNT };
@@ -106,6 +112,7 @@ static hush_status asvgf_execute(hush_filter f, void *state, const hush_frame_in
   gp->sigma_n = hush__param_f(f, P_SIGMA_N);
   gp->sigma_l = hush__param_f(f, P_GRADIENT_SIGMA_L);
   gp->exponent = hush__param_f(f, P_GRADIENT_EXPONENT);
+  gp->threshold = hush__param_f(f, P_GRADIENT_THRESHOLD);
   st->ad.rule = hush__param_i(f, P_HISTORY_RULE) ? HUSH_HISTORY_HIGGINSON : HUSH_HISTORY_SCHIED;
   return svgf_run(f, st->svgf, info, &st->ad);
 }
