@@ -4,7 +4,11 @@
  * evenly (clipped at the edges); the changed region is exactly the pixels that stepped;
  * an exponential moving average with weight a after a step is within 10%
  * after the frames 0.6 (1 - a)^(k+1) <= 0.1 * 0.2 predicts, no history
- * gives 0 and a filter that never follows gives -1; the shift lag finds an
+ * gives 0 and a filter that never follows gives -1; split by sign, the
+ * brightened and darkened parts are exactly the pixels that stepped up and
+ * down, and where one part brightens as much as another darkens (a light
+ * that jumps) a trailing filter reads 0 unsigned but its EMA lag by sign;
+ * the shift lag finds an
  * integer delay exactly, a half-frame blend at k + 0.5, keeps it under
  * noise, and an exponential moving average on a steady ramp trails it by
  * (1 - a) / a frames.
@@ -115,6 +119,77 @@ static void test_event(void) {
   CHECK(ema_event_lag(0.0) == -1); /* never follows */
 }
 
+/* Signed region: the lit square darkens, the band below it (y >= 34)
+ * brightens, the rest stays; NaN is in neither part. */
+static void test_region_signed(void) {
+  static float m[N];
+  for (int i = 0; i < N; i++) {
+    const int band = i / W >= 34;
+    prev[i] = lit(i) ? 0.8f : 0.2f;
+    cur[i] = lit(i) ? 0.2f : band ? 0.6f : 0.2f;
+  }
+  prev[0] = NAN;
+  size_t part[2];
+  const size_t c = hush__lag_region_signed(prev, cur, N, HUSH_LAG_THRESHOLD, m, part);
+  CHECK(part[0] == (size_t)(14 * W) && part[1] == 24 * 22 && c == part[0] + part[1]);
+  int right = 1;
+  for (int i = 0; i < N; i++)
+    right &= m[i] == (lit(i) ? -1.0f : i / W >= 34 ? 1.0f : 0.0f);
+  CHECK(right);
+  CHECK_NEAR(hush__lag_region_mean_of(cur, m, 1.0f, N), 0.6, 1e-6);
+  CHECK_NEAR(hush__lag_region_mean_of(cur, m, -1.0f, N), 0.2, 1e-6);
+  memset(m, 0, sizeof m);
+  CHECK(isnan(hush__lag_region_mean_of(cur, m, 1.0f, N)));
+}
+
+/* A light that jumps: one region of equal size goes 0.2 -> 0.6, another
+ * 0.6 -> 0.2, and a filter that keeps history (an EMA of weight 0.2)
+ * trails both. Over the whole changed region the two errors cancel
+ * exactly, so the unsigned event lag reads 0; by sign it is the EMA's lag
+ * on a step of 0.4 towards 0.2: 0.4 (0.8)^(k+1) <= 0.02, k = 13 (the
+ * brightened part, 0.6, is within 10% sooner: 0.4 (0.8)^(k+1) <= 0.06). */
+static void test_event_signed(void) {
+  static float ref[N], out[N], m[N], before[N], after[N];
+  /* the left half of the square brightens, the right half darkens */
+  for (int i = 0; i < N; i++) {
+    const int up = lit(i) && i % W < 28, down = lit(i) && i % W >= 28;
+    before[i] = up ? 0.2f : down ? 0.6f : 0.4f;
+    after[i] = up ? 0.6f : down ? 0.2f : 0.4f;
+  }
+  size_t part[2];
+  hush__lag_region_signed(before, after, N, HUSH_LAG_THRESHOLD, m, part);
+  CHECK(part[0] == part[1] && part[0] > 0);
+  for (int i = 0; i < N; i++) mask[i] = m[i] != 0.0f ? 1.0f : 0.0f;
+  double all_out[FRAMES], all_ref[FRAMES], s_out[2][FRAMES], s_ref[2][FRAMES];
+  memcpy(out, before, sizeof out);
+  memcpy(ref, after, sizeof ref);
+  for (int k = 0; k < FRAMES; k++) {
+    for (int i = 0; i < N; i++) out[i] = 0.8f * out[i] + 0.2f * ref[i];
+    all_out[k] = hush__lag_region_mean(out, mask, N);
+    all_ref[k] = hush__lag_region_mean(ref, mask, N);
+    for (int s = 0; s < 2; s++) {
+      s_out[s][k] = hush__lag_region_mean_of(out, m, s ? -1.0f : 1.0f, N);
+      s_ref[s][k] = hush__lag_region_mean_of(ref, m, s ? -1.0f : 1.0f, N);
+    }
+  }
+  CHECK(hush__lag_event(all_out, all_ref, FRAMES, HUSH_LAG_TOLERANCE) == 0);
+  const double *const o2[2] = {s_out[0], s_out[1]}, *const r2[2] = {s_ref[0], s_ref[1]};
+  const int both[2] = {1, 1}, up_only[2] = {1, 0}, none[2] = {0, 0};
+  const int lag_down = (int)ceil(log(0.02 / 0.4) / log(0.8) - 1.0 - 1e-9);
+  const int lag_up = (int)ceil(log(0.06 / 0.4) / log(0.8) - 1.0 - 1e-9);
+  CHECK(lag_down == 13 && lag_up > 0 && lag_up < lag_down);
+  CHECK_MSG(hush__lag_event_signed(o2, r2, both, FRAMES, HUSH_LAG_TOLERANCE) == lag_down,
+            "signed lag %d, expected %d",
+            hush__lag_event_signed(o2, r2, both, FRAMES, HUSH_LAG_TOLERANCE), lag_down);
+  CHECK(hush__lag_event_signed(o2, r2, up_only, FRAMES, HUSH_LAG_TOLERANCE) == lag_up);
+  CHECK(hush__lag_event_signed(o2, r2, none, FRAMES, HUSH_LAG_TOLERANCE) == -2);
+  /* a part that never follows makes the event's lag -1 */
+  for (int k = 0; k < FRAMES; k++) s_out[1][k] = 0.6;
+  CHECK(hush__lag_event_signed(o2, r2, both, FRAMES, HUSH_LAG_TOLERANCE) == -1);
+  /* no history: 0 */
+  CHECK(hush__lag_event_signed(r2, r2, both, FRAMES, HUSH_LAG_TOLERANCE) == 0);
+}
+
 /* A pattern moving one pixel per frame: ref(t)(x) = ramp of x - t. */
 static float ramp(int i, double t) {
   const double x = i % W, y = i / W;
@@ -172,6 +247,8 @@ int main(void) {
   test_saturated();
   test_region();
   test_event();
+  test_region_signed();
+  test_event_signed();
   test_shift();
   return check_summary();
 }

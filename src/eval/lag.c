@@ -72,6 +72,31 @@ size_t hush__lag_region(const float *prev, const float *cur, size_t n, float thr
   return count;
 }
 
+size_t hush__lag_region_signed(const float *prev, const float *cur, size_t n, float threshold,
+                               float *mask, size_t count[2]) {
+  size_t up = 0, down = 0;
+  for (size_t i = 0; i < n; i++) {
+    const float d = cur[i] - prev[i]; /* NaN fails both tests: 0 */
+    const int u = d > threshold, w = d < -threshold;
+    mask[i] = (float)(u - w);
+    up += (size_t)u;
+    down += (size_t)w;
+  }
+  count[0] = up;
+  count[1] = down;
+  return up + down;
+}
+
+double hush__lag_region_mean_of(const float *y, const float *mask, float value, size_t n) {
+  double sum = 0.0, count = 0.0;
+  for (size_t i = 0; i < n; i++) {
+    const double in = mask[i] == value ? 1.0 : 0.0;
+    sum += in * y[i];
+    count += in;
+  }
+  return count > 0.0 ? sum / count : NAN;
+}
+
 double hush__lag_region_mean(const float *y, const float *mask, size_t n) {
   double sum = 0.0, count = 0.0;
   for (size_t i = 0; i < n; i++) {
@@ -86,6 +111,18 @@ int hush__lag_event(const double *out_mean, const double *ref_mean, uint32_t cou
   for (uint32_t k = 0; k < count; k++)
     if (fabs(out_mean[k] - ref_mean[k]) <= tolerance * fabs(ref_mean[k])) return (int)k;
   return -1;
+}
+
+int hush__lag_event_signed(const double *const out_mean[2], const double *const ref_mean[2],
+                           const int use[2], uint32_t count, double tolerance) {
+  int lag = -2;
+  for (int s = 0; s < 2; s++) {
+    if (!use[s]) continue;
+    const int k = hush__lag_event(out_mean[s], ref_mean[s], count, tolerance);
+    if (k < 0) return -1; /* one part never follows: neither does the event */
+    if (k > lag) lag = k;
+  }
+  return lag;
 }
 
 void hush__lag_shift_add(const float *out, const float *const *ref, const float *mask,

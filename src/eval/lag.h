@@ -10,15 +10,21 @@
  * be. Both are defined by the references alone and are the same for every
  * filter (docs/eval.md "Lag"):
  *
- *   event lag  a change at frame K (a light switched off): the changed
- *              region R is the set of pixels whose reference luminance,
- *              averaged over a (2 HUSH_LAG_RADIUS + 1)^2 box, changes by
- *              more than HUSH_LAG_THRESHOLD between frames K-1 and K (the
- *              box keeps the references' own noise out: a region chosen
- *              where a noisy reference happens to change would favour
- *              bright noise in it). The lag is the number of frames after K until the
- *              filter's mean luminance over R is within HUSH_LAG_TOLERANCE
- *              (10%) of the reference's mean over R (0: already at K).
+ *   event lag  a change at frame K (a light switched off, a light that
+ *              jumps): the changed region R is the set of pixels whose
+ *              reference luminance, averaged over a (2 HUSH_LAG_RADIUS +
+ *              1)^2 box, changes by more than HUSH_LAG_THRESHOLD between
+ *              frames K-1 and K (the box keeps the references' own noise
+ *              out: a region chosen where a noisy reference happens to
+ *              change would favour bright noise in it). R is split by the
+ *              sign of the change into the brightened part R+ and the
+ *              darkened part R- (where a light jumps, a filter that keeps
+ *              the old lighting is too dark in R+ and too bright in R-, and
+ *              over all of R the two cancel). Each part that covers at
+ *              least HUSH_LAG_MIN_PART of the frame is lagged: the number
+ *              of frames after K until the filter's mean luminance over it
+ *              is within HUSH_LAG_TOLERANCE (10%) of the reference's mean
+ *              over it (0: already at K); the event lag is the larger.
  *   shift lag  continuous change (a moving light): the shift k, 0..S-1, of
  *              the reference sequence that the filter's output matches
  *              best, argmin_k of the sum over frames t and the pixels of
@@ -52,6 +58,9 @@
 #define HUSH_LAG_TOLERANCE 0.1
 /* An event needs at least this fraction of the frame to change. */
 #define HUSH_LAG_MIN_REGION 0.05
+/* A part of the event region (brightened, darkened) is lagged when it
+ * covers at least this fraction of the frame. */
+#define HUSH_LAG_MIN_PART 0.01
 /* Largest shift the shift lag tries. */
 #define HUSH_LAG_MAX_SHIFT 8u
 
@@ -74,8 +83,19 @@ void hush__lag_mark_saturated(const float *y, uint32_t width, uint32_t height, i
 size_t hush__lag_region(const float *prev, const float *cur, size_t n, float threshold,
                         float *mask);
 
+/* The event region by sign: mask[i] = +1 where cur[i] - prev[i] >
+ * threshold (brightened), -1 where it is < -threshold (darkened), else 0
+ * (also where either is NaN). count[0]: the brightened pixels, count[1]:
+ * the darkened ones; returns their sum. */
+size_t hush__lag_region_signed(const float *prev, const float *cur, size_t n, float threshold,
+                               float *mask, size_t count[2]);
+
 /* Mean of y over the pixels where mask is 1 (NaN for an empty mask). */
 double hush__lag_region_mean(const float *y, const float *mask, size_t n);
+
+/* Mean of y over the pixels where mask equals `value` (+1, -1; NaN when
+ * there are none). */
+double hush__lag_region_mean_of(const float *y, const float *mask, float value, size_t n);
 
 /*
  * Event lag: out_mean[k] and ref_mean[k] are the region means at frame
@@ -84,6 +104,15 @@ double hush__lag_region_mean(const float *y, const float *mask, size_t n);
  */
 int hush__lag_event(const double *out_mean, const double *ref_mean, uint32_t count,
                     double tolerance);
+
+/*
+ * Event lag by sign: out_mean[s][k], ref_mean[s][k] as for hush__lag_event
+ * for part s (0: brightened, 1: darkened); a part is lagged when use[s] is
+ * non-zero. Returns the larger of the parts' lags, -1 when a lagged part
+ * never comes within the tolerance, -2 when no part is used.
+ */
+int hush__lag_event_signed(const double *const out_mean[2], const double *const ref_mean[2],
+                           const int use[2], uint32_t count, double tolerance);
 
 /* Shift lag, per frame: sse[k] += sum over pixels of mask (out - ref[k])^2
  * for k < shifts, ref[k] the reference k frames before out's frame; mask
