@@ -562,8 +562,17 @@ static void lag_reference(eval_run *r, uint32_t i) {
   r->lag_box_prev = r->lag_box;
   r->lag_box = t;
   hush__lag_luminance(r->ref_rgb, r->pixels, r->lag_ref_luma);
-  /* lag_luma is free until the filters run: the box's scratch */
+  /* lag_luma and lag_candidate are free here: scratch. The box is NaN
+   * within the box of a saturated pixel, so that both regions below leave
+   * out what is saturated in either of their frames (the light itself and
+   * its clamped glow: every filter follows a light seen directly, and the
+   * clamped edges would outweigh the shading). The shift region once took
+   * this frame's box unmarked: the pixels the moving light had just
+   * reached then dominated its sums and pinned every filter's shift lag
+   * near 0 (docs/results/asvgf-lag.md). */
   hush__lag_box(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma, r->lag_box);
+  hush__lag_mark_saturated(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma,
+                           r->lag_candidate, r->lag_box);
   if (i > r->first && (r->lag_fixed == UINT32_MAX || r->lag_fixed == i)) {
     size_t part[2];
     const size_t c = hush__lag_region_signed(r->lag_box_prev, r->lag_box, r->pixels,
@@ -587,9 +596,6 @@ static void lag_reference(eval_run *r, uint32_t i) {
   const uint32_t S = r->lag_shifts;
   memcpy(r->lag_ring[i % S], r->lag_ref_luma, r->pixels * sizeof(float));
   memcpy(r->lag_ring_box[i % S], r->lag_box, r->pixels * sizeof(float));
-  /* lag_luma and the shift mask are free here: scratch */
-  hush__lag_mark_saturated(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma,
-                           r->lag_shift_mask, r->lag_ring_box[i % S]);
   /* the shift region: what changed over the S frames the shifts span */
   if (i + 1 >= r->first + S)
     hush__lag_region(r->lag_ring_box[(i + 1) % S], r->lag_box, r->pixels, HUSH_LAG_THRESHOLD,
