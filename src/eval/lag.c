@@ -138,6 +138,46 @@ void hush__lag_shift_add(const float *out, const float *const *ref, const float 
   }
 }
 
+void hush__lag_shift_add_pixels(const float *out, const float *const *ref, uint32_t shifts,
+                                size_t n, double *sse) {
+  for (size_t i = 0; i < n; i++)
+    for (uint32_t k = 0; k < shifts; k++) {
+      const double d = (double)out[i] - ref[k][i];
+      sse[i * shifts + k] += d * d;
+    }
+}
+
+void hush__lag_range_add(const float *boxed, size_t n, float *lo, float *hi) {
+  for (size_t i = 0; i < n; i++) {
+    const float v = boxed[i];
+    if (v != v || lo[i] != lo[i]) { /* NaN now or before: out for good */
+      lo[i] = hi[i] = NAN;
+      continue;
+    }
+    lo[i] = v < lo[i] ? v : lo[i];
+    hi[i] = v > hi[i] ? v : hi[i];
+  }
+}
+
+size_t hush__lag_range_region(const float *lo, const float *hi, size_t n, float threshold,
+                              float *mask) {
+  size_t count = 0;
+  for (size_t i = 0; i < n; i++) {
+    const int in = hi[i] - lo[i] > threshold; /* NaN: 0 */
+    mask[i] = in ? 1.0f : 0.0f;
+    count += (size_t)in;
+  }
+  return count;
+}
+
+void hush__lag_shift_sum(const double *pixels, const float *mask, uint32_t shifts, size_t n,
+                         double *sse) {
+  for (uint32_t k = 0; k < shifts; k++) sse[k] = 0.0;
+  for (size_t i = 0; i < n; i++)
+    if (mask[i] != 0.0f)
+      for (uint32_t k = 0; k < shifts; k++) sse[k] += (double)mask[i] * pixels[i * shifts + k];
+}
+
 double hush__lag_shift(const double *sse, uint32_t shifts) {
   if (shifts == 0) return NAN;
   uint32_t best = 0;

@@ -28,16 +28,21 @@
  *   shift lag  continuous change (a moving light): the shift k, 0..S-1, of
  *              the reference sequence that the filter's output matches
  *              best, argmin_k of the sum over frames t and the pixels of
- *              frame t's shift region of (Y_out(t) - Y_ref(t - k))^2
- *              (the region: where the box-averaged reference changes by
- *              more than HUSH_LAG_THRESHOLD from frame t - S + 1 to t, the
- *              pixels that carry the change, less those within the box of
- *              a saturated pixel, Y = 1, in either frame: a light seen
- *              directly moves with the motion vectors, which every filter
- *              follows, and its clamped edges would outweigh the shading
- *              whose history the lag is about), refined to a fraction of a
- *              frame by the parabola through the minimum and its two
- *              neighbours. A filter that trails the reference by L frames
+ *              the shift region of (Y_out(t) - Y_ref(t - k))^2, refined to
+ *              a fraction of a frame by the parabola through the minimum
+ *              and its two neighbours. The shift region is one set for the
+ *              whole run: the pixels whose box-averaged reference ranges
+ *              over more than HUSH_LAG_THRESHOLD across the frames (max -
+ *              min), less those within the box of a saturated pixel, Y = 1,
+ *              in any frame (a light seen directly moves with the motion
+ *              vectors, which every filter follows, and its clamped edges
+ *              would outweigh the shading whose history the lag is about).
+ *              One region, not one per frame: a region chosen per frame t
+ *              from references t and t - S + 1 is chosen where their noise
+ *              happens to exaggerate the change, so those two shifts match
+ *              worse than the others and an output with no history at all
+ *              read a lag of 1 (tests/test_lag.c); over the whole run every
+ *              reference frame's noise weighs on every shift alike. A filter that trails the reference by L frames
  *              on a steady change minimises it at k = L: the error is
  *              exactly quadratic in k - L for a linear ramp, and the
  *              noise adds the same constant to every k.
@@ -119,6 +124,26 @@ int hush__lag_event_signed(const double *const out_mean[2], const double *const 
  * NULL: every pixel. */
 void hush__lag_shift_add(const float *out, const float *const *ref, const float *mask,
                          uint32_t shifts, size_t n, double *sse);
+
+/* Shift lag, per pixel: sse[i * shifts + k] += (out[i] - ref[k][i])^2 for
+ * k < shifts (ref[k]: the reference k frames before out's); the region is
+ * applied at the end (hush__lag_shift_sum). */
+void hush__lag_shift_add_pixels(const float *out, const float *const *ref, uint32_t shifts,
+                                size_t n, double *sse);
+
+/* The range of a box-averaged reference over the frames: lo = min, hi =
+ * max, start them at +inf and -inf; a NaN (near a saturated pixel) makes
+ * both NaN for good. */
+void hush__lag_range_add(const float *boxed, size_t n, float *lo, float *hi);
+
+/* The shift region: mask[i] = 1 where hi[i] - lo[i] > threshold, else 0
+ * (NaN: 0); returns the number of ones. */
+size_t hush__lag_range_region(const float *lo, const float *hi, size_t n, float threshold,
+                              float *mask);
+
+/* sse[k] = sum over i of mask[i] * pixels[i * shifts + k], k < shifts. */
+void hush__lag_shift_sum(const double *pixels, const float *mask, uint32_t shifts, size_t n,
+                         double *sse);
 
 /* The shift lag from the sums of hush__lag_shift_add (shifts >= 1): the
  * argmin (the smallest on a tie), refined by the parabola through it and

@@ -160,7 +160,8 @@ typedef struct eval_filter {
   uint32_t stage_count;
   double *lag_mean[2];       /* mean lag luminance over the event's brightened [0] and
                                 darkened [1] region, from the event on */
-  double lag_sse[HUSH_LAG_MAX_SHIFT]; /* shift lag sums (eval/lag.h) */
+  double *lag_pixel_sse;     /* shift lag: per pixel and shift (eval/lag.h), owned */
+  double lag_sse[HUSH_LAG_MAX_SHIFT]; /* ... summed over the shift region at the end */
 } eval_filter;
 
 typedef struct eval_run {
@@ -197,8 +198,10 @@ typedef struct eval_run {
   size_t lag_part[2];        /* the brightened and the darkened pixels of the region */
   double *lag_ref_mean[2];
   uint32_t lag_shifts;       /* 0: too few frames for the shift lag */
-  float *lag_ring[HUSH_LAG_MAX_SHIFT], *lag_ring_box[HUSH_LAG_MAX_SHIFT]; /* and box-averaged */
-  float *lag_shift_mask;     /* this frame's shift region */
+  float *lag_ring[HUSH_LAG_MAX_SHIFT];
+  float *lag_lo, *lag_hi;    /* the box-averaged reference's range over the frames */
+  float *lag_shift_mask;     /* the shift region (at the end) */
+  size_t lag_shift_region;
 } eval_run;
 
 /* ---- options ---------------------------------------------------------------- */
@@ -427,6 +430,9 @@ static int setup_filter(eval_run *r, eval_filter *f) {
   f->lag_mean[1] = calloc(n, sizeof *f->lag_mean[1]);
   if (!f->rows || !f->luma || !f->prev_luma || !f->lag_mean[0] || !f->lag_mean[1])
     return cli_error(r->cmd, "out of memory");
+  if (r->lag_shifts &&
+      !(f->lag_pixel_sse = calloc(r->pixels * r->lag_shifts, sizeof *f->lag_pixel_sse)))
+    return cli_error(r->cmd, "out of memory");
   if (!f->cls) return 0;
   f->filter = hush_filter_new(r->device, f->cls);
   if (!f->filter) return cli_device_error(r->cmd, r->device, HUSH_ERROR_NOT_FOUND, f->cls);
@@ -545,11 +551,14 @@ static int lag_setup(eval_run *r) {
       !r->lag_ref_luma || !r->lag_box || !r->lag_box_prev)
     return cli_error(r->cmd, "out of memory");
   for (uint32_t k = 0; k < r->lag_shifts; k++)
-    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))) ||
-        !(r->lag_ring_box[k] = malloc(r->pixels * sizeof(float))))
+    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))))
       return cli_error(r->cmd, "out of memory");
-  if (r->lag_shifts && !(r->lag_shift_mask = malloc(r->pixels * sizeof(float))))
-    return cli_error(r->cmd, "out of memory");
+  if (!r->lag_shifts) return 0;
+  r->lag_shift_mask = malloc(r->pixels * sizeof(float));
+  r->lag_lo = malloc(r->pixels * sizeof(float));
+  r->lag_hi = malloc(r->pixels * sizeof(float));
+  if (!r->lag_shift_mask || !r->lag_lo || !r->lag_hi) return cli_error(r->cmd, "out of memory");
+  for (size_t p = 0; p < r->pixels; p++) r->lag_lo[p] = INFINITY, r->lag_hi[p] = -INFINITY;
   return 0;
 }
 
@@ -595,11 +604,18 @@ static void lag_reference(eval_run *r, uint32_t i) {
   if (!r->lag_shifts) return;
   const uint32_t S = r->lag_shifts;
   memcpy(r->lag_ring[i % S], r->lag_ref_luma, r->pixels * sizeof(float));
-  memcpy(r->lag_ring_box[i % S], r->lag_box, r->pixels * sizeof(float));
-  /* the shift region: what changed over the S frames the shifts span */
-  if (i + 1 >= r->first + S)
-    hush__lag_region(r->lag_ring_box[(i + 1) % S], r->lag_box, r->pixels, HUSH_LAG_THRESHOLD,
-                     r->lag_shift_mask);
+  hush__lag_range_add(r->lag_box, r->pixels, r->lag_lo, r->lag_hi);
+}
+
+/* After the last frame: the shift region over the run and each filter's
+ * shift sums over it. */
+static void lag_finish(eval_run *r) {
+  if (!r->lag_shifts) return;
+  r->lag_shift_region = hush__lag_range_region(r->lag_lo, r->lag_hi, r->pixels,
+                                               HUSH_LAG_THRESHOLD, r->lag_shift_mask);
+  for (uint32_t k = 0; k < r->filter_count; k++)
+    hush__lag_shift_sum(r->filters[k].lag_pixel_sse, r->lag_shift_mask, r->lag_shifts, r->pixels,
+                        r->filters[k].lag_sse);
 }
 
 /* Filter f's output of frame i (r->out_rgb) into its series. */
@@ -612,8 +628,7 @@ static void lag_filter(eval_run *r, eval_filter *f, uint32_t i) {
   if (r->lag_shifts && i + 1 >= r->first + r->lag_shifts) {
     const float *ring[HUSH_LAG_MAX_SHIFT];
     for (uint32_t k = 0; k < r->lag_shifts; k++) ring[k] = r->lag_ring[(i - k) % r->lag_shifts];
-    hush__lag_shift_add(r->lag_luma, ring, r->lag_shift_mask, r->lag_shifts, r->pixels,
-                        f->lag_sse);
+    hush__lag_shift_add_pixels(r->lag_luma, ring, r->lag_shifts, r->pixels, f->lag_pixel_sse);
   }
 }
 
@@ -1036,8 +1051,10 @@ static void write_lag_table(const eval_run *r, FILE *f) {
   if (r->lag_shifts)
     fprintf(f,
             " Shift lag: the delay, 0 to %u frames, of the reference sequence that the output "
-            "matches best (least squares over frames %u to %u).",
-            r->lag_shifts - 1, r->first + r->lag_shifts - 1, r->last - 1);
+            "matches best (least squares over frames %u to %u and the %zu pixels, %.1f%%, whose "
+            "box-averaged reference ranges over more than %.2f across the run).",
+            r->lag_shifts - 1, r->first + r->lag_shifts - 1, r->last - 1, r->lag_shift_region,
+            100.0 * (double)r->lag_shift_region / (double)r->pixels, (double)HUSH_LAG_THRESHOLD);
   fputs(" docs/eval.md defines both.\n\n"
         "| lag | event (frames) | brightened | darkened | shift (frames) |\n"
         "| --- | ---: | ---: | ---: | ---: |\n",
@@ -1319,6 +1336,7 @@ static int run(eval_run *r) {
   for (uint32_t i = r->first; !rc && i < r->last; i++) rc = eval_frame(r, i);
   if (rc) return rc;
   if (r->tty && !r->o->quiet) fputc('\n', stderr);
+  lag_finish(r);
   rc = write_results(r);
   if (!rc) rc = write_report(r);
   if (rc) return rc;
@@ -1346,6 +1364,7 @@ static void run_free(eval_run *r) {
     free(f->luma);
     free(f->prev_luma);
     free(f->rows);
+    free(f->lag_pixel_sse);
     free(f->lag_mean[0]);
     free(f->lag_mean[1]);
     for (uint32_t s = 0; s < f->stage_count; s++) free(f->stages[s].ms);
@@ -1365,9 +1384,10 @@ static void run_free(eval_run *r) {
   free(r->lag_box_prev);
   for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) {
     free(r->lag_ring[k]);
-    free(r->lag_ring_box[k]);
   }
   free(r->lag_shift_mask);
+  free(r->lag_lo);
+  free(r->lag_hi);
   hush_frame_release(r->picture);
   if (r->have_seq) hush__sequence_free(&r->seq);
   if (r->have_ref) hush__sequence_free(&r->ref);
