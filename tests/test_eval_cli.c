@@ -272,6 +272,15 @@ static void test_gradients_and_lag(hush_device dev) {
   CHECK_MSG(strcmp(dark_lag, field) == 0, "darkened lag %s, event lag %s", dark_lag, field);
   CHECK(starts_with(read_file(WORK "/lo/lag_series.csv"), "frame,part,reference,noisy,accumulate\n"));
   CHECK(strstr(text, "\n8,darkened,") && strstr(text, "\n11,brightened,"));
+  /* a light that jumps: one event at 8 with both parts over 1% of the frame */
+  expect("--scene builtin:light-jump --path static --size 48x27 --frames 10 --ref-spp 4 "
+         "--filters accumulate --no-video --quiet --out " WORK "/lj", 0, NULL);
+  char up[64], down[64];
+  lag_field(WORK "/lj", "accumulate", 1, field, sizeof field);
+  lag_field(WORK "/lj", "accumulate", 5, up, sizeof up);
+  lag_field(WORK "/lj", "accumulate", 6, down, sizeof down);
+  CHECK_MSG(strcmp(field, "8") == 0 && atoi(up) >= 13 && atoi(down) >= 13,
+            "light-jump: event frame '%s', brightened %s, darkened %s of 1296", field, up, down);
   read_file(WORK "/lo/summary.md");
   CHECK(strstr(text, "## Lag") &&
         strstr(text, "| lag | event (frames) | brightened | darkened | shift (frames) |") &&
