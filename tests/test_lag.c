@@ -276,7 +276,7 @@ static double shift_per_frame(float (*out)[RN]) {
 }
 
 static double shift_over_run(float (*out)[RN], size_t *region) {
-  static double pixels[(size_t)RN * HUSH_LAG_MAX_SHIFT];
+  static float pixels[(size_t)RN * HUSH_LAG_MAX_SHIFT];
   static float lo[RN], hi[RN], m[RN];
   memset(pixels, 0, sizeof pixels);
   const float *ring[HUSH_LAG_MAX_SHIFT];

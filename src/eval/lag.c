@@ -139,10 +139,10 @@ void hush__lag_shift_add(const float *out, const float *const *ref, const float 
 }
 
 void hush__lag_shift_add_pixels(const float *out, const float *const *ref, uint32_t shifts,
-                                size_t n, double *sse) {
+                                size_t n, float *sse) {
   for (size_t i = 0; i < n; i++)
     for (uint32_t k = 0; k < shifts; k++) {
-      const double d = (double)out[i] - ref[k][i];
+      const float d = out[i] - ref[k][i];
       sse[i * shifts + k] += d * d;
     }
 }
@@ -170,7 +170,7 @@ size_t hush__lag_range_region(const float *lo, const float *hi, size_t n, float 
   return count;
 }
 
-void hush__lag_shift_sum(const double *pixels, const float *mask, uint32_t shifts, size_t n,
+void hush__lag_shift_sum(const float *pixels, const float *mask, uint32_t shifts, size_t n,
                          double *sse) {
   for (uint32_t k = 0; k < shifts; k++) sse[k] = 0.0;
   for (size_t i = 0; i < n; i++)

@@ -127,9 +127,10 @@ void hush__lag_shift_add(const float *out, const float *const *ref, const float 
 
 /* Shift lag, per pixel: sse[i * shifts + k] += (out[i] - ref[k][i])^2 for
  * k < shifts (ref[k]: the reference k frames before out's); the region is
- * applied at the end (hush__lag_shift_sum). */
+ * applied at the end (hush__lag_shift_sum). Float: a pixel's sum has one
+ * term in [0, 1] per frame, and the memory is pixels x shifts per filter. */
 void hush__lag_shift_add_pixels(const float *out, const float *const *ref, uint32_t shifts,
-                                size_t n, double *sse);
+                                size_t n, float *sse);
 
 /* The range of a box-averaged reference over the frames: lo = min, hi =
  * max, start them at +inf and -inf; a NaN (near a saturated pixel) makes
@@ -142,7 +143,7 @@ size_t hush__lag_range_region(const float *lo, const float *hi, size_t n, float 
                               float *mask);
 
 /* sse[k] = sum over i of mask[i] * pixels[i * shifts + k], k < shifts. */
-void hush__lag_shift_sum(const double *pixels, const float *mask, uint32_t shifts, size_t n,
+void hush__lag_shift_sum(const float *pixels, const float *mask, uint32_t shifts, size_t n,
                          double *sse);
 
 /* The shift lag from the sums of hush__lag_shift_add (shifts >= 1): the

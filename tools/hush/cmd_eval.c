@@ -162,7 +162,8 @@ typedef struct eval_filter {
   uint32_t stage_count;
   double *lag_mean[2];       /* mean lag luminance over the event's brightened [0] and
                                 darkened [1] region, from the event on */
-  double *lag_pixel_sse;     /* shift lag: per pixel and shift (eval/lag.h), owned */
+  float *lag_pixel_sse;      /* shift lag: per pixel and shift (eval/lag.h), owned;
+                                4 x 8 bytes a pixel */
   double lag_sse[HUSH_LAG_MAX_SHIFT]; /* ... summed over the shift region at the end */
 } eval_filter;
 
