@@ -252,7 +252,8 @@ static void test_gradients_and_lag(hush_device dev) {
   CHECK(strstr(read_file(WORK "/rr/eval.json"), "\"gradients\": false") != NULL);
 
   CHECK(starts_with(read_file(WORK "/lo/lag.csv"),
-                    "filter,event_frame,region_pixels,event_lag,shift_lag\n"));
+                    "filter,event_frame,region_pixels,event_lag,shift_lag,brightened_pixels,"
+                    "darkened_pixels,event_lag_brightened,event_lag_darkened\n"));
   char field[64];
   lag_field(WORK "/lo", "accumulate", 1, field, sizeof field);
   CHECK_MSG(strcmp(field, "8") == 0, "event frame '%s', the light goes off at 8", field);
@@ -260,8 +261,29 @@ static void test_gradients_and_lag(hush_device dev) {
   CHECK_MSG(strcmp(field, "0") == 0, "noisy event lag '%s'", field);
   lag_field(WORK "/lo", "accumulate", 3, field, sizeof field);
   CHECK_MSG(strcmp(field, "inf") == 0 || atoi(field) >= 2, "accumulate event lag '%s'", field);
+  /* a light switched off only darkens: the darkened part is (nearly) all
+   * of the region and the event lag is its lag */
+  char region[64], dark[64], dark_lag[64];
+  lag_field(WORK "/lo", "accumulate", 2, region, sizeof region);
+  lag_field(WORK "/lo", "accumulate", 6, dark, sizeof dark);
+  lag_field(WORK "/lo", "accumulate", 8, dark_lag, sizeof dark_lag);
+  CHECK_MSG(atoi(dark) > 0 && atoi(dark) >= 0.95 * atoi(region), "darkened %s of %s", dark,
+            region);
+  CHECK_MSG(strcmp(dark_lag, field) == 0, "darkened lag %s, event lag %s", dark_lag, field);
+  CHECK(starts_with(read_file(WORK "/lo/lag_series.csv"), "frame,part,reference,noisy,accumulate\n"));
+  CHECK(strstr(text, "\n8,darkened,") && strstr(text, "\n11,brightened,"));
+  /* a light that jumps: one event at 8 with both parts over 1% of the frame */
+  expect("--scene builtin:light-jump --path static --size 48x27 --frames 10 --ref-spp 4 "
+         "--filters accumulate --no-video --quiet --out " WORK "/lj", 0, NULL);
+  char up[64], down[64];
+  lag_field(WORK "/lj", "accumulate", 1, field, sizeof field);
+  lag_field(WORK "/lj", "accumulate", 5, up, sizeof up);
+  lag_field(WORK "/lj", "accumulate", 6, down, sizeof down);
+  CHECK_MSG(strcmp(field, "8") == 0 && atoi(up) >= 13 && atoi(down) >= 13,
+            "light-jump: event frame '%s', brightened %s, darkened %s of 1296", field, up, down);
   read_file(WORK "/lo/summary.md");
-  CHECK(strstr(text, "## Lag") && strstr(text, "| lag | event (frames) | shift (frames) |") &&
+  CHECK(strstr(text, "## Lag") &&
+        strstr(text, "| lag | event (frames) | brightened | darkened | shift (frames) |") &&
         strstr(text, "Event at frame 8"));
   CHECK(strstr(read_file(WORK "/lo/report.html"), ">Lag<") != NULL); /* summary.md's table */
 

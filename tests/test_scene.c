@@ -11,6 +11,7 @@
 
 #include <cjson/cJSON.h>
 #include <errno.h>
+#include <math.h>
 #include <png.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -281,6 +282,22 @@ static void test_animation(void) {
   CHECK(hush__scene_sphere_at(&s, 0, 10, c10) == 1);
   CHECK_NEAR(c10[0] - c0[0], 10 * s.spheres[0].velocity[0], 1e-5);
   CHECK(s.spheres[0].velocity[0] != 0.0f);
+  for (uint32_t o2 = 0; o2 < s.object_count; o2++) CHECK(!s.objects[o2].motion.animated);
+  hush__scene_free(&s);
+  /* jumping: still up to frame 7, one step of more than 3 m at 8, still
+   * after; always on; nothing else moves */
+  REQUIRE(hush__scene_builtin(dev, "light-jump", &s) == HUSH_OK);
+  float j0[3], j7[3], j8[3], j30[3];
+  CHECK(hush__scene_sphere_at(&s, 0, 0, j0) == 1 && hush__scene_sphere_at(&s, 0, 7, j7) == 1);
+  CHECK(hush__scene_sphere_at(&s, 0, 8, j8) == 1 && hush__scene_sphere_at(&s, 0, 30, j30) == 1);
+  float step = 0.0f, before = 0.0f, after = 0.0f;
+  for (int k = 0; k < 3; k++) {
+    step += (j8[k] - j7[k]) * (j8[k] - j7[k]);
+    before += fabsf(j7[k] - j0[k]);
+    after += fabsf(j30[k] - j8[k]);
+  }
+  CHECK_MSG(sqrtf(step) > 3.0f, "the light jumps %g m", (double)sqrtf(step));
+  CHECK(before == 0.0f && after == 0.0f);
   for (uint32_t o2 = 0; o2 < s.object_count; o2++) CHECK(!s.objects[o2].motion.animated);
   hush__scene_free(&s);
 }

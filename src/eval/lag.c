@@ -72,6 +72,31 @@ size_t hush__lag_region(const float *prev, const float *cur, size_t n, float thr
   return count;
 }
 
+size_t hush__lag_region_signed(const float *prev, const float *cur, size_t n, float threshold,
+                               float *mask, size_t count[2]) {
+  size_t up = 0, down = 0;
+  for (size_t i = 0; i < n; i++) {
+    const float d = cur[i] - prev[i]; /* NaN fails both tests: 0 */
+    const int u = d > threshold, w = d < -threshold;
+    mask[i] = (float)(u - w);
+    up += (size_t)u;
+    down += (size_t)w;
+  }
+  count[0] = up;
+  count[1] = down;
+  return up + down;
+}
+
+double hush__lag_region_mean_of(const float *y, const float *mask, float value, size_t n) {
+  double sum = 0.0, count = 0.0;
+  for (size_t i = 0; i < n; i++) {
+    const double in = mask[i] == value ? 1.0 : 0.0;
+    sum += in * y[i];
+    count += in;
+  }
+  return count > 0.0 ? sum / count : NAN;
+}
+
 double hush__lag_region_mean(const float *y, const float *mask, size_t n) {
   double sum = 0.0, count = 0.0;
   for (size_t i = 0; i < n; i++) {
@@ -88,6 +113,18 @@ int hush__lag_event(const double *out_mean, const double *ref_mean, uint32_t cou
   return -1;
 }
 
+int hush__lag_event_signed(const double *const out_mean[2], const double *const ref_mean[2],
+                           const int use[2], uint32_t count, double tolerance) {
+  int lag = -2;
+  for (int s = 0; s < 2; s++) {
+    if (!use[s]) continue;
+    const int k = hush__lag_event(out_mean[s], ref_mean[s], count, tolerance);
+    if (k < 0) return -1; /* one part never follows: neither does the event */
+    if (k > lag) lag = k;
+  }
+  return lag;
+}
+
 void hush__lag_shift_add(const float *out, const float *const *ref, const float *mask,
                          uint32_t shifts, size_t n, double *sse) {
   for (uint32_t k = 0; k < shifts; k++) {
@@ -99,6 +136,46 @@ void hush__lag_shift_add(const float *out, const float *const *ref, const float 
     }
     sse[k] += s;
   }
+}
+
+void hush__lag_shift_add_pixels(const float *out, const float *const *ref, uint32_t shifts,
+                                size_t n, float *sse) {
+  for (size_t i = 0; i < n; i++)
+    for (uint32_t k = 0; k < shifts; k++) {
+      const float d = out[i] - ref[k][i];
+      sse[i * shifts + k] += d * d;
+    }
+}
+
+void hush__lag_range_add(const float *boxed, size_t n, float *lo, float *hi) {
+  for (size_t i = 0; i < n; i++) {
+    const float v = boxed[i];
+    if (v != v || lo[i] != lo[i]) { /* NaN now or before: out for good */
+      lo[i] = hi[i] = NAN;
+      continue;
+    }
+    lo[i] = v < lo[i] ? v : lo[i];
+    hi[i] = v > hi[i] ? v : hi[i];
+  }
+}
+
+size_t hush__lag_range_region(const float *lo, const float *hi, size_t n, float threshold,
+                              float *mask) {
+  size_t count = 0;
+  for (size_t i = 0; i < n; i++) {
+    const int in = hi[i] - lo[i] > threshold; /* NaN: 0 */
+    mask[i] = in ? 1.0f : 0.0f;
+    count += (size_t)in;
+  }
+  return count;
+}
+
+void hush__lag_shift_sum(const float *pixels, const float *mask, uint32_t shifts, size_t n,
+                         double *sse) {
+  for (uint32_t k = 0; k < shifts; k++) sse[k] = 0.0;
+  for (size_t i = 0; i < n; i++)
+    if (mask[i] != 0.0f)
+      for (uint32_t k = 0; k < shifts; k++) sse[k] += (double)mask[i] * pixels[i * shifts + k];
 }
 
 double hush__lag_shift(const double *sse, uint32_t shifts) {

@@ -145,7 +145,8 @@ int hush__scene_sphere_at(const hush_scene *scene, uint32_t light, uint32_t fram
   if (!scene || light >= scene->sphere_count) return 0;
   const hush_sphere_light *l = &scene->spheres[light];
   const float s = travel(frame, l->period);
-  for (int k = 0; k < 3; k++) center[k] = l->center[k] + s * l->velocity[k];
+  const float jumped = frame >= l->jump_from_frame ? 1.0f : 0.0f;
+  for (int k = 0; k < 3; k++) center[k] = l->center[k] + s * l->velocity[k] + jumped * l->jump[k];
   return l->off_from_frame < 0 || frame < (uint32_t)l->off_from_frame;
 }
 

@@ -105,7 +105,8 @@ typedef struct hush_environment {
 } hush_environment;
 
 /* A spherical area light (synthetic scenes). It may move along a straight
- * back-and-forth path and switch off at a given frame. */
+ * back-and-forth path, jump once to another place and switch off at a
+ * given frame. */
 typedef struct hush_sphere_light {
   float center[3];
   float radius;
@@ -113,6 +114,8 @@ typedef struct hush_sphere_light {
   float velocity[3];       /* world units per frame */
   uint32_t period;         /* back-and-forth period in frames (0: linear) */
   int32_t off_from_frame;  /* -1: always on; else dark from this frame on */
+  float jump[3];           /* added to the centre from jump_from_frame on (a step) */
+  uint32_t jump_from_frame; /* 0 with jump 0: never jumps */
 } hush_sphere_light;
 
 /* ---- camera --------------------------------------------------------------------- */

@@ -14,7 +14,7 @@
 #include <string.h>
 
 const char *const hush__scene_builtin_names[] = {
-    "cornell", "cornell-moving", "courtyard", "moving-light", "light-off", "furnace", "mask", NULL};
+    "cornell", "cornell-moving", "courtyard", "moving-light", "light-off", "light-jump", "furnace", "mask", NULL};
 
 const char *const hush__scene_builtin_docs[] = {
     "the Cornell box: white floor, ceiling and back wall, red left and green right wall, two "
@@ -25,6 +25,8 @@ const char *const hush__scene_builtin_docs[] = {
     "sphere, a moving box, a small sphere light moving back and forth and a dim sky",
     "the courtyard with nothing moving but the sphere light",
     "the courtyard with everything still and the sphere light switched off from frame 8",
+    "the courtyard with everything still and the sphere light jumping at frame 8 from the "
+    "left of the roof's middle to its front right (2.2 m right, 2.5 m forward)",
     "a Lambert sphere of albedo 0.8 inside a uniform environment of radiance 1 (the furnace "
     "test: the sphere converges to 0.8, the background to 1)",
     "an alpha-masked quad (opaque right half, a hole in the left half) in front of a white wall",
@@ -304,7 +306,12 @@ static int checker_texture(builder *b) {
   return index;
 }
 
-enum { COURTYARD_ALL = 0, COURTYARD_LIGHT_MOVES = 1, COURTYARD_LIGHT_OFF = 2 };
+enum {
+  COURTYARD_ALL = 0,
+  COURTYARD_LIGHT_MOVES = 1,
+  COURTYARD_LIGHT_OFF = 2,
+  COURTYARD_LIGHT_JUMPS = 3
+};
 
 static void build_courtyard(builder *b, int variant) {
   hush_scene *s = b->s;
@@ -367,7 +374,12 @@ static void build_courtyard(builder *b, int variant) {
   l->radius = 0.15f;
   l->radiance[0] = 120.0f, l->radiance[1] = 100.0f, l->radiance[2] = 80.0f;
   l->off_from_frame = variant == COURTYARD_LIGHT_OFF ? 8 : -1;
-  if (variant != COURTYARD_LIGHT_OFF) {
+  if (variant == COURTYARD_LIGHT_JUMPS) {
+    /* a step: the shading it lit darkens and new shading brightens in the
+     * same frame (the event lag by sign, docs/eval.md "Lag") */
+    l->jump[0] = 2.2f, l->jump[2] = 2.5f;
+    l->jump_from_frame = 8;
+  } else if (variant != COURTYARD_LIGHT_OFF) {
     l->velocity[0] = 0.08f;
     l->period = 50;
   }
@@ -445,6 +457,7 @@ hush_status hush__scene_builtin(hush_device device, const char *name, hush_scene
   else if (strcmp(name, "courtyard") == 0) build_courtyard(&b, COURTYARD_ALL);
   else if (strcmp(name, "moving-light") == 0) build_courtyard(&b, COURTYARD_LIGHT_MOVES);
   else if (strcmp(name, "light-off") == 0) build_courtyard(&b, COURTYARD_LIGHT_OFF);
+  else if (strcmp(name, "light-jump") == 0) build_courtyard(&b, COURTYARD_LIGHT_JUMPS);
   else if (strcmp(name, "furnace") == 0) build_furnace(&b);
   else if (strcmp(name, "mask") == 0) build_mask(&b);
   else {

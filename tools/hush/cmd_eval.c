@@ -93,10 +93,12 @@ static const char *const help_text =
     "  --tonemap T          report pictures: clamp, reinhard or aces (default aces)\n"
     "  --no-video           report: no side-by-side video (default: with ffmpeg)\n"
     "  --lag-frame K        the lag after a change at frame K (a light switched\n"
-    "                       off): frames until each filter's mean over the region\n"
-    "                       that changed in the references is within 10% of the\n"
-    "                       reference's (default: the frame where the references\n"
-    "                       change most); lag.csv and summary.md (docs/eval.md)\n"
+    "                       off, or jumping): frames until each filter's mean over\n"
+    "                       the brightened and the darkened region of the\n"
+    "                       references is within 10% of the reference's, the\n"
+    "                       larger (default: the frame where the references\n"
+    "                       change most); lag.csv, lag_series.csv and summary.md\n"
+    "                       (docs/eval.md)\n"
     "  --quiet              no progress and no table, only warnings and errors\n"
     "  -h, --help           show this help\n"
     "\n"
@@ -158,8 +160,11 @@ typedef struct eval_filter {
   uint32_t done;
   stage_times stages[MAX_STAGES + 1]; /* the filter's stages, then "total" */
   uint32_t stage_count;
-  double *lag_mean;          /* mean display luminance over the lag region, from the event on */
-  double lag_sse[HUSH_LAG_MAX_SHIFT]; /* shift lag sums (eval/lag.h) */
+  double *lag_mean[2];       /* mean lag luminance over the event's brightened [0] and
+                                darkened [1] region, from the event on */
+  float *lag_pixel_sse;      /* shift lag: per pixel and shift (eval/lag.h), owned;
+                                4 x 8 bytes a pixel */
+  double lag_sse[HUSH_LAG_MAX_SHIFT]; /* ... summed over the shift region at the end */
 } eval_filter;
 
 typedef struct eval_run {
@@ -187,16 +192,19 @@ typedef struct eval_run {
   /* lag (eval/lag.h): the event's region, its frame and size, the
    * reference's region means from it on; the last lag_shifts reference
    * luminances by frame modulo lag_shifts */
-  float *lag_mask, *lag_candidate;
+  float *lag_mask, *lag_candidate; /* +1 brightened, -1 darkened, 0 (hush__lag_region_signed) */
   float *lag_luma, *lag_ref_luma; /* lag luminance: an output, the reference */
   float *lag_box, *lag_box_prev; /* the reference's box average, this frame and the last */
   uint32_t lag_event;        /* UINT32_MAX: no event (yet) */
   uint32_t lag_fixed;        /* --lag-frame K, else UINT32_MAX */
   size_t lag_region;
-  double *lag_ref_mean;
+  size_t lag_part[2];        /* the brightened and the darkened pixels of the region */
+  double *lag_ref_mean[2];
   uint32_t lag_shifts;       /* 0: too few frames for the shift lag */
-  float *lag_ring[HUSH_LAG_MAX_SHIFT], *lag_ring_box[HUSH_LAG_MAX_SHIFT]; /* and box-averaged */
-  float *lag_shift_mask;     /* this frame's shift region */
+  float *lag_ring[HUSH_LAG_MAX_SHIFT];
+  float *lag_lo, *lag_hi;    /* the box-averaged reference's range over the frames */
+  float *lag_shift_mask;     /* the shift region (at the end) */
+  size_t lag_shift_region;
 } eval_run;
 
 /* ---- options ---------------------------------------------------------------- */
@@ -421,8 +429,12 @@ static int setup_filter(eval_run *r, eval_filter *f) {
   f->rows = calloc(n, sizeof *f->rows);
   f->luma = malloc(r->pixels * sizeof *f->luma);
   f->prev_luma = malloc(r->pixels * sizeof *f->prev_luma);
-  f->lag_mean = calloc(n, sizeof *f->lag_mean);
-  if (!f->rows || !f->luma || !f->prev_luma || !f->lag_mean)
+  f->lag_mean[0] = calloc(n, sizeof *f->lag_mean[0]);
+  f->lag_mean[1] = calloc(n, sizeof *f->lag_mean[1]);
+  if (!f->rows || !f->luma || !f->prev_luma || !f->lag_mean[0] || !f->lag_mean[1])
+    return cli_error(r->cmd, "out of memory");
+  if (r->lag_shifts &&
+      !(f->lag_pixel_sse = calloc(r->pixels * r->lag_shifts, sizeof *f->lag_pixel_sse)))
     return cli_error(r->cmd, "out of memory");
   if (!f->cls) return 0;
   f->filter = hush_filter_new(r->device, f->cls);
@@ -531,20 +543,25 @@ static int lag_setup(eval_run *r) {
   if (r->lag_shifts < 2) r->lag_shifts = 0;
   r->lag_mask = malloc(r->pixels * sizeof *r->lag_mask);
   r->lag_candidate = malloc(r->pixels * sizeof *r->lag_candidate);
-  r->lag_ref_mean = calloc(n, sizeof *r->lag_ref_mean);
+  r->lag_ref_mean[0] = calloc(n, sizeof *r->lag_ref_mean[0]);
+  r->lag_ref_mean[1] = calloc(n, sizeof *r->lag_ref_mean[1]);
   r->lag_luma = malloc(r->pixels * sizeof *r->lag_luma);
   r->lag_ref_luma = malloc(r->pixels * sizeof *r->lag_ref_luma);
   r->lag_box = malloc(r->pixels * sizeof *r->lag_box);
   r->lag_box_prev = malloc(r->pixels * sizeof *r->lag_box_prev);
-  if (!r->lag_mask || !r->lag_candidate || !r->lag_ref_mean || !r->lag_luma ||
+  if (!r->lag_mask || !r->lag_candidate || !r->lag_ref_mean[0] || !r->lag_ref_mean[1] ||
+      !r->lag_luma ||
       !r->lag_ref_luma || !r->lag_box || !r->lag_box_prev)
     return cli_error(r->cmd, "out of memory");
   for (uint32_t k = 0; k < r->lag_shifts; k++)
-    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))) ||
-        !(r->lag_ring_box[k] = malloc(r->pixels * sizeof(float))))
+    if (!(r->lag_ring[k] = malloc(r->pixels * sizeof(float))))
       return cli_error(r->cmd, "out of memory");
-  if (r->lag_shifts && !(r->lag_shift_mask = malloc(r->pixels * sizeof(float))))
-    return cli_error(r->cmd, "out of memory");
+  if (!r->lag_shifts) return 0;
+  r->lag_shift_mask = malloc(r->pixels * sizeof(float));
+  r->lag_lo = malloc(r->pixels * sizeof(float));
+  r->lag_hi = malloc(r->pixels * sizeof(float));
+  if (!r->lag_shift_mask || !r->lag_lo || !r->lag_hi) return cli_error(r->cmd, "out of memory");
+  for (size_t p = 0; p < r->pixels; p++) r->lag_lo[p] = INFINITY, r->lag_hi[p] = -INFINITY;
   return 0;
 }
 
@@ -557,56 +574,85 @@ static void lag_reference(eval_run *r, uint32_t i) {
   r->lag_box_prev = r->lag_box;
   r->lag_box = t;
   hush__lag_luminance(r->ref_rgb, r->pixels, r->lag_ref_luma);
-  /* lag_luma is free until the filters run: the box's scratch */
+  /* lag_luma and lag_candidate are free here: scratch. The box is NaN
+   * within the box of a saturated pixel, so that both regions below leave
+   * out what is saturated in either of their frames (the light itself and
+   * its clamped glow: every filter follows a light seen directly, and the
+   * clamped edges would outweigh the shading). The shift region once took
+   * this frame's box unmarked: the pixels the moving light had just
+   * reached then dominated its sums and pinned every filter's shift lag
+   * near 0 (docs/results/asvgf-lag.md). */
   hush__lag_box(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma, r->lag_box);
+  hush__lag_mark_saturated(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma,
+                           r->lag_candidate, r->lag_box);
   if (i > r->first && (r->lag_fixed == UINT32_MAX || r->lag_fixed == i)) {
-    const size_t c = hush__lag_region(r->lag_box_prev, r->lag_box, r->pixels,
-                                      HUSH_LAG_THRESHOLD, r->lag_candidate);
+    size_t part[2];
+    const size_t c = hush__lag_region_signed(r->lag_box_prev, r->lag_box, r->pixels,
+                                             HUSH_LAG_THRESHOLD, r->lag_candidate, part);
     const int fixed = r->lag_fixed == i;
     if (c > 0 && (fixed || (c > r->lag_region && c >= HUSH_LAG_MIN_REGION * (double)r->pixels))) {
       t = r->lag_mask;
       r->lag_mask = r->lag_candidate;
       r->lag_candidate = t;
       r->lag_region = c;
+      r->lag_part[0] = part[0];
+      r->lag_part[1] = part[1];
       r->lag_event = i;
     }
   }
   if (r->lag_event != UINT32_MAX && i >= r->lag_event)
-    r->lag_ref_mean[i - r->lag_event] =
-        hush__lag_region_mean(r->lag_ref_luma, r->lag_mask, r->pixels);
+    for (int s = 0; s < 2; s++)
+      r->lag_ref_mean[s][i - r->lag_event] =
+          hush__lag_region_mean_of(r->lag_ref_luma, r->lag_mask, s ? -1.0f : 1.0f, r->pixels);
   if (!r->lag_shifts) return;
   const uint32_t S = r->lag_shifts;
   memcpy(r->lag_ring[i % S], r->lag_ref_luma, r->pixels * sizeof(float));
-  memcpy(r->lag_ring_box[i % S], r->lag_box, r->pixels * sizeof(float));
-  /* lag_luma and the shift mask are free here: scratch */
-  hush__lag_mark_saturated(r->lag_ref_luma, r->width, r->height, HUSH_LAG_RADIUS, r->lag_luma,
-                           r->lag_shift_mask, r->lag_ring_box[i % S]);
-  /* the shift region: what changed over the S frames the shifts span */
-  if (i + 1 >= r->first + S)
-    hush__lag_region(r->lag_ring_box[(i + 1) % S], r->lag_box, r->pixels, HUSH_LAG_THRESHOLD,
-                     r->lag_shift_mask);
+  hush__lag_range_add(r->lag_box, r->pixels, r->lag_lo, r->lag_hi);
+}
+
+/* After the last frame: the shift region over the run and each filter's
+ * shift sums over it. */
+static void lag_finish(eval_run *r) {
+  if (!r->lag_shifts) return;
+  r->lag_shift_region = hush__lag_range_region(r->lag_lo, r->lag_hi, r->pixels,
+                                               HUSH_LAG_THRESHOLD, r->lag_shift_mask);
+  for (uint32_t k = 0; k < r->filter_count; k++)
+    hush__lag_shift_sum(r->filters[k].lag_pixel_sse, r->lag_shift_mask, r->lag_shifts, r->pixels,
+                        r->filters[k].lag_sse);
 }
 
 /* Filter f's output of frame i (r->out_rgb) into its series. */
 static void lag_filter(eval_run *r, eval_filter *f, uint32_t i) {
   hush__lag_luminance(r->out_rgb, r->pixels, r->lag_luma);
   if (r->lag_event != UINT32_MAX && i >= r->lag_event)
-    f->lag_mean[i - r->lag_event] = hush__lag_region_mean(r->lag_luma, r->lag_mask, r->pixels);
+    for (int s = 0; s < 2; s++)
+      f->lag_mean[s][i - r->lag_event] =
+          hush__lag_region_mean_of(r->lag_luma, r->lag_mask, s ? -1.0f : 1.0f, r->pixels);
   if (r->lag_shifts && i + 1 >= r->first + r->lag_shifts) {
     const float *ring[HUSH_LAG_MAX_SHIFT];
     for (uint32_t k = 0; k < r->lag_shifts; k++) ring[k] = r->lag_ring[(i - k) % r->lag_shifts];
-    hush__lag_shift_add(r->lag_luma, ring, r->lag_shift_mask, r->lag_shifts, r->pixels,
-                        f->lag_sse);
+    hush__lag_shift_add_pixels(r->lag_luma, ring, r->lag_shifts, r->pixels, f->lag_pixel_sse);
   }
 }
 
-/* NaN: not measured (no event, or the filter failed); +inf: never within
- * the tolerance in the frames evaluated. */
-static double event_lag(const eval_run *r, const eval_filter *f) {
+/* Whether part s (0: brightened, 1: darkened) of the event's region is
+ * large enough to be lagged. */
+static int lag_part_used(const eval_run *r, int s) {
+  return r->lag_event != UINT32_MAX && r->lag_part[s] > 0 &&
+         (double)r->lag_part[s] >= HUSH_LAG_MIN_PART * (double)r->pixels;
+}
+
+/* The event lag of part s (0, 1), or of both (s = 2: the larger). NaN: not
+ * measured (no event, the part too small, or the filter failed); +inf:
+ * never within the tolerance in the frames evaluated. */
+static double event_lag(const eval_run *r, const eval_filter *f, int s) {
   if (r->lag_event == UINT32_MAX || f->failed) return NAN;
-  const int k = hush__lag_event(f->lag_mean, r->lag_ref_mean, r->last - r->lag_event,
-                                HUSH_LAG_TOLERANCE);
-  return k < 0 ? INFINITY : (double)k;
+  const int use[2] = {(s == 0 || s == 2) && lag_part_used(r, 0),
+                      (s == 1 || s == 2) && lag_part_used(r, 1)};
+  const double *const out[2] = {f->lag_mean[0], f->lag_mean[1]};
+  const double *const ref[2] = {r->lag_ref_mean[0], r->lag_ref_mean[1]};
+  const int k = hush__lag_event_signed(out, ref, use, r->last - r->lag_event, HUSH_LAG_TOLERANCE);
+  return k == -2 ? NAN : k < 0 ? INFINITY : (double)k;
 }
 
 static double shift_lag(const eval_run *r, const eval_filter *f) {
@@ -887,17 +933,45 @@ static void write_timings(const eval_run *r, FILE *f) {
 }
 
 static void write_lag(const eval_run *r, FILE *f) {
-  fputs("filter,event_frame,region_pixels,event_lag,shift_lag\n", f);
+  fputs("filter,event_frame,region_pixels,event_lag,shift_lag,brightened_pixels,darkened_pixels,"
+        "event_lag_brightened,event_lag_darkened\n",
+        f);
   for (uint32_t k = 0; k < r->filter_count; k++) {
     const eval_filter *fl = &r->filters[k];
     fprintf(f, "%s,", fl->name);
     if (r->lag_event != UINT32_MAX) fprintf(f, "%u,%zu,", r->lag_event, r->lag_region);
     else fputs(",,", f);
-    put_number(f, event_lag(r, fl));
+    put_number(f, event_lag(r, fl, 2));
     fputc(',', f);
     put_number(f, shift_lag(r, fl));
+    if (r->lag_event != UINT32_MAX) fprintf(f, ",%zu,%zu,", r->lag_part[0], r->lag_part[1]);
+    else fputs(",,,", f);
+    put_number(f, event_lag(r, fl, 0));
+    fputc(',', f);
+    put_number(f, event_lag(r, fl, 1));
     fputc('\n', f);
   }
+}
+
+/* The series behind the event lag: per frame from the event on and per
+ * part, the reference's and each filter's mean lag luminance over it
+ * (empty without an event). */
+static void write_lag_series(const eval_run *r, FILE *f) {
+  fputs("frame,part,reference", f);
+  for (uint32_t k = 0; k < r->filter_count; k++) fprintf(f, ",%s", r->filters[k].name);
+  fputc('\n', f);
+  if (r->lag_event == UINT32_MAX) return;
+  for (uint32_t i = r->lag_event; i < r->last; i++)
+    for (int s = 0; s < 2; s++) {
+      fprintf(f, "%u,%s,", i, s ? "darkened" : "brightened");
+      put_number(f, r->lag_ref_mean[s][i - r->lag_event]);
+      for (uint32_t k = 0; k < r->filter_count; k++) {
+        const eval_filter *fl = &r->filters[k];
+        fputc(',', f);
+        put_number(f, fl->failed ? NAN : fl->lag_mean[s][i - r->lag_event]);
+      }
+      fputc('\n', f);
+    }
 }
 
 static void write_status(const eval_run *r, FILE *f) {
@@ -965,31 +1039,40 @@ static void write_lag_table(const eval_run *r, FILE *f) {
   if (r->lag_event != UINT32_MAX)
     fprintf(f,
             "Event at frame %u: %zu pixels (%.1f%%) of the reference changed by more than %.2f "
-            "in luminance (linear, clamped to 1, averaged over %dx%d boxes) from frame %u. Event lag: frames after it until the filter's "
-            "mean over them is within %.0f%% of the reference's (`> M`: not in the M frames "
-            "evaluated after it).",
+            "in luminance (linear, clamped to 1, averaged over %dx%d boxes) from frame %u: "
+            "%zu brightened, %zu darkened. Event lag: frames after it until the filter's "
+            "mean over each part (of %.0f%% of the frame or more) is within %.0f%% of the "
+            "reference's, the larger of the two (`> M`: not in the M frames evaluated after "
+            "it).",
             r->lag_event, r->lag_region, 100.0 * (double)r->lag_region / (double)r->pixels,
             (double)HUSH_LAG_THRESHOLD, 2 * HUSH_LAG_RADIUS + 1, 2 * HUSH_LAG_RADIUS + 1,
-            r->lag_event - 1, 100.0 * HUSH_LAG_TOLERANCE);
+            r->lag_event - 1, r->lag_part[0], r->lag_part[1], 100.0 * HUSH_LAG_MIN_PART,
+            100.0 * HUSH_LAG_TOLERANCE);
   else
     fprintf(f, "No event: no frame's reference changed on %.1f%% of the pixels or more.",
             100.0 * HUSH_LAG_MIN_REGION);
   if (r->lag_shifts)
     fprintf(f,
             " Shift lag: the delay, 0 to %u frames, of the reference sequence that the output "
-            "matches best (least squares over frames %u to %u).",
-            r->lag_shifts - 1, r->first + r->lag_shifts - 1, r->last - 1);
-  fputs(" docs/eval.md defines both.\n\n| lag | event (frames) | shift (frames) |\n"
-        "| --- | ---: | ---: |\n",
+            "matches best (least squares over frames %u to %u and the %zu pixels, %.1f%%, whose "
+            "box-averaged reference ranges over more than %.2f across the run).",
+            r->lag_shifts - 1, r->first + r->lag_shifts - 1, r->last - 1, r->lag_shift_region,
+            100.0 * (double)r->lag_shift_region / (double)r->pixels, (double)HUSH_LAG_THRESHOLD);
+  fputs(" docs/eval.md defines both.\n\n"
+        "| lag | event (frames) | brightened | darkened | shift (frames) |\n"
+        "| --- | ---: | ---: | ---: | ---: |\n",
         f);
   for (uint32_t k = 0; k < r->filter_count; k++) {
     const eval_filter *fl = &r->filters[k];
     fprintf(f, "| %s%s", fl->name, fl->failed ? " (failed)" : "");
-    const double e = event_lag(r, fl);
-    if (isinf(e))
-      fprintf(f, " | > %u", r->last - 1 - r->lag_event);
-    else
-      put_cell(f, e, "%.0f");
+    static const int parts[3] = {2, 0, 1}; /* both, brightened, darkened */
+    for (int j = 0; j < 3; j++) {
+      const double e = event_lag(r, fl, parts[j]);
+      if (isinf(e))
+        fprintf(f, " | > %u", r->last - 1 - r->lag_event);
+      else
+        put_cell(f, e, "%.0f");
+    }
     put_cell(f, shift_lag(r, fl), "%.2f");
     fputs(" |\n", f);
   }
@@ -1209,6 +1292,7 @@ static int write_results(eval_run *r) {
   if (!rc) rc = write_file(r, "timings.csv", write_timings);
   if (!rc) rc = write_file(r, "status.csv", write_status);
   if (!rc) rc = write_file(r, "lag.csv", write_lag);
+  if (!rc) rc = write_file(r, "lag_series.csv", write_lag_series);
   if (!rc) rc = write_file(r, "summary.md", write_summary);
   if (!rc) rc = write_file(r, "eval.json", write_json);
   return rc;
@@ -1255,6 +1339,7 @@ static int run(eval_run *r) {
   for (uint32_t i = r->first; !rc && i < r->last; i++) rc = eval_frame(r, i);
   if (rc) return rc;
   if (r->tty && !r->o->quiet) fputc('\n', stderr);
+  lag_finish(r);
   rc = write_results(r);
   if (!rc) rc = write_report(r);
   if (rc) return rc;
@@ -1282,7 +1367,9 @@ static void run_free(eval_run *r) {
     free(f->luma);
     free(f->prev_luma);
     free(f->rows);
-    free(f->lag_mean);
+    free(f->lag_pixel_sse);
+    free(f->lag_mean[0]);
+    free(f->lag_mean[1]);
     for (uint32_t s = 0; s < f->stage_count; s++) free(f->stages[s].ms);
   }
   free(r->psf_ms);
@@ -1292,16 +1379,18 @@ static void run_free(eval_run *r) {
   free(r->ref_prev_luma);
   free(r->lag_mask);
   free(r->lag_candidate);
-  free(r->lag_ref_mean);
+  free(r->lag_ref_mean[0]);
+  free(r->lag_ref_mean[1]);
   free(r->lag_luma);
   free(r->lag_ref_luma);
   free(r->lag_box);
   free(r->lag_box_prev);
   for (uint32_t k = 0; k < HUSH_LAG_MAX_SHIFT; k++) {
     free(r->lag_ring[k]);
-    free(r->lag_ring_box[k]);
   }
   free(r->lag_shift_mask);
+  free(r->lag_lo);
+  free(r->lag_hi);
   hush_frame_release(r->picture);
   if (r->have_seq) hush__sequence_free(&r->seq);
   if (r->have_ref) hush__sequence_free(&r->ref);
