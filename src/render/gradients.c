@@ -43,6 +43,7 @@ hush_status hush__gradients_init(hush_device device, hush_gradients *g, uint32_t
   g->reshade_rays = calloc(n, sizeof *g->reshade_rays);
   g->select = HUSH_GRADIENT_SELECT_BRIGHTEST;
   g->landing_mode = HUSH_GRADIENT_LANDING_FRESH;
+  g->lobe = HUSH_GRADIENT_LOBE_DIFFUSE;
   if (!g->sources || !g->next || !g->claim || !g->landing || !g->accepted || !g->current ||
       !g->previous || !g->reshade_rays) {
     hush__gradients_free(g);
@@ -139,6 +140,24 @@ static void sample_color(int split_lobes, const hush_path_result *r, float c[3])
   for (int k = 0; k < 3; k++) c[k] = split_lobes ? r->diffuse[k] + r->specular[k] : r->radiance[k];
 }
 
+/* The luminance a gradient compares, of a sample shaded by gradient_integrator's. */
+static float gradient_luminance(const hush_gradients *g, int split_lobes,
+                                const hush_path_result *r) {
+  if (g->lobe == HUSH_GRADIENT_LOBE_DIFFUSE)
+    return hush_luminance(r->diffuse[0], r->diffuse[1], r->diffuse[2]);
+  float c[3];
+  sample_color(split_lobes, r, c);
+  return hush_luminance(c[0], c[1], c[2]);
+}
+
+/* The integrator of the re-shading: the frame's, with the lobes split when the
+ * gradient compares the diffuse one (same paths: the split only adds sums). */
+static hush_integrator gradient_integrator(const hush_gradients *g, const hush_integrator *it) {
+  hush_integrator copy = *it;
+  if (g->lobe == HUSH_GRADIENT_LOBE_DIFFUSE) copy.split_lobes = 1;
+  return copy;
+}
+
 int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_t x, uint32_t y,
                           const hush_hit *traced, hush_pixel_result *out) {
   const uint32_t t = stratum_of(g, x, y);
@@ -153,11 +172,10 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
   hush_rand rng;
   hush__rand_init(&rng, p->sampler, p->seed, src->seed_frame, src->seed_x, src->seed_y, 0, 1);
   hush_path_result r;
-  hush__integrator_shade(&ctx->it, ctx->cam.eye, &f, &rng, x, y, &r);
+  const hush_integrator it = gradient_integrator(g, &ctx->it);
+  hush__integrator_shade(&it, ctx->cam.eye, &f, &rng, x, y, &r);
   if (g->landing_mode == HUSH_GRADIENT_LANDING_FRESH) {
-    float rgb[3];
-    sample_color(p->split_lobes, &r, rgb);
-    g->current[t] = hush_luminance(rgb[0], rgb[1], rgb[2]);
+    g->current[t] = gradient_luminance(g, p->split_lobes, &r);
     g->previous[t] = src->luminance;
     g->accepted[t] = (int32_t)((y % S) * S + x % S);
     g->reshade_rays[t] = r.rays + 1u; /* + the primary ray of the visibility test */
@@ -174,7 +192,7 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
   out->first = f;
   out->gradient_sample = 1;
   out->rays = (uint64_t)r.rays + 1; /* + the primary ray traced for the visibility test */
-  g->current[t] = hush_luminance(out->color[0], out->color[1], out->color[2]);
+  g->current[t] = gradient_luminance(g, p->split_lobes, &r);
   g->previous[t] = src->luminance;
   g->accepted[t] = (int32_t)((y % S) * S + x % S);
   return 1;
@@ -269,9 +287,7 @@ static uint64_t choose_source(const hush_gradients *g, const hush_render_ctx *ct
   hush__rand_init(&rng, p->sampler, p->seed, src->seed_frame, src->seed_x, src->seed_y, 0, 1);
   hush_path_result r;
   hush__integrator_shade(it, ctx->cam.eye, &f, &rng, bx, by, &r);
-  float c[3];
-  sample_color(p->split_lobes, &r, c);
-  const float l = hush_luminance(c[0], c[1], c[2]);
+  const float l = gradient_luminance(g, p->split_lobes, &r);
   if (!isfinite(l)) return r.rays;
   src->triangle = tri;
   src->u = u;
@@ -290,7 +306,7 @@ hush_status hush__gradients_end(hush_device device, hush_gradients *g, const hus
   if (st != HUSH_OK) return hush__fail(device, st, "render: cannot add the layer 'gradient'");
   /* the extra shading must not reach the path hooks (psf): it is no
    * pixel's sample */
-  hush_integrator it = ctx->it;
+  hush_integrator it = gradient_integrator(g, &ctx->it);
   it.vertex_fn = NULL;
   it.path_end_fn = NULL;
   const int n = (int)(g->strata_x * g->strata_y);

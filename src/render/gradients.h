@@ -81,8 +81,22 @@ typedef enum hush_gradient_landing {
   HUSH_GRADIENT_LANDING_SAMPLE
 } hush_gradient_landing;
 
+/* Which radiance the gradient compares. */
+typedef enum hush_gradient_lobe {
+  /* the first hit's diffuse lobe only (hush_path_result.diffuse; the
+   * default): a moved eye turns a glossy lobe's paths elsewhere with the same
+   * numbers, a change of view that at 1 spp reads as a large gradient and
+   * cut the history of every glossy surface on a camera path (classroom
+   * RMSE +10% over svgf); the diffuse lobe's share of the same paths
+   * changes only with the lighting. Surfaces without a diffuse lobe
+   * (mirror, glass) give no gradient. */
+  HUSH_GRADIENT_LOBE_DIFFUSE,
+  HUSH_GRADIENT_LOBE_ALL /* the sample's whole colour (the papers) */
+} hush_gradient_lobe;
+
 typedef struct hush_gradients {
   uint32_t width, height;
+  hush_gradient_lobe lobe;       /* set by hush__gradients_init to DIFFUSE */
   hush_gradient_select select;   /* set by hush__gradients_init to BRIGHTEST */
   hush_gradient_landing landing_mode; /* set by hush__gradients_init to FRESH */
   uint32_t strata_x, strata_y; /* ceil(width / 3), ceil(height / 3) */

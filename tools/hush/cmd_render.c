@@ -74,7 +74,11 @@ static const char *const help_text =
     "                       sample, the re-shaded one measures the gradient only\n"
     "                       (unbiased, +1 path per stratum); sample: the landing\n"
     "                       pixel shows the re-shaded sample (A-SVGF as published;\n"
-    "                       with brightest, biased upwards). Both imply --gradients\n"
+    "                       with brightest, biased upwards)\n"
+    "  --gradient-lobe L    diffuse (default): the gradient compares the first hit's\n"
+    "                       diffuse lobe only (a moved eye changes glossy paths);\n"
+    "                       all: the whole colour (the papers). These three imply\n"
+    "                       --gradients\n"
     "  --png                also write DIR/frame_NNNN.png of the radiance\n"
     "  --export bmfr        also write DIR/bmfr/: colorN.exr (demodulated),\n"
     "                       albedoN.exr, shading_normalN.exr, world_positionN.exr and\n"
@@ -108,6 +112,7 @@ typedef struct render_options {
   int gradients;           /* --gradients */
   int gradient_select;     /* hush_gradient_select, --gradient-select */
   int gradient_landing;    /* hush_gradient_landing, --gradient-landing */
+  int gradient_lobe;       /* hush_gradient_lobe, --gradient-lobe */
   double spp_fraction;     /* 1: every pixel */
   hush_progressive progressive;
   hush_exr_type exr_type;
@@ -217,6 +222,14 @@ static void parse_options(int argc, char **argv, render_options *o) {
         o->gradient_select = HUSH_GRADIENT_SELECT_RANDOM;
       else
         cli_usage_error(a.cmd, "--gradient-select: unknown rule '%s' (brightest, random)", v);
+      o->gradients = 1;
+    } else if (cli_option(&a, arg, "--gradient-lobe", &v)) {
+      if (strcmp(v, "all") == 0)
+        o->gradient_lobe = HUSH_GRADIENT_LOBE_ALL;
+      else if (strcmp(v, "diffuse") == 0)
+        o->gradient_lobe = HUSH_GRADIENT_LOBE_DIFFUSE;
+      else
+        cli_usage_error(a.cmd, "--gradient-lobe: unknown lobe '%s' (all, diffuse)", v);
       o->gradients = 1;
     } else if (cli_option(&a, arg, "--gradient-landing", &v)) {
       if (strcmp(v, "fresh") == 0)
@@ -565,6 +578,7 @@ static int render_frames(render_run *r, int argc, char **argv) {
     if (st != HUSH_OK) return fail(r, st, "gradients");
     gradients.select = (hush_gradient_select)o->gradient_select;
     gradients.landing_mode = (hush_gradient_landing)o->gradient_landing;
+    gradients.lobe = (hush_gradient_lobe)o->gradient_lobe;
     params.gradients = &gradients;
   }
   const double t0 = hush__now_ms();

@@ -39,10 +39,11 @@ static const hush_param_info asvgf_params[P_ASVGF_COUNT] = {
      "luminance weight of the gradient reconstruction, relative: exp(-|l_p - l_q| / "
      "(gradient_sigma_l max(l_p, l_q) + 1e-4))",
      NULL},
-    {"gradient_exponent", HUSH_PARAM_FLOAT, 2.0, 0.01, 100.0,
+    {"gradient_exponent", HUSH_PARAM_FLOAT, 1.0, 0.01, 100.0,
      "lambda = min(|delta| / max(current, previous), 1)^exponent, of the reconstructed "
-     "luminances (1: Schied 2018; 2: Higginson 2023, the default with history_rule higginson: "
-     "moving-light 160x90 relMSE 0.098 -> 0.076, svgf 0.059)",
+     "luminances (1: Schied 2018, the default; 2: Higginson 2023). With the renderer's "
+     "diffuse-lobe gradients, exponent 1 meets issue 7's lag lines (light-jump 2 frames, 5 with "
+     "2) and classroom RMSE (-0.9% against svgf); docs/results/asvgf-lag.md",
      NULL},
     {"history_rule", HUSH_PARAM_ENUM, 1, 0, 1,
      "how lambda shortens the history: schied, a = (1 - lambda) max(alpha, 1/N) + lambda; or "
