@@ -115,7 +115,7 @@ static void landing_xy(const hush_gradients *g, uint32_t t, uint32_t *x, uint32_
 
 /* ---- static scene and camera: exactly zero ------------------------------------------ */
 
-static void test_static_zero(hush_gradient_landing mode) {
+static void test_static_zero(hush_gradient_landing mode, hush_gradient_lobe lobe) {
   rig r;
   rig_open(&r, "cornell");
   hush_render_params p;
@@ -123,7 +123,9 @@ static void test_static_zero(hush_gradient_landing mode) {
   hush_gradients g;
   REQUIRE(hush__gradients_init(r.device, &g, p.width, p.height) == HUSH_OK);
   CHECK(g.landing_mode == HUSH_GRADIENT_LANDING_FRESH); /* the default: an unbiased image */
+  CHECK(g.lobe == HUSH_GRADIENT_LOBE_DIFFUSE); /* the default */
   g.landing_mode = mode;
+  g.lobe = lobe;
   const int sample = mode == HUSH_GRADIENT_LANDING_SAMPLE;
   p.gradients = &g;
   hush_render_params plain = p;
@@ -446,6 +448,9 @@ static void test_cli(void) {
   REQUIRE(system("mkdir -p '" WORK "'") == 0);
   CHECK(run("--scene builtin:cornell --out " WORK "/seq --gradients --spp 4") == 2);
   CHECK(run("--scene builtin:cornell --out " WORK "/seq --gradients --spp-fraction 0.25") == 2);
+  CHECK(run("--scene builtin:cornell --out " WORK "/seq --gradient-lobe specular") == 2);
+  CHECK(run("--scene builtin:cornell --out " WORK "/seq --gradient-landing later") == 2);
+  CHECK(run("--scene builtin:cornell --out " WORK "/seq --gradient-select dimmest") == 2);
   REQUIRE(run("--scene builtin:cornell --out " WORK "/seq --gradients --half --quiet --size 40x31 "
               "--frames 2 --path static") == 0);
   hush_device dev = hush_device_new("threads=1");
@@ -471,8 +476,9 @@ static void test_cli(void) {
 }
 
 int main(void) {
-  test_static_zero(HUSH_GRADIENT_LANDING_SAMPLE);
-  test_static_zero(HUSH_GRADIENT_LANDING_FRESH);
+  /* the published configuration, and the default */
+  test_static_zero(HUSH_GRADIENT_LANDING_SAMPLE, HUSH_GRADIENT_LOBE_ALL);
+  test_static_zero(HUSH_GRADIENT_LANDING_FRESH, HUSH_GRADIENT_LOBE_DIFFUSE);
   test_light_off();
   test_projection();
   test_threads();
