@@ -26,4 +26,16 @@ static inline float hush_rng_float(uint32_t seed, uint32_t stream, uint32_t coun
   return (float)(hush_rng_u32(seed, stream, counter) >> 8) * (1.0f / 16777216.0f);
 }
 
+/* lowbias32 (Wellons): a fast integer hash with good avalanche, for
+ * choices that must be a function of their inputs (not of the thread
+ * count): bmfr's fit noise, the renderer's random gradient pixel. */
+static inline uint32_t hush_hash32(uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
+}
+
 #endif

@@ -8,6 +8,7 @@
 #include "render/gradients.h"
 
 #include "core/device.h"
+#include "core/rng.h"
 #include "io/frame.h"
 
 #include <math.h>
@@ -223,17 +224,6 @@ static hush_status write_layer(const hush_gradients *g, hush_frame out) {
   return HUSH_OK;
 }
 
-/* A well-mixed 32-bit hash (lowbias32): the random selection must not
- * depend on the thread count, so it is a function of (seed, frame, stratum). */
-static uint32_t hash32(uint32_t x) {
-  x ^= x >> 16;
-  x *= 0x7feb352dU;
-  x ^= x >> 15;
-  x *= 0x846ca68bU;
-  x ^= x >> 16;
-  return x;
-}
-
 /* Stratum t's sample for the next frame: one of its pixels that see a
  * triangle (the brightest, or one at random), re-shaded from the visibility
  * buffer with the numbers the pixel was shaded with. A landing pixel whose
@@ -266,7 +256,8 @@ static uint64_t choose_source(const hush_gradients *g, const hush_render_ctx *ct
   if (!count) return 0;
   uint32_t pick = 0;
   if (g->select == HUSH_GRADIENT_SELECT_RANDOM) {
-    pick = hash32(hash32(ctx->params.seed ^ hash32(ctx->frame)) ^ t) % count;
+    /* a function of (seed, frame, stratum): not of the thread count */
+    pick = hush_hash32(hush_hash32(ctx->params.seed ^ hush_hash32(ctx->frame)) ^ t) % count;
   } else {
     for (uint32_t k = 1; k < count; k++)
       if (lum[k] > lum[pick]) pick = k;

@@ -6,6 +6,8 @@
  */
 #include "filters/bmfr/regression.h"
 
+#include "core/rng.h"
+
 #include <math.h>
 #include <string.h>
 
@@ -16,26 +18,16 @@
 #  define HUSH_INLINE inline
 #endif
 
-/* lowbias32 (Wellons): a fast integer hash with good avalanche. */
-static inline uint32_t hash32(uint32_t x) {
-  x ^= x >> 16;
-  x *= 0x7feb352du;
-  x ^= x >> 15;
-  x *= 0x846ca68bu;
-  x ^= x >> 16;
-  return x;
-}
-
 void hush__bmfr_noise_table(float *table, int count, int n, size_t ld, uint64_t frame, float eps) {
-  const uint32_t seed = hash32((uint32_t)frame ^ hash32((uint32_t)(frame >> 32) + 0x9e3779b9u));
+  const uint32_t seed = hush_hash32((uint32_t)frame ^ hush_hash32((uint32_t)(frame >> 32) + 0x9e3779b9u));
   memset(table, 0, ld * sizeof *table); /* the constant feature */
   for (int m = 1; m < count; m++) {
     float *col = table + (size_t)m * ld;
-    const uint32_t sm = hash32(seed + (uint32_t)m * 0x85ebca6bu);
+    const uint32_t sm = hush_hash32(seed + (uint32_t)m * 0x85ebca6bu);
     double sum = 0.0;
     for (int i = 0; i < n; i++) {
       /* 24 random bits -> [-1, 1) */
-      const float u = (float)(hash32(sm ^ (uint32_t)i * 0xc2b2ae35u) >> 8) * (2.0f / 16777216.0f);
+      const float u = (float)(hush_hash32(sm ^ (uint32_t)i * 0xc2b2ae35u) >> 8) * (2.0f / 16777216.0f);
       col[i] = eps * (u - 1.0f);
       sum += col[i];
     }
