@@ -370,7 +370,7 @@ static void test_projection(void) {
 /* Which sample a stratum takes and how the pixels are shaded do not depend
  * on the thread count: three frames with 1 and with 2 threads are equal bit
  * for bit (colour, vis and the gradient layer). */
-static void test_threads(void) {
+static void test_threads(hush_gradient_select select) {
   rig r;
   rig_open(&r, "cornell-moving");
   hush_frame out[2];
@@ -380,6 +380,7 @@ static void test_threads(void) {
     p.threads = k + 1;
     hush_gradients g;
     REQUIRE(hush__gradients_init(r.device, &g, p.width, p.height) == HUSH_OK);
+    g.select = select;
     p.gradients = &g;
     out[k] = hush_frame_new(r.device, p.width, p.height);
     REQUIRE(out[k]);
@@ -481,7 +482,8 @@ int main(void) {
   test_static_zero(HUSH_GRADIENT_LANDING_FRESH, HUSH_GRADIENT_LOBE_DIFFUSE);
   test_light_off();
   test_projection();
-  test_threads();
+  test_threads(HUSH_GRADIENT_SELECT_BRIGHTEST);
+  test_threads(HUSH_GRADIENT_SELECT_RANDOM);
   test_bad_params();
   test_cli();
   return check_summary();
