@@ -134,6 +134,14 @@ cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')
   for p in speed synthetic scenes render; do
     [ -f "docs/results/$p.md" ] && { cat "docs/results/$p.md"; echo; }
   done
+  # pages measured by hand (their commands are in them), not by a part of this script
+  echo "## Other measurements"
+  echo
+  for f in docs/results/*.md; do
+    case $(basename "$f" .md) in speed | synthetic | scenes | render) continue ;; esac
+    echo "- [$(basename "$f")](results/$(basename "$f")): $(head -1 "$f" | sed 's/^# *//')"
+  done
+  echo "- [holes.md](holes.md): the temporal filters at fewer than 1 spp, before and after hole handling"
 } >docs/RESULTS.md.tmp
 mv docs/RESULTS.md.tmp docs/RESULTS.md
 echo "wrote docs/RESULTS.md ($parts)"
