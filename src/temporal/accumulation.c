@@ -97,6 +97,17 @@ static HUSH_ALWAYS_INLINE void blend_compute(const blend_params *p, blend_px *q,
 }
 
 /* Pixel i through hush__reproject_taps: any footprint, any plan. */
+/* Writes pixel i's blended colour, moments, age (and variance, if asked). */
+static HUSH_ALWAYS_INLINE void blend_store(const blend_ctx *b, size_t i, const blend_px *q,
+                                           const int nc) {
+  const float out[4] = {q->c0, q->c1, q->c2, q->c3};
+  for (int c = 0; c < nc; c++) b->oc[c][i] = out[c];
+  b->om1[i] = q->m1;
+  b->om2[i] = q->m2;
+  b->oa[i] = q->age;
+  if (b->variance) b->variance[i] = q->var;
+}
+
 static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
   const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
   int32_t idx[9];
@@ -115,12 +126,7 @@ static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
     q.ha = hush__reproject_apply(b->pa, idx, w, n);
   }
   blend_compute(&p, &q, n > 0, nc);
-  const float out[4] = {q.c0, q.c1, q.c2, q.c3};
-  for (int c = 0; c < nc; c++) b->oc[c][i] = out[c];
-  b->om1[i] = q.m1;
-  b->om2[i] = q.m2;
-  b->oa[i] = q.age;
-  if (b->variance) b->variance[i] = q.var;
+  blend_store(b, i, &q, nc);
 }
 
 /*
@@ -320,12 +326,7 @@ static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, con
     const float v = q.m2 - m1sq;
     q.var = v > 0.0f ? v : 0.0f;
   }
-  const float out[4] = {q.c0, q.c1, q.c2, q.c3};
-  for (int c = 0; c < nc; c++) b->oc[c][i] = out[c];
-  b->om1[i] = q.m1;
-  b->om2[i] = q.m2;
-  b->oa[i] = q.age;
-  if (b->variance) b->variance[i] = q.var;
+  blend_store(b, i, &q, nc);
   return !(q.age > 0.0f);
 }
 
