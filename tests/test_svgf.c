@@ -9,6 +9,8 @@
 #include "check.h"
 #include "core/half.h"
 #include "core/hmath.h"
+#include "filters/svgf/atrous.h"
+#include "filters/svgf/variance.h"
 #include "filters/svgf/weights.h"
 
 #include <float.h>
@@ -800,6 +802,234 @@ static void test_weight_math(void) {
   }
 }
 
+/* ---- one a-trous level against the formula ------------------------------- */
+
+#define LW 37 /* not a multiple of the vector width: the row tails run too */
+#define LH 23
+
+/* A level computed in double straight from the formulas of atrous.h and
+ * weights.h (rows and columns clamped at the border). */
+static void level_reference(const svgf_guide *g, const svgf_padded *in, const svgf_kernel *k,
+                            int step, float sigma_l, const float *eps, int normal_exp,
+                            int validity, double *out /* LW * LH * 4: r g b var */) {
+  const int r = k->radius;
+#define AT(P, C, X, Y) ((double)(P)->plane[C][(size_t)(Y) * (P)->stride + (size_t)(X)])
+  for (int y = 0; y < LH; y++)
+    for (int x = 0; x < LW; x++) {
+      double g3 = 0.0;
+      for (int j = -1; j <= 1; j++)
+        for (int i = -1; i <= 1; i++) {
+          const int xx = x + i < 0 ? 0 : x + i >= LW ? LW - 1 : x + i;
+          const int yy = y + j < 0 ? 0 : y + j >= LH ? LH - 1 : y + j;
+          g3 += (i ? 0.25 : 0.5) * (j ? 0.25 : 0.5) * AT(in, SVGF_VAR, xx, yy);
+        }
+      const size_t pi = (size_t)y * LW + x;
+      const double okp = validity ? AT(in, SVGF_VALID, x, y) : 1.0;
+      const double dl_den = sigma_l * sqrt(g3) + (eps ? eps[pi] : SVGF_EPS_L);
+      double sw = 0, s0 = 0, s1 = 0, s2 = 0, sv = 0;
+      for (int j = -r; j <= r; j++)
+        for (int i = -r; i <= r; i++) {
+          const int qx = x + i * step < 0 ? 0 : x + i * step >= LW ? LW - 1 : x + i * step;
+          const int qy = y + j * step < 0 ? 0 : y + j * step >= LH ? LH - 1 : y + j * step;
+          const double h = (double)k->h[r + i] * k->h[r + j];
+          double w = h;
+          if (i || j) {
+            const double sz = g->sigma_z * fabs(g->gx[pi] * i * step + g->gy[pi] * j * step);
+            const double ez = g->zon[pi] * fabs(AT(g->zn, 0, x, y) - AT(g->zn, 0, qx, qy)) /
+                              (sz + SVGF_EPS_Z);
+            const double el = okp * fabs(AT(in, SVGF_LUM, x, y) - AT(in, SVGF_LUM, qx, qy)) / dl_den;
+            double dot = 0.0;
+            for (int c = 1; c <= 3; c++) dot += AT(g->zn, c, x, y) * AT(g->zn, c, qx, qy);
+            const double sn = g->np.sigma_n;
+            const double wn = normal_exp ? exp(-sn * (1.0 - dot)) : pow(dot > 0 ? dot : 0, sn);
+            w = h * wn * exp(-ez - el);
+            if (w <= h * exp(-20.0)) w = 0.0;
+            if (validity) w *= AT(in, SVGF_VALID, qx, qy);
+          } else {
+            w *= okp;
+          }
+          sw += w;
+          s0 += w * AT(in, SVGF_R, qx, qy);
+          s1 += w * AT(in, SVGF_G, qx, qy);
+          s2 += w * AT(in, SVGF_B, qx, qy);
+          sv += w * w * AT(in, SVGF_VAR, qx, qy);
+        }
+      double *o = out + 4 * pi;
+      if (sw > 0) {
+        o[0] = s0 / sw;
+        o[1] = s1 / sw;
+        o[2] = s2 / sw;
+        o[3] = sv / (sw * sw);
+      } else {
+        o[0] = o[1] = o[2] = o[3] = 0.0;
+      }
+    }
+#undef AT
+}
+
+/* Every variant of svgf_atrous_level (the AVX-512 loop where built, the
+ * portable loop, exp and pow normal weights, with and without validity,
+ * both kernels, with tap steps past the frame) computes the formula within
+ * float rounding of the weights (1e-4 relative of the value range). */
+static void test_level_formula(hush_device dev) {
+  static svgf_padded zn, in, out;
+  const int pad = 32;
+  REQUIRE(svgf_padded_ensure(dev, &zn, 4, LW, LH, pad) == HUSH_OK);
+  REQUIRE(svgf_padded_ensure(dev, &in, SVGF_SIGNAL_CHANNELS, LW, LH, pad) == HUSH_OK);
+  REQUIRE(svgf_padded_ensure(dev, &out, SVGF_SIGNAL_CHANNELS, LW, LH, pad) == HUSH_OK);
+  static float gx[LW * LH], gy[LW * LH], zon[LW * LH], eps[LW * LH];
+  for (int y = 0; y < LH; y++) {
+    for (int x = 0; x < LW; x++) {
+      const size_t i = (size_t)y * zn.stride + x, pi = (size_t)y * LW + x;
+      /* two planes meeting at a depth and normal edge, plus noise */
+      const int right = x > LW / 2;
+      zn.plane[0][i] = (right ? 3.0f : 2.0f) + 0.02f * (float)y + 0.01f * rnd();
+      float n[3] = {right ? 0.6f : 0.05f * rnd(), 0.05f * rnd(), right ? 0.8f : 1.0f};
+      const float len = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+      for (int c = 0; c < 3; c++) zn.plane[1 + c][i] = n[c] / len;
+      const size_t si = (size_t)y * in.stride + x;
+      const float base = right ? 0.2f : 0.7f;
+      for (int c = 0; c < 3; c++) in.plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());
+      in.plane[SVGF_VAR][si] = 0.05f * rnd();
+      in.plane[SVGF_LUM][si] =
+          hush_luminance(in.plane[0][si], in.plane[1][si], in.plane[2][si]);
+      in.plane[SVGF_VALID][si] = rnd() < 0.2f ? 0.0f : 1.0f;
+      gx[pi] = 0.01f * (rnd() - 0.5f);
+      gy[pi] = 0.02f + 0.01f * rnd();
+      zon[pi] = rnd() < 0.1f ? 0.0f : 1.0f;
+      eps[pi] = 1e-4f + 0.05f * rnd();
+    }
+    for (int c = 0; c < 4; c++) svgf_pad_row(svgf_padded_row(&zn, c, y), LW, zn.pad);
+    for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
+      svgf_pad_row(svgf_padded_row(&in, c, y), LW, in.pad);
+  }
+  static double ref[LW * LH * 4];
+  const svgf_kernel *kernels[2] = {&svgf_kernel_5x5, &svgf_kernel_3x3};
+  for (int kk = 0; kk < 2; kk++)
+    for (int step = 1; step <= 16; step *= 4)
+      for (int nexp = 0; nexp <= 1; nexp++)
+        for (int valid = 0; valid <= 1; valid++)
+          for (int portable = 0; portable <= 1; portable++) {
+            svgf_guide g;
+            g.width = LW;
+            g.height = LH;
+            g.zn = &zn;
+            g.gx = gx;
+            g.gy = gy;
+            g.zon = zon;
+            g.sigma_z = 1.0f;
+            g.np = svgf_normal_power_of(128.0f);
+            svgf_level_params lp;
+            lp.kernel = kernels[kk];
+            lp.step = step;
+            lp.sigma_l = 4.0f;
+            lp.eps_l = valid ? eps : NULL;
+            lp.validity = valid;
+            lp.normal_exp = nexp;
+            lp.portable = portable;
+            const svgf_level_out o = svgf_level_out_padded(&out);
+            svgf_atrous_level(&g, &lp, &in, &o, 2);
+            level_reference(&g, &in, kernels[kk], step, 4.0f, lp.eps_l, nexp, valid, ref);
+            double worst = 0.0;
+            int holes_ok = 1;
+            for (int y = 0; y < LH; y++)
+              for (int x = 0; x < LW; x++) {
+                const size_t i = (size_t)y * out.stride + x, pi = (size_t)y * LW + x;
+                for (int c = 0; c < 3; c++) {
+                  const double e = fabs(out.plane[c][i] - ref[4 * pi + c]);
+                  worst = e > worst ? e : worst;
+                }
+                /* the variance relative to its own size */
+                const double ev = fabs(out.plane[SVGF_VAR][i] - ref[4 * pi + 3]) /
+                                  (ref[4 * pi + 3] + 1e-6);
+                worst = ev > worst ? ev : worst;
+                if (valid && !(out.plane[SVGF_VALID][i] == 1.0f || ref[4 * pi] == 0.0))
+                  holes_ok = 0;
+              }
+            CHECK_MSG(worst < 1e-4, "level %s step %d %s%s%s: worst difference %g",
+                      kk ? "3x3" : "5x5", step, nexp ? "exp" : "pow",
+                      valid ? " validity" : "", portable ? " portable" : "", worst);
+            CHECK(holes_ok);
+          }
+
+  /* the 7x7 spatial variance (Dundr §4.4) against its formula: depth and
+   * normal weights, pixels without data (age 0) not counted, kept where the
+   * history is long; moments padded less than the guide (other strides) */
+  static svgf_padded mom;
+  REQUIRE(svgf_padded_ensure(dev, &mom, 2, LW, LH, SVGF_SPATIAL_VARIANCE_RADIUS) == HUSH_OK);
+  REQUIRE(mom.stride != zn.stride);
+  static float age[LW * LH], var[LW * LH];
+  for (int holes = 0; holes <= 1; holes++)
+    for (int nexp = 0; nexp <= 1; nexp++) {
+      for (int y = 0; y < LH; y++) {
+        for (int x = 0; x < LW; x++) {
+          const size_t pi = (size_t)y * LW + x, mi = (size_t)y * mom.stride + x;
+          const float l = 0.3f + 0.5f * rnd();
+          mom.plane[0][mi] = l;
+          mom.plane[1][mi] = l * l + 0.1f * rnd();
+          const float u = rnd();
+          age[pi] = u < 0.4f ? 1.0f + (float)(int)(3.0f * rnd()) : 10.0f;
+          if (holes && u > 0.85f) age[pi] = 0.0f;
+          var[pi] = -1.0f; /* kept where age >= 4 */
+        }
+        for (int c = 0; c < 2; c++) svgf_pad_row(svgf_padded_row(&mom, c, y), LW, mom.pad);
+      }
+      svgf_guide g;
+      g.width = LW;
+      g.height = LH;
+      g.zn = &zn;
+      g.gx = gx;
+      g.gy = gy;
+      g.zon = zon;
+      g.sigma_z = 1.0f;
+      g.np = svgf_normal_power_of(128.0f);
+      svgf_spatial_variance(&g, &mom, age, 4.0f, var, nexp, 2);
+      double worst = 0.0;
+      int kept = 1;
+      const int R = SVGF_SPATIAL_VARIANCE_RADIUS;
+      for (int y = 0; y < LH; y++)
+        for (int x = 0; x < LW; x++) {
+          const size_t pi = (size_t)y * LW + x;
+          if (!(age[pi] < 4.0f)) {
+            kept &= var[pi] == -1.0f;
+            continue;
+          }
+          double sw = 0, s1 = 0, s2 = 0;
+          for (int j = -R; j <= R; j++)
+            for (int i = -R; i <= R; i++) {
+              const int qx = x + i < 0 ? 0 : x + i >= LW ? LW - 1 : x + i;
+              const int qy = y + j < 0 ? 0 : y + j >= LH ? LH - 1 : y + j;
+              if (!(age[(size_t)qy * LW + qx] > 0.0f)) continue;
+              const size_t gp = (size_t)y * zn.stride + x, gq = (size_t)qy * zn.stride + qx;
+              double w = 1.0;
+              if (i || j) {
+                const double ez = zon[pi] * fabs((double)zn.plane[0][gp] - zn.plane[0][gq]) /
+                                  (fabs((double)gx[pi] * i + (double)gy[pi] * j) + SVGF_EPS_Z);
+                double dot = 0.0;
+                for (int c = 1; c <= 3; c++) dot += (double)zn.plane[c][gp] * zn.plane[c][gq];
+                const double wn = nexp ? exp(-128.0 * (1.0 - dot)) : pow(dot > 0 ? dot : 0, 128.0);
+                w = wn * exp(-ez);
+                if (w <= exp(-20.0)) w = 0.0;
+              }
+              const size_t mq = (size_t)qy * mom.stride + qx;
+              sw += w;
+              s1 += w * mom.plane[0][mq];
+              s2 += w * mom.plane[1][mq];
+            }
+          double est = sw > 0 ? s2 / sw - (s1 / sw) * (s1 / sw) : 0.0;
+          est = est > 0 ? est : 0.0;
+          const double e = fabs(var[pi] - est);
+          worst = e > worst ? e : worst;
+        }
+      CHECK_MSG(worst < 1e-5 && kept, "spatial variance %s%s: worst difference %g, kept %d",
+                nexp ? "exp" : "pow", holes ? " holes" : "", worst, kept);
+    }
+  svgf_padded_free(&mom);
+  svgf_padded_free(&zn);
+  svgf_padded_free(&in);
+  svgf_padded_free(&out);
+}
+
 /* ---- emission ------------------------------------------------------------ */
 
 /* A dark wall (radiance `wall`) with a lamp on it: a 6 x 6 patch whose
@@ -925,6 +1155,7 @@ int main(void) {
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);
   test_weight_math();
+  test_level_formula(dev);
   test_constant(dev, 0);
   test_constant(dev, 1);
   test_edges(dev);

@@ -9,17 +9,18 @@
 const svgf_kernel svgf_kernel_5x5 = {2, {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16}};
 const svgf_kernel svgf_kernel_3x3 = {1, {1.0f / 4, 1.0f / 2, 1.0f / 4, 0.0f, 0.0f}};
 
-/* Pixels per block: the block's accumulators and p-side rows stay in L1
- * while every tap pair streams over them. */
-#define BLOCK 128
 /* (2 * 2 + 1)^2 - 1 taps in mirrored pairs */
 #define MAX_PAIRS 12
+/* A weight is 0 when its exponent s (of 2^-s, the kernel weight h folded
+ * in as -log2 h) is past the floor plus -log2 h: at or below e^-20 times h
+ * (weights.h on why a floor). */
+#define S_FLOOR (20.0f * SVGF_LOG2E)
 
 typedef struct tap_pair {
   int dx, dy;   /* tap a = (x + dx, y + dy), tap b = (x - dx, y - dy) */
   float fdx, fdy;
   float h;      /* kernel weight, the same for both */
-  svgf_exp2_poly poly; /* 2^f times h (weights.h) */
+  float nlh;    /* -log2 h */
 } tap_pair;
 
 /* The taps other than the centre, one of each mirrored pair: dy > 0, or
@@ -36,21 +37,325 @@ static int tap_pairs(const svgf_kernel *k, int step, tap_pair *pairs) {
       t->fdx = (float)t->dx;
       t->fdy = (float)t->dy;
       t->h = k->h[r + i] * k->h[r + j];
-      t->poly = svgf_exp2_poly_scaled(t->h);
+      t->nlh = -log2f(t->h);
     }
   return n;
 }
 
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
-/* Row pointers of one pixel row (or tap row) of the signal and the guide. */
-typedef struct rows {
-  const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
-} rows;
+/* What the pixel loop of a level reads, resolved once per level. */
+typedef struct level_ctx {
+  const svgf_guide *g;
+  const svgf_padded *in;
+  const svgf_level_out *out;
+  float sigma_l;
+  const float *eps_l;
+  float h0;          /* centre kernel weight */
+  float bias;        /* exp normal weight: sigma_n log2 e; else 0 */
+  float nscale;      /* exp normal weight: sigma_n log2 e; else 1 */
+  tap_pair pairs[MAX_PAIRS];
+  int npairs;
+} level_ctx;
 
-static inline rows rows_at(const svgf_guide *g, const svgf_padded *in, int y, int x) {
-  const size_t gi = (size_t)y * g->zn->stride + (size_t)x, si = (size_t)y * in->stride + (size_t)x;
-  rows r;
+/* Per row: the offsets of both taps of every pair from the pixel, in
+ * floats (rows clamped at the frame's border; columns by the padding). The
+ * guide and the signal share the stride (svgf.c pads them alike). */
+typedef struct row_offsets {
+  ptrdiff_t a[MAX_PAIRS], b[MAX_PAIRS];
+} row_offsets;
+
+static void offsets_of(const level_ctx *c, int npairs, int y, row_offsets *o) {
+  const int H = c->g->height;
+  const ptrdiff_t stride = (ptrdiff_t)c->in->stride;
+  for (int k = 0; k < npairs; k++) {
+    const tap_pair *t = &c->pairs[k];
+    o->a[k] = (ptrdiff_t)(clampi(y + t->dy, 0, H - 1) - y) * stride + t->dx;
+    o->b[k] = (ptrdiff_t)(clampi(y - t->dy, 0, H - 1) - y) * stride - t->dx;
+  }
+}
+
+/*
+ * One tap: its exponent s = (|dz| rdd + |dl| inv_l) + -log2 h (+ the normal
+ * term with NORMAL_EXP), then the weight. NORMAL_EXP: w_n =
+ * 2^(-sigma_n log2 e (1 - n_p . n_q)), the first-order form of max(0, n_p .
+ * n_q)^sigma_n (both vanish away from dot 1; they differ by at most 0.0021
+ * at sigma_n 128): the dot joins the exponent's fma chain, with the normal
+ * at p pre-scaled by sigma_n log2 e, and costs no power. Else the exact
+ * power as weights.h's svgf_tap_weight.
+ */
+#define TAP(OFF)                                                                            \
+  do {                                                                                      \
+    const ptrdiff_t q = x + (OFF);                                                          \
+    float s = fmaf(fabsf(zp - z[q]), rdd, fmaf(fabsf(lp - l[q]), inv_l, t_bias));           \
+    float w;                                                                                \
+    if (NORMAL_EXP) {                                                                       \
+      s = fmaf(-n0p, n0[q], fmaf(-n1p, n1[q], fmaf(-n2p, n2[q], s)));                       \
+      w = hush__select_bits(s < t_floor, svgf_exp2_neg4(s), 0.0f);                         \
+    } else {                                                                                \
+      const float dot = fmaf(n0p, n0[q], fmaf(n1p, n1[q], n2p * n2[q]));                    \
+      w = svgf_tap_weight(s, dot, SQUARINGS, sigma_n_log2e, dot_floor, &unit_poly);         \
+    }                                                                                       \
+    if (VALIDITY) w *= ok[q];                                                               \
+    sw += w;                                                                                \
+    s0 = fmaf(w, c0[q], s0);                                                                \
+    s1 = fmaf(w, c1[q], s1);                                                                \
+    s2 = fmaf(w, c2[q], s2);                                                                \
+    sv = fmaf(w * w, v[q], sv);                                                             \
+  } while (0)
+
+/*
+ * Row y of one level: per pixel, every tap of the kernel with the sums in
+ * registers (no block arrays: the loads are the 9 tap planes only). NPAIRS,
+ * NORMAL_EXP, SQUARINGS and VALIDITY are literals at every call, so the pair
+ * loop unrolls into straight-line code that the pixel loop vectorises.
+ */
+static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NPAIRS,
+                                         const int NORMAL_EXP, const int SQUARINGS,
+                                         const int VALIDITY) {
+  const svgf_guide *g = c->g;
+  const svgf_padded *in = c->in;
+  const int W = g->width, H = g->height;
+  row_offsets off;
+  offsets_of(c, NPAIRS, y, &off);
+  const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
+  const float *restrict z = g->zn->plane[0] + gi, *restrict n0 = g->zn->plane[1] + gi,
+                        *restrict n1 = g->zn->plane[2] + gi, *restrict n2 = g->zn->plane[3] + gi;
+  const float *restrict l = in->plane[SVGF_LUM] + si, *restrict c0 = in->plane[SVGF_R] + si,
+                        *restrict c1 = in->plane[SVGF_G] + si, *restrict c2 = in->plane[SVGF_B] + si,
+                        *restrict v = in->plane[SVGF_VAR] + si;
+  const float *restrict ok = VALIDITY ? in->plane[SVGF_VALID] + si : NULL;
+  const float *restrict vu = svgf_padded_row(in, SVGF_VAR, y > 0 ? y - 1 : y);
+  const float *restrict vd = svgf_padded_row(in, SVGF_VAR, y < H - 1 ? y + 1 : y);
+  const size_t pi = (size_t)y * W;
+  const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
+  const float *restrict eps = c->eps_l ? c->eps_l + pi : NULL;
+  const size_t o = (size_t)y * c->out->stride;
+  float *restrict out_r = c->out->plane[SVGF_R] + o, *restrict out_g = c->out->plane[SVGF_G] + o,
+                  *restrict out_b = c->out->plane[SVGF_B] + o;
+  float *restrict out_v = c->out->plane[SVGF_VAR] ? c->out->plane[SVGF_VAR] + o : NULL;
+  float *restrict out_l = c->out->plane[SVGF_LUM] ? c->out->plane[SVGF_LUM] + o : NULL;
+  float *restrict out_ok =
+      VALIDITY && c->out->plane[SVGF_VALID] ? c->out->plane[SVGF_VALID] + o : NULL;
+  const float sigma_l = c->sigma_l, sigma_z = g->sigma_z, h0 = c->h0, nscale = c->nscale;
+  const float bias = c->bias;
+  const float sigma_n_log2e = g->np.sigma_n_log2e, dot_floor = g->np.dot_floor;
+  const svgf_exp2_poly unit_poly = svgf_exp2_poly_scaled(1.0f);
+  float fdx[MAX_PAIRS], fdy[MAX_PAIRS], nlh[MAX_PAIRS];
+  for (int k = 0; k < NPAIRS; k++) {
+    fdx[k] = c->pairs[k].fdx;
+    fdy[k] = c->pairs[k].fdy;
+    nlh[k] = c->pairs[k].nlh;
+  }
+#pragma omp simd
+  for (int x = 0; x < W; x++) {
+    /* the luminance weight's scale: the 3x3 Gaussian of the variance */
+    const float hu = fmaf(0.5f, vu[x], 0.25f * (vu[x - 1] + vu[x + 1]));
+    const float hm = fmaf(0.5f, v[x], 0.25f * (v[x - 1] + v[x + 1]));
+    const float hd = fmaf(0.5f, vd[x], 0.25f * (vd[x - 1] + vd[x + 1]));
+    const float var3 = fmaf(0.5f, hm, 0.25f * (hu + hd));
+    const float dl = fmaf(sigma_l, svgf_sqrt_pos(var3), eps ? eps[x] : SVGF_EPS_L);
+    float inv_l = SVGF_LOG2E * svgf_rcp_pos(dl < 1e30f ? dl : 1e30f);
+    /* a pixel without data has no luminance to compare: weight 1 */
+    if (VALIDITY) inv_l *= ok[x];
+    /* the gradient within +-1e20 (NaN taken as 1e20): every denominator,
+     * at most 1e20 times the largest offset, is in svgf_rcp2_pos's range */
+    const float ax = sigma_z * gx[x], ay = sigma_z * gy[x];
+    const float cx = ax < 1e20f ? ax : 1e20f, cy = ay < 1e20f ? ay : 1e20f;
+    const float sgx = cx > -1e20f ? cx : -1e20f, sgy = cy > -1e20f ? cy : -1e20f;
+    const float zl = zon[x] * SVGF_LOG2E;
+    const float zp = z[x], lp = l[x];
+    const float n0p = nscale * n0[x], n1p = nscale * n1[x], n2p = nscale * n2[x];
+    /* the centre tap: every edge-stopping weight is 1 */
+    const float hp = VALIDITY ? h0 * ok[x] : h0;
+    float sw = hp, s0 = hp * c0[x], s1 = hp * c1[x], s2 = hp * c2[x], sv = hp * hp * v[x];
+#pragma GCC unroll 12
+    for (int k = 0; k < NPAIRS; k++) {
+      /* both taps of a pair see the same |grad z . (q - p)| */
+      const float rdd = zl * svgf_rcp2_pos(fabsf(fmaf(sgx, fdx[k], sgy * fdy[k])) + SVGF_EPS_Z);
+      const float t_bias = bias + nlh[k], t_floor = S_FLOOR + nlh[k];
+      TAP(off.a[k]);
+      TAP(off.b[k]);
+    }
+    int some = 1;
+    if (VALIDITY) {
+      /* nothing valid in reach: stays a hole (0, not valid) */
+      some = sw > 0.0f;
+      if (out_ok) out_ok[x] = hush__select_bits(some, 1.0f, 0.0f);
+      sw = hush__select_bits(some, sw, 1.0f);
+      sv = hush__select_bits(some, sv, 0.0f);
+    }
+    const float inv = 1.0f / sw;
+    const float r = s0 * inv, gr = s1 * inv, b = s2 * inv;
+    out_r[x] = r;
+    out_g[x] = gr;
+    out_b[x] = b;
+    if (out_v) out_v[x] = sv * inv * inv;
+    if (out_l) out_l[x] = hush_luminance(r, gr, b);
+  }
+  if (c->out->pad > 0)
+    for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
+      if (c->out->plane[ch]) svgf_pad_row(c->out->plane[ch] + o, W, c->out->pad);
+}
+
+#if defined(__AVX512F__) && defined(__x86_64__)
+/*
+ * The default level (exp normal weight) in AVX-512 intrinsics. The portable
+ * loop above is what GCC makes of it: with every tap unrolled it keeps 216
+ * tap addresses on the stack and reloads one per vector load, and each
+ * select costs two operations. Here the pair loop stays a loop (9 plane
+ * bases in registers, one offset per tap), the weight floor is the zero
+ * mask of the last operation of the exp, 2^x is vrndscaleps + a degree-4
+ * polynomial + vscalefps, and the depth denominators use vrcp14ps (relative
+ * error 2^-14 in an exponent). The exponent is carried negated, t = -s.
+ * Same weights as the portable loop within 1e-4 relative (tests/test_svgf.c
+ * compares the two).
+ */
+#include <immintrin.h>
+
+typedef struct avx_pair {
+  ptrdiff_t a, b;       /* tap offsets in floats (row_offsets) */
+  float fdx, fdy;
+  float nbias, nfloor;  /* -(bias - log2 h), -(S_FLOOR - log2 h) */
+} avx_pair;
+
+/* The sums of one vector of 16 pixels. */
+typedef struct avx_sums {
+  __m512 sw, s0, s1, s2, sv;
+} avx_sums;
+
+/* The planes of a row, at pixel 0 of that row. */
+typedef struct avx_row {
+  const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
+} avx_row;
+
+/* One tap at offset off from the vector at x. FULL: all 16 lanes in the row
+ * (plain loads); else the loads are masked by m. */
+static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, __m512 inv_l,
+                                       __m512 zp, __m512 lp, __m512 n0p, __m512 n1p, __m512 n2p,
+                                       __m512 nbias, __m512 nfloor, __mmask16 m, const int FULL,
+                                       const int VALIDITY, avx_sums *acc) {
+#define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
+  const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(zp, LD(r->z)));
+  const __m512 dl = _mm512_abs_ps(_mm512_sub_ps(lp, LD(r->l)));
+  __m512 t = _mm512_fnmadd_ps(dl, inv_l, nbias);
+  t = _mm512_fnmadd_ps(dz, rdd, t);
+  t = _mm512_fmadd_ps(n0p, LD(r->n0), t);
+  t = _mm512_fmadd_ps(n1p, LD(r->n1), t);
+  t = _mm512_fmadd_ps(n2p, LD(r->n2), t);
+  /* NaN compares false: weight 0 */
+  const __mmask16 keep = _mm512_cmp_ps_mask(t, nfloor, _CMP_GT_OQ);
+  const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  const __m512 f = _mm512_sub_ps(t, n);
+  __m512 y = _mm512_fmadd_ps(f, _mm512_set1_ps(0.009570101908f), _mm512_set1_ps(0.05591786032f));
+  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.2402474483f));
+  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.6931218147f));
+  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.9999992614f));
+  __m512 w = _mm512_maskz_scalef_ps(keep, y, n);
+  if (VALIDITY) w = _mm512_mul_ps(w, LD(r->ok));
+  acc->sw = _mm512_add_ps(acc->sw, w);
+  acc->s0 = _mm512_fmadd_ps(w, LD(r->c0), acc->s0);
+  acc->s1 = _mm512_fmadd_ps(w, LD(r->c1), acc->s1);
+  acc->s2 = _mm512_fmadd_ps(w, LD(r->c2), acc->s2);
+  acc->sv = _mm512_fmadd_ps(_mm512_mul_ps(w, w), LD(r->v), acc->sv);
+#undef LD
+}
+
+/* 16 pixels from x (n of them, n < 16 only at the row's end). */
+static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, const float *vu,
+                                          const float *vd, const float *gx, const float *gy,
+                                          const float *zon, const float *eps,
+                                          const avx_pair *pairs, int npairs, int x, int n,
+                                          float *const out[SVGF_SIGNAL_CHANNELS],
+                                          const int FULL, const int VALIDITY) {
+  const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
+#define LDX(P, OFF) (FULL ? _mm512_loadu_ps((P) + x + (OFF)) : _mm512_maskz_loadu_ps(m, (P) + x + (OFF)))
+  const __m512 q = _mm512_set1_ps(0.25f), h = _mm512_set1_ps(0.5f);
+  const __m512 hu = _mm512_fmadd_ps(h, LDX(vu, 0), _mm512_mul_ps(q, _mm512_add_ps(LDX(vu, -1), LDX(vu, 1))));
+  const __m512 hm = _mm512_fmadd_ps(h, LDX(r->v, 0), _mm512_mul_ps(q, _mm512_add_ps(LDX(r->v, -1), LDX(r->v, 1))));
+  const __m512 hd = _mm512_fmadd_ps(h, LDX(vd, 0), _mm512_mul_ps(q, _mm512_add_ps(LDX(vd, -1), LDX(vd, 1))));
+  const __m512 var3 = _mm512_max_ps(_mm512_fmadd_ps(h, hm, _mm512_mul_ps(q, _mm512_add_ps(hu, hd))),
+                                    _mm512_setzero_ps());
+  const __m512 e = eps ? LDX(eps, 0) : _mm512_set1_ps(SVGF_EPS_L);
+  const __m512 dl = _mm512_min_ps(_mm512_fmadd_ps(_mm512_set1_ps(c->sigma_l), _mm512_sqrt_ps(var3), e),
+                                  _mm512_set1_ps(1e30f));
+  __m512 inv_l = _mm512_div_ps(_mm512_set1_ps(SVGF_LOG2E), dl);
+  if (VALIDITY) inv_l = _mm512_mul_ps(inv_l, LDX(r->ok, 0));
+  const __m512 sz = _mm512_set1_ps(c->g->sigma_z);
+  const __m512 sgx = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gx, 0)), _mm512_set1_ps(1e20f)),
+                                   _mm512_set1_ps(-1e20f));
+  const __m512 sgy = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gy, 0)), _mm512_set1_ps(1e20f)),
+                                   _mm512_set1_ps(-1e20f));
+  const __m512 zl = _mm512_mul_ps(LDX(zon, 0), _mm512_set1_ps(SVGF_LOG2E));
+  const __m512 zp = LDX(r->z, 0), lp = LDX(r->l, 0);
+  const __m512 ns = _mm512_set1_ps(c->nscale);
+  const __m512 n0p = _mm512_mul_ps(ns, LDX(r->n0, 0)), n1p = _mm512_mul_ps(ns, LDX(r->n1, 0)),
+               n2p = _mm512_mul_ps(ns, LDX(r->n2, 0));
+  const __m512 h0 = _mm512_set1_ps(c->h0);
+  const __m512 hp = VALIDITY ? _mm512_mul_ps(h0, LDX(r->ok, 0)) : h0;
+  avx_sums acc;
+  acc.sw = hp;
+  acc.s0 = _mm512_mul_ps(hp, LDX(r->c0, 0));
+  acc.s1 = _mm512_mul_ps(hp, LDX(r->c1, 0));
+  acc.s2 = _mm512_mul_ps(hp, LDX(r->c2, 0));
+  acc.sv = _mm512_mul_ps(_mm512_mul_ps(hp, hp), LDX(r->v, 0));
+  const __m512 eps_z = _mm512_set1_ps(SVGF_EPS_Z);
+  avx_row rx = *r;
+  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
+  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
+  if (VALIDITY) rx.ok += x;
+  for (int k = 0; k < npairs; k++) {
+    const avx_pair *t = &pairs[k];
+    const __m512 a = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
+    const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(a), eps_z)));
+    const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
+    avx_tap(&rx, t->a, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, &acc);
+    avx_tap(&rx, t->b, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, &acc);
+  }
+  __m512 sw = acc.sw, sv = acc.sv;
+  if (VALIDITY) {
+    /* nothing valid in reach: stays a hole (0, not valid) */
+    const __mmask16 some = _mm512_cmp_ps_mask(sw, _mm512_setzero_ps(), _CMP_GT_OQ);
+    if (out[SVGF_VALID])
+      _mm512_mask_storeu_ps(out[SVGF_VALID] + x, m, _mm512_maskz_mov_ps(some, _mm512_set1_ps(1.0f)));
+    sw = _mm512_mask_mov_ps(_mm512_set1_ps(1.0f), some, sw);
+    sv = _mm512_maskz_mov_ps(some, sv);
+  }
+  const __m512 inv = _mm512_div_ps(_mm512_set1_ps(1.0f), sw);
+  const __m512 rr = _mm512_mul_ps(acc.s0, inv), gg = _mm512_mul_ps(acc.s1, inv),
+               bb = _mm512_mul_ps(acc.s2, inv);
+  _mm512_mask_storeu_ps(out[SVGF_R] + x, m, rr);
+  _mm512_mask_storeu_ps(out[SVGF_G] + x, m, gg);
+  _mm512_mask_storeu_ps(out[SVGF_B] + x, m, bb);
+  if (out[SVGF_VAR])
+    _mm512_mask_storeu_ps(out[SVGF_VAR] + x, m, _mm512_mul_ps(_mm512_mul_ps(sv, inv), inv));
+  if (out[SVGF_LUM]) {
+    const __m512 lum = _mm512_add_ps(
+        _mm512_add_ps(_mm512_mul_ps(_mm512_set1_ps(0.2126f), rr), _mm512_mul_ps(_mm512_set1_ps(0.7152f), gg)),
+        _mm512_mul_ps(_mm512_set1_ps(0.0722f), bb));
+    _mm512_mask_storeu_ps(out[SVGF_LUM] + x, m, lum);
+  }
+#undef LDX
+}
+
+static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const int VALIDITY) {
+  const svgf_guide *g = c->g;
+  const svgf_padded *in = c->in;
+  const int W = g->width, H = g->height;
+  const int npairs = c->npairs;
+  row_offsets off;
+  offsets_of(c, npairs, y, &off);
+  avx_pair pairs[MAX_PAIRS];
+  for (int k = 0; k < npairs; k++) {
+    pairs[k].a = off.a[k];
+    pairs[k].b = off.b[k];
+    pairs[k].fdx = c->pairs[k].fdx;
+    pairs[k].fdy = c->pairs[k].fdy;
+    pairs[k].nbias = -(c->bias + c->pairs[k].nlh);
+    pairs[k].nfloor = -(S_FLOOR + c->pairs[k].nlh);
+  }
+  const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
+  avx_row r;
   r.z = g->zn->plane[0] + gi;
   r.n0 = g->zn->plane[1] + gi;
   r.n1 = g->zn->plane[2] + gi;
@@ -60,234 +365,88 @@ static inline rows rows_at(const svgf_guide *g, const svgf_padded *in, int y, in
   r.c1 = in->plane[SVGF_G] + si;
   r.c2 = in->plane[SVGF_B] + si;
   r.v = in->plane[SVGF_VAR] + si;
-  r.ok = in->plane[SVGF_VALID] + si;
-  return r;
+  r.ok = VALIDITY ? in->plane[SVGF_VALID] + si : NULL;
+  const float *vu = svgf_padded_row(in, SVGF_VAR, y > 0 ? y - 1 : y);
+  const float *vd = svgf_padded_row(in, SVGF_VAR, y < H - 1 ? y + 1 : y);
+  const size_t pi = (size_t)y * W;
+  const float *gx = g->gx + pi, *gy = g->gy + pi, *zon = g->zon + pi;
+  const float *eps = c->eps_l ? c->eps_l + pi : NULL;
+  const size_t o = (size_t)y * c->out->stride;
+  float *out[SVGF_SIGNAL_CHANNELS];
+  for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
+    out[ch] = c->out->plane[ch] ? c->out->plane[ch] + o : NULL;
+  int x = 0;
+  for (; x + 16 <= W; x += 16)
+    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, 1, VALIDITY);
+  if (x < W) avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, 0, VALIDITY);
+  if (c->out->pad > 0)
+    for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
+      if (out[ch]) svgf_pad_row(out[ch], W, c->out->pad);
 }
 
-/* Everything a block reads at p, and its accumulators: block-local arrays
- * (on the stack of the worker), so the tap loop addresses them from one
- * base register and keeps the general registers for the 9 tap planes. */
-typedef struct block_acc {
-  float sw[BLOCK], s0[BLOCK], s1[BLOCK], s2[BLOCK], sv[BLOCK];
-  float inv_l[BLOCK]; /* log2 e / (sigma_l sqrt(g3x3(var_p)) + eps_l) */
-  float z[BLOCK], l[BLOCK], n0[BLOCK], n1[BLOCK], n2[BLOCK];
-  float sgx[BLOCK], sgy[BLOCK], zl[BLOCK]; /* sigma_z grad z (clamped), zon log2 e */
-  float rdd[MAX_PAIRS][BLOCK]; /* log2 e / (sigma_z |grad z . (q - p)| + eps_z), 0: depth weight off */
-} block_acc;
-
-/* inv_l for pixels [x0, x0 + n) of row y: the 3x3 Gaussian (1 2 1)/4 x
- * (1 2 1)/4 of the variance, rows clamped, columns by the padding (fmaf
- * spelled out: ISO C does not contract a * b + c). */
-static void block_inv_l(const svgf_padded *in, int y, int x0, int n, float sigma_l,
-                        const float *eps_l, block_acc *acc) {
-  const int H = in->height;
-  const float *restrict up = svgf_padded_row(in, SVGF_VAR, y > 0 ? y - 1 : y) + x0;
-  const float *restrict mid = svgf_padded_row(in, SVGF_VAR, y) + x0;
-  const float *restrict dn = svgf_padded_row(in, SVGF_VAR, y < H - 1 ? y + 1 : y) + x0;
-  float *restrict inv_l = acc->inv_l;
-  if (eps_l) {
-    const float *restrict eps = eps_l + (size_t)y * in->width + x0;
-#pragma omp simd
-    for (int x = 0; x < n; x++) {
-      const float hu = fmaf(0.5f, up[x], 0.25f * (up[x - 1] + up[x + 1]));
-      const float hm = fmaf(0.5f, mid[x], 0.25f * (mid[x - 1] + mid[x + 1]));
-      const float hd = fmaf(0.5f, dn[x], 0.25f * (dn[x - 1] + dn[x + 1]));
-      const float v = fmaf(0.5f, hm, 0.25f * (hu + hd));
-      const float d = fmaf(sigma_l, svgf_sqrt_pos(v), eps[x]);
-      inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
-    }
-  } else {
-#pragma omp simd
-    for (int x = 0; x < n; x++) {
-      const float hu = fmaf(0.5f, up[x], 0.25f * (up[x - 1] + up[x + 1]));
-      const float hm = fmaf(0.5f, mid[x], 0.25f * (mid[x - 1] + mid[x + 1]));
-      const float hd = fmaf(0.5f, dn[x], 0.25f * (dn[x - 1] + dn[x + 1]));
-      const float v = fmaf(0.5f, hm, 0.25f * (hu + hd));
-      const float d = fmaf(sigma_l, svgf_sqrt_pos(v), SVGF_EPS_L);
-      inv_l[x] = SVGF_LOG2E * svgf_rcp_pos(d < 1e30f ? d : 1e30f);
-    }
-  }
+static void avx_rows(const level_ctx *c, int threads) {
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < c->g->height; y++) avx_level_row(c, y, 0);
 }
-
-/* The p side of pixels [x0, x0 + n) of row y into the block: guide, luminance
- * and, per tap pair (both taps of a pair see the same |grad z . (q - p)|),
- * the reciprocal depth denominator. */
-static HUSH_ALWAYS_INLINE void block_p_side(const svgf_guide *g, const svgf_padded *in,
-                                            const tap_pair *pairs, int npairs, int y, int x0,
-                                            int n, block_acc *acc) {
-  const rows p = rows_at(g, in, y, x0);
-#pragma omp simd
-  for (int x = 0; x < n; x++) {
-    acc->z[x] = p.z[x];
-    acc->l[x] = p.l[x];
-    acc->n0[x] = p.n0[x];
-    acc->n1[x] = p.n1[x];
-    acc->n2[x] = p.n2[x];
-  }
-  const size_t pi = (size_t)y * g->width + x0;
-  const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
-  const float sigma_z = g->sigma_z;
-  /* once per pixel what every pair needs: the gradient within +-1e20 (NaN
-   * taken as 1e20), so that a denominator, at most 1e20 times the largest
-   * offset, is in the range of svgf_rcp_pos without a clamp per pair */
-  float *restrict sgx = acc->sgx, *restrict sgy = acc->sgy, *restrict zl = acc->zl;
-#pragma omp simd
-  for (int x = 0; x < n; x++) {
-    const float ax = sigma_z * gx[x], ay = sigma_z * gy[x];
-    const float cx = ax < 1e20f ? ax : 1e20f, cy = ay < 1e20f ? ay : 1e20f;
-    sgx[x] = cx > -1e20f ? cx : -1e20f;
-    sgy[x] = cy > -1e20f ? cy : -1e20f;
-    zl[x] = zon[x] * SVGF_LOG2E;
-  }
-  for (int k = 0; k < npairs; k++) {
-    const float fdx = pairs[k].fdx, fdy = pairs[k].fdy;
-    float *restrict rdd = acc->rdd[k];
-    /* fmaf spelled out: ISO C mode does not contract a * b + c */
-#pragma omp simd
-    for (int x = 0; x < n; x++)
-      rdd[x] = zl[x] * svgf_rcp_pos(fabsf(fmaf(sgx[x], fdx, sgy[x] * fdy)) + SVGF_EPS_Z);
-  }
+static void avx_rows_valid(const level_ctx *c, int threads) {
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < c->g->height; y++) avx_level_row(c, y, 1);
 }
+#define HAVE_AVX_LEVEL 1
+#else
+#define HAVE_AVX_LEVEL 0
+#endif
 
-/* Adds the tap (x + dx, y + dy) with kernel weight h (in poly) to the accumulators of
- * pixels [x0, x0 + n) of row y; rdd is its pair's depth denominator. */
-static HUSH_ALWAYS_INLINE void block_tap(const svgf_guide *g, const svgf_padded *in, int dx,
-                                         int dy, const svgf_exp2_poly *poly,
-                                         const float *rdd_pair, int y,
-                                         int x0, int n, const int squarings, const int validity,
-                                         block_acc *acc) {
-  const rows q = rows_at(g, in, clampi(y + dy, 0, g->height - 1), x0 + dx);
-  /* locals: the stores to acc must not make the loop reload them */
-  const svgf_exp2_poly p = *poly;
-  const float sigma_n_log2e = g->np.sigma_n_log2e, dot_floor = g->np.dot_floor;
-  const float *restrict rdd = rdd_pair;
-#pragma omp simd
-  for (int x = 0; x < n; x++) {
-    const float sz = fmaf(fabsf(acc->z[x] - q.z[x]), rdd[x], fabsf(acc->l[x] - q.l[x]) * acc->inv_l[x]);
-    const float dot = fmaf(acc->n0[x], q.n0[x], fmaf(acc->n1[x], q.n1[x], acc->n2[x] * q.n2[x]));
-    float w = svgf_tap_weight(sz, dot, squarings, sigma_n_log2e, dot_floor, &p);
-    if (validity) w *= q.ok[x]; /* a constant: resolved at compile time */
-    acc->sw[x] += w;
-    acc->s0[x] = fmaf(w, q.c0[x], acc->s0[x]);
-    acc->s1[x] = fmaf(w, q.c1[x], acc->s1[x]);
-    acc->s2[x] = fmaf(w, q.c2[x], acc->s2[x]);
-    acc->sv[x] = fmaf(w * w, q.v[x], acc->sv[x]);
+#define LEVEL_ROWS(NAME, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY)                            \
+  static void NAME(const level_ctx *c, int threads) {                                         \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                         \
+    for (int y = 0; y < c->g->height; y++)                                                     \
+      level_row(c, y, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY);                               \
   }
-}
-
-/* Row y of one level. SQUARINGS is a literal at every call: the OpenMP
- * region is outlined before inlining, so the dispatch on it has to sit
- * outside the parallel region for the constant to reach the vector loop. */
-static HUSH_ALWAYS_INLINE void level_row(const svgf_guide *g, const svgf_level_params *lp,
-                                         const svgf_padded *in, const svgf_level_out *out,
-                                         const tap_pair *pairs, int npairs,
-                                         int y, const int squarings,
-                                         const int validity, block_acc *acc) {
-  const int W = g->width;
-  const float hc = lp->kernel->h[lp->kernel->radius];
-  const float h0 = hc * hc;
-  for (int x0 = 0; x0 < W; x0 += BLOCK) {
-    const int n = W - x0 < BLOCK ? W - x0 : BLOCK;
-    block_inv_l(in, y, x0, n, lp->sigma_l, lp->eps_l, acc);
-    if (validity) {
-      /* a pixel without data has no luminance to compare: weight 1 */
-      const float *restrict ok = svgf_padded_row(in, SVGF_VALID, y) + x0;
-#pragma omp simd
-      for (int x = 0; x < n; x++) acc->inv_l[x] *= ok[x];
-    }
-    {
-      const rows p = rows_at(g, in, y, x0);
-      /* the centre tap: every edge-stopping weight is 1 */
-#pragma omp simd
-      for (int x = 0; x < n; x++) {
-        const float hp = validity ? h0 * p.ok[x] : h0;
-        acc->sw[x] = hp;
-        acc->s0[x] = hp * p.c0[x];
-        acc->s1[x] = hp * p.c1[x];
-        acc->s2[x] = hp * p.c2[x];
-        acc->sv[x] = hp * hp * p.v[x];
-      }
-    }
-    block_p_side(g, in, pairs, npairs, y, x0, n, acc);
-    for (int k = 0; k < npairs; k++) {
-      const tap_pair *t = &pairs[k];
-      block_tap(g, in, t->dx, t->dy, &t->poly, acc->rdd[k], y, x0, n, squarings, validity,
-                acc);
-      block_tap(g, in, -t->dx, -t->dy, &t->poly, acc->rdd[k], y, x0, n, squarings, validity,
-                acc);
-    }
-    const size_t o = (size_t)y * out->stride + (size_t)x0;
-    float *restrict r = out->plane[SVGF_R] + o, *restrict gr = out->plane[SVGF_G] + o,
-                    *restrict bl = out->plane[SVGF_B] + o;
-    if (validity) {
-      /* nothing valid in reach: stays a hole (0, not valid) */
-      float *restrict ok = out->plane[SVGF_VALID] ? out->plane[SVGF_VALID] + o : acc->inv_l;
-#pragma omp simd
-      for (int x = 0; x < n; x++) {
-        const int some = acc->sw[x] > 0.0f;
-        ok[x] = hush__select_bits(some, 1.0f, 0.0f);
-        acc->sw[x] = hush__select_bits(some, acc->sw[x], 1.0f);
-        acc->sv[x] = hush__select_bits(some, acc->sv[x], 0.0f);
-      }
-    }
-#pragma omp simd
-    for (int x = 0; x < n; x++) {
-      const float inv = 1.0f / acc->sw[x];
-      r[x] = acc->s0[x] * inv;
-      gr[x] = acc->s1[x] * inv;
-      bl[x] = acc->s2[x] * inv;
-    }
-    if (out->plane[SVGF_VAR]) {
-      float *restrict v = out->plane[SVGF_VAR] + o;
-#pragma omp simd
-      for (int x = 0; x < n; x++) {
-        const float inv = 1.0f / acc->sw[x];
-        v[x] = acc->sv[x] * inv * inv;
-      }
-    }
-    if (out->plane[SVGF_LUM]) {
-      float *restrict l = out->plane[SVGF_LUM] + o;
-#pragma omp simd
-      for (int x = 0; x < n; x++) l[x] = hush_luminance(r[x], gr[x], bl[x]);
-    }
-  }
-  if (out->pad > 0)
-    for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
-      if (out->plane[c]) svgf_pad_row(out->plane[c] + (size_t)y * out->stride, W, out->pad);
-}
-
-#define LEVEL_ROWS(NAME, SQUARINGS, VALIDITY)                                                           \
-  static void NAME(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,  \
-                   const svgf_level_out *out, int threads) {                                 \
-    tap_pair pairs[MAX_PAIRS];                                                                \
-    const int npairs = tap_pairs(lp->kernel, lp->step, pairs);                                \
-    _Pragma("omp parallel num_threads(threads)") {                                           \
-      block_acc acc __attribute__((aligned(64)));                                             \
-      _Pragma("omp for schedule(static)") for (int y = 0; y < g->height; y++)                 \
-          level_row(g, lp, in, out, pairs, npairs, y, SQUARINGS, VALIDITY, &acc);             \
-    }                                                                                         \
-  }
-LEVEL_ROWS(level_rows_pow64, 6, 0)
-LEVEL_ROWS(level_rows_pow128, 7, 0)
-LEVEL_ROWS(level_rows_pow256, 8, 0)
-LEVEL_ROWS(level_rows_any, -1, 0)
-LEVEL_ROWS(level_rows_pow128_valid, 7, 1)
-LEVEL_ROWS(level_rows_any_valid, -1, 1)
+/* 5x5 (12 pairs) and 3x3 (4 pairs); the normal weight as exp (default),
+ * as the exact power 128 by squarings, or any sigma_n through the log */
+LEVEL_ROWS(rows5_exp, 12, 1, 0, 0)
+LEVEL_ROWS(rows5_exp_valid, 12, 1, 0, 1)
+LEVEL_ROWS(rows5_pow128, 12, 0, 7, 0)
+LEVEL_ROWS(rows5_pow128_valid, 12, 0, 7, 1)
+LEVEL_ROWS(rows5_any, 12, 0, -1, 0)
+LEVEL_ROWS(rows5_any_valid, 12, 0, -1, 1)
+LEVEL_ROWS(rows3_exp, 4, 1, 0, 0)
+LEVEL_ROWS(rows3_exp_valid, 4, 1, 0, 1)
+LEVEL_ROWS(rows3_pow128, 4, 0, 7, 0)
+LEVEL_ROWS(rows3_pow128_valid, 4, 0, 7, 1)
+LEVEL_ROWS(rows3_any, 4, 0, -1, 0)
+LEVEL_ROWS(rows3_any_valid, 4, 0, -1, 1)
 
 void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,
                        const svgf_level_out *out, int threads) {
-  if (lp->validity) {
-    if (g->np.squarings == 7)
-      level_rows_pow128_valid(g, lp, in, out, threads);
-    else
-      level_rows_any_valid(g, lp, in, out, threads);
+  level_ctx c;
+  c.g = g;
+  c.in = in;
+  c.out = out;
+  c.sigma_l = lp->sigma_l;
+  c.eps_l = lp->eps_l;
+  const float hc = lp->kernel->h[lp->kernel->radius];
+  c.h0 = hc * hc;
+  const int npairs = tap_pairs(lp->kernel, lp->step, c.pairs);
+  c.npairs = npairs;
+  const int exp_form = lp->normal_exp;
+  c.bias = exp_form ? g->np.sigma_n_log2e : 0.0f;
+  c.nscale = exp_form ? g->np.sigma_n_log2e : 1.0f;
+  const int pow128 = g->np.squarings == 7, v = lp->validity;
+  if (HAVE_AVX_LEVEL && exp_form && !lp->portable) {
+#if HAVE_AVX_LEVEL
+    (v ? avx_rows_valid : avx_rows)(&c, threads);
+#endif
     return;
   }
-  /* the normal weight's power as straight-line code for the usual sigma_n */
-  switch (g->np.squarings) {
-  case 6: level_rows_pow64(g, lp, in, out, threads); break;
-  case 7: level_rows_pow128(g, lp, in, out, threads); break;
-  case 8: level_rows_pow256(g, lp, in, out, threads); break;
-  default: level_rows_any(g, lp, in, out, threads); break;
+  if (npairs == 12) {
+    if (exp_form) (v ? rows5_exp_valid : rows5_exp)(&c, threads);
+    else if (pow128) (v ? rows5_pow128_valid : rows5_pow128)(&c, threads);
+    else (v ? rows5_any_valid : rows5_any)(&c, threads);
+  } else {
+    if (exp_form) (v ? rows3_exp_valid : rows3_exp)(&c, threads);
+    else if (pow128) (v ? rows3_pow128_valid : rows3_pow128)(&c, threads);
+    else (v ? rows3_any_valid : rows3_any)(&c, threads);
   }
 }

@@ -56,6 +56,8 @@ typedef struct svgf_level_params {
   float sigma_l;
   const float *eps_l; /* per-pixel luminance epsilon (unpadded), or NULL: SVGF_EPS_L */
   int validity;       /* taps and centre weighted by VALID (progressive, Dundr §4.2) */
+  int normal_exp;     /* normal weight 2^(-sigma_n log2 e (1 - dot)), else max(0, dot)^sigma_n */
+  int portable;       /* 1: never the AVX-512 loop (tests compare the two) */
 } svgf_level_params;
 
 /* in (padded, SVGF_SIGNAL_CHANNELS planes) -> out. in and out must not

@@ -53,6 +53,7 @@
 const char *const svgf_kernel_names[] = {"5x5", "3x3"};
 enum { ORDER_INCREASING = 0, ORDER_DECREASING, ORDER_ZERO_THEN_DECREASING };
 const char *const svgf_order_names[] = {"increasing", "decreasing", "0-then-decreasing"};
+const char *const svgf_normal_weight_names[] = {"exp", "pow"};
 
 static const hush_param_info svgf_params[P_COUNT] = {SVGF_PARAM_ROWS};
 
@@ -298,7 +299,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     const hush_planar *m = hush__accum_moments(&c->acc);
     for (int k = 0; k < 2; k++) svgf_padded_import(&st->moments, k, m->plane[k], threads);
     svgf_spatial_variance(fc->gd, &st->moments, samples, (float)min_age, st->var.plane[0],
-                          threads);
+                          hush__param_i(f, P_NORMAL_WEIGHT) == 0, threads);
   }
   /* with the merge the moments are per sample; else they see only the
    * frame-to-frame spread of the pixel means, already per frame value */
@@ -316,6 +317,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   lp.sigma_l = hush__param_f(f, P_SIGMA_L);
   lp.eps_l = NULL;
   lp.validity = fc->holes;
+  lp.normal_exp = hush__param_i(f, P_NORMAL_WEIGHT) == 0;
+  lp.portable = 0;
   if (fc->holes) {
     svgf_progressive_epsilon(samples, hush__param_f(f, P_PROGRESSIVE_EPSILON), st->eps.plane[0],
                              hush__planar_pixels(&st->eps), threads);

@@ -40,11 +40,13 @@ enum {
   P_PROGRESSIVE_EPSILON,
   P_EMISSION_BYPASS,
   P_PROGRESSIVE_TAA,
+  P_NORMAL_WEIGHT,
   P_COUNT
 };
 
 extern const char *const svgf_kernel_names[];
 extern const char *const svgf_order_names[];
+extern const char *const svgf_normal_weight_names[];
 
 /* The parameter rows of "svgf", in P_ order. */
 #define SVGF_PARAM_ROWS \
@@ -120,7 +122,12 @@ extern const char *const svgf_order_names[];
      "progressive, with taa: only the traced pixels blend into the TAA history, a hole keeps " \
      "it clamped to its box (Dundr 2018 §4.2.6: 'only new samples would get updated'; " \
      "docs/holes.md)", \
-     NULL},
+     NULL}, \
+    {"normal_weight", HUSH_PARAM_ENUM, 0, 0, 1, \
+     "a-trous normal weight: exp = exp(-sigma_n (1 - n_p . n_q)), the first-order form of the " \
+     "paper's max(0, n_p . n_q)^sigma_n (within 0.0021 of it at sigma_n 128, and cheaper: " \
+     "docs/svgf-speed.md), or pow = that power exactly", \
+     svgf_normal_weight_names},
 
 enum {
   I_COLOR = 0,

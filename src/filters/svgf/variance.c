@@ -171,8 +171,142 @@ VARIANCE_ROWS(variance_rows_pow128, 7)
 VARIANCE_ROWS(variance_rows_pow256, 8)
 VARIANCE_ROWS(variance_rows_any, -1)
 
+#if defined(__AVX512F__) && defined(__x86_64__)
+/*
+ * The exp-normal-weight estimate in AVX-512 intrinsics, as the a-trous
+ * (atrous.c): per vector of 16 pixels with a short-history pixel, the 48
+ * taps with the sums in registers; a vector whose windows hold a pixel
+ * without data goes through variance_row_valid. The weight floor is the
+ * zero mask of the exp; the depth denominators use vrcp14ps.
+ */
+#include <immintrin.h>
+
+#define NPAIRS ((2 * R + 1) * (2 * R + 1) / 2)
+
+typedef struct avx_vpair {
+  ptrdiff_t ga, gb, ma, mb; /* tap offsets in the guide and the moments, in floats */
+  float fdx, fdy;
+} avx_vpair;
+
+static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const float *n1,
+                                        const float *n2, const float *m1, const float *m2,
+                                        ptrdiff_t go, ptrdiff_t mo, __m512 rdd, __m512 zp,
+                                        __m512 n0p, __m512 n1p, __m512 n2p, __m512 nbias,
+                                        __m512 *sw, __m512 *s1, __m512 *s2) {
+  const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(zp, _mm512_loadu_ps(z + go)));
+  __m512 t = _mm512_fnmadd_ps(dz, rdd, nbias);
+  t = _mm512_fmadd_ps(n0p, _mm512_loadu_ps(n0 + go), t);
+  t = _mm512_fmadd_ps(n1p, _mm512_loadu_ps(n1 + go), t);
+  t = _mm512_fmadd_ps(n2p, _mm512_loadu_ps(n2 + go), t);
+  const __mmask16 keep = _mm512_cmp_ps_mask(t, _mm512_set1_ps(-20.0f * SVGF_LOG2E), _CMP_GT_OQ);
+  const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
+  const __m512 f = _mm512_sub_ps(t, n);
+  __m512 y = _mm512_fmadd_ps(f, _mm512_set1_ps(0.009570101908f), _mm512_set1_ps(0.05591786032f));
+  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.2402474483f));
+  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.6931218147f));
+  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.9999992614f));
+  const __m512 w = _mm512_maskz_scalef_ps(keep, y, n);
+  *sw = _mm512_add_ps(*sw, w);
+  *s1 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m1 + mo), *s1);
+  *s2 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m2 + mo), *s2);
+}
+
+static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const float *age,
+                             float min_age, float *var, int y, int has_empty,
+                             const svgf_exp2_poly *poly) {
+  const int W = g->width, H = g->height;
+  const size_t gs = g->zn->stride, ms = m->stride;
+  avx_vpair pairs[NPAIRS];
+  int k = 0;
+  for (int dy = 0; dy <= R; dy++)
+    for (int dx = -R; dx <= R; dx++) {
+      if (dy == 0 && dx <= 0) continue;
+      const int ya = clampi(y + dy, 0, H - 1) - y, yb = clampi(y - dy, 0, H - 1) - y;
+      pairs[k].ga = (ptrdiff_t)ya * (ptrdiff_t)gs + dx;
+      pairs[k].gb = (ptrdiff_t)yb * (ptrdiff_t)gs - dx;
+      pairs[k].ma = (ptrdiff_t)ya * (ptrdiff_t)ms + dx;
+      pairs[k].mb = (ptrdiff_t)yb * (ptrdiff_t)ms - dx;
+      pairs[k].fdx = (float)dx;
+      pairs[k].fdy = (float)dy;
+      k++;
+    }
+  const float *z = g->zn->plane[0] + (size_t)y * gs, *n0 = g->zn->plane[1] + (size_t)y * gs,
+              *n1 = g->zn->plane[2] + (size_t)y * gs, *n2 = g->zn->plane[3] + (size_t)y * gs;
+  const float *m1 = m->plane[0] + (size_t)y * ms, *m2 = m->plane[1] + (size_t)y * ms;
+  const size_t pi = (size_t)y * W;
+  const float *a = age + pi, *gx = g->gx + pi, *gy = g->gy + pi, *zon = g->zon + pi;
+  float *v = var + pi;
+  const __m512 sn = _mm512_set1_ps(g->np.sigma_n_log2e), nbias = _mm512_set1_ps(-g->np.sigma_n_log2e);
+  const __m512 sz = _mm512_set1_ps(g->sigma_z), eps_z = _mm512_set1_ps(SVGF_EPS_Z);
+  for (int x = 0; x < W; x += 16) {
+    const int n = W - x < 16 ? W - x : 16;
+    const __mmask16 lanes = (__mmask16)((1u << n) - 1u);
+    const __mmask16 young =
+        _mm512_mask_cmp_ps_mask(lanes, _mm512_maskz_loadu_ps(lanes, a + x), _mm512_set1_ps(min_age),
+                                _CMP_LT_OQ);
+    if (!young) continue;
+    if (has_empty && window_has_empty(age, W, H, y, x, n)) {
+      variance_row_valid(g, m, age, min_age, var, y, x, n, poly, SVGF_NORMAL_EXP);
+      continue;
+    }
+    /* the tail's lanes past the row read the pads and the next row: their
+     * sums are never stored */
+    const __m512 sgx = _mm512_max_ps(
+        _mm512_min_ps(_mm512_mul_ps(sz, _mm512_maskz_loadu_ps(lanes, gx + x)), _mm512_set1_ps(1e20f)),
+        _mm512_set1_ps(-1e20f));
+    const __m512 sgy = _mm512_max_ps(
+        _mm512_min_ps(_mm512_mul_ps(sz, _mm512_maskz_loadu_ps(lanes, gy + x)), _mm512_set1_ps(1e20f)),
+        _mm512_set1_ps(-1e20f));
+    const __m512 zl = _mm512_mul_ps(_mm512_maskz_loadu_ps(lanes, zon + x), _mm512_set1_ps(SVGF_LOG2E));
+    const __m512 zp = _mm512_maskz_loadu_ps(lanes, z + x);
+    const __m512 n0p = _mm512_mul_ps(sn, _mm512_maskz_loadu_ps(lanes, n0 + x));
+    const __m512 n1p = _mm512_mul_ps(sn, _mm512_maskz_loadu_ps(lanes, n1 + x));
+    const __m512 n2p = _mm512_mul_ps(sn, _mm512_maskz_loadu_ps(lanes, n2 + x));
+    __m512 sw = _mm512_set1_ps(1.0f);
+    __m512 s1 = _mm512_maskz_loadu_ps(lanes, m1 + x), s2 = _mm512_maskz_loadu_ps(lanes, m2 + x);
+    for (int p = 0; p < NPAIRS; p++) {
+      const avx_vpair *t = &pairs[p];
+      const __m512 d = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
+      const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(d), eps_z)));
+      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->ga, t->ma, rdd, zp, n0p, n1p, n2p,
+               nbias, &sw, &s1, &s2);
+      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->gb, t->mb, rdd, zp, n0p, n1p, n2p,
+               nbias, &sw, &s1, &s2);
+    }
+    const __m512 inv = _mm512_div_ps(_mm512_set1_ps(1.0f), sw);
+    const __m512 e1 = _mm512_mul_ps(s1, inv), e2 = _mm512_mul_ps(s2, inv);
+    const __m512 est = _mm512_max_ps(_mm512_fnmadd_ps(e1, e1, e2), _mm512_setzero_ps());
+    _mm512_mask_storeu_ps(v + x, young, est);
+  }
+}
+
+static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, const float *age,
+                                  float min_age, float *var, int threads) {
+  const svgf_exp2_poly poly = svgf_exp2_poly_scaled(1.0f);
+  const long long npix = (long long)g->width * g->height;
+  int has_empty = 0;
+#pragma omp parallel for simd reduction(| : has_empty) num_threads(threads)
+  for (long long i = 0; i < npix; i++) has_empty |= !(age[i] > 0.0f);
+#pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
+  for (int y = 0; y < g->height; y++)
+    avx_variance_row(g, m, age, min_age, var, y, has_empty, &poly);
+}
+#define HAVE_AVX_VARIANCE 1
+#else
+VARIANCE_ROWS(variance_rows_exp, SVGF_NORMAL_EXP)
+#define HAVE_AVX_VARIANCE 0
+#endif
+
 void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
-                           float min_age, float *var, int threads) {
+                           float min_age, float *var, int normal_exp, int threads) {
+  if (normal_exp) {
+#if HAVE_AVX_VARIANCE
+    variance_rows_exp_avx(g, moments, age, min_age, var, threads);
+#else
+    variance_rows_exp(g, moments, age, min_age, var, threads);
+#endif
+    return;
+  }
   switch (g->np.squarings) {
   case 6: variance_rows_pow64(g, moments, age, min_age, var, threads); break;
   case 7: variance_rows_pow128(g, moments, age, min_age, var, threads); break;

@@ -22,8 +22,10 @@
 #define SVGF_SPATIAL_VARIANCE_RADIUS 3
 
 /* moments: padded, 2 planes (E[l], E[l^2]); age: unpadded history lengths;
- * var (unpadded) is overwritten where age < min_age and kept elsewhere. */
+ * var (unpadded) is overwritten where age < min_age and kept elsewhere.
+ * normal_exp: the normal weight as svgf's normal_weight=exp (weights.h,
+ * SVGF_NORMAL_EXP), else the power. */
 void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
-                           float min_age, float *var, int threads);
+                           float min_age, float *var, int normal_exp, int threads);
 
 #endif

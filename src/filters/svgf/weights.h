@@ -95,6 +95,40 @@ static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
   return fmaf(y, fmaf(-x, y, 1.0f), y);
 }
 
+/* 1/x for x in [1e-30, 1e30] with two Newton steps (relative error within
+ * 2e-4): for the a-trous depth denominators, where a 1e-4 error in an
+ * exponent changes nothing visible and each step costs two operations per
+ * tap pair. */
+static HUSH_ALWAYS_INLINE float svgf_rcp2_pos(float x) {
+  uint32_t bits;
+  memcpy(&bits, &x, sizeof bits);
+  bits = 0x7EF311C3u - bits;
+  float y;
+  memcpy(&y, &bits, sizeof y);
+  y = fmaf(y, fmaf(-x, y, 1.0f), y);
+  return fmaf(y, fmaf(-x, y, 1.0f), y);
+}
+
+/* 2^-s for s in [-126, 126] by the degree-4 minimax polynomial of 2^f on
+ * [-1/2, 1/2] (relative error 2.6e-6): the a-trous tap weight, where the
+ * caller zeroes every weight whose s is past its floor, so s outside that
+ * range (even NaN or Inf) may give anything here. */
+static HUSH_ALWAYS_INLINE float svgf_exp2_neg4(float s) {
+  const float magic = 12582912.0f; /* 1.5 * 2^23 */
+  const float big = magic - s;     /* rounds -s to an integer n */
+  const float g = s + (big - magic); /* -f */
+  float y = fmaf(g, 0.009570101908f, -0.05591786032f);
+  y = fmaf(g, y, 0.2402474483f);
+  y = fmaf(g, y, -0.6931218147f);
+  y = fmaf(g, y, 0.9999992614f);
+  uint32_t nb, yb;
+  memcpy(&nb, &big, sizeof nb);
+  memcpy(&yb, &y, sizeof yb);
+  yb += nb << 23;
+  memcpy(&y, &yb, sizeof y);
+  return y;
+}
+
 /* Exponents are in base 2 (see the top): log2 e joins the reciprocals. */
 #define SVGF_LOG2E 1.44269504f
 /* Weights at or below e^-20 are 0 (see the top). */
@@ -145,6 +179,11 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf
   return y;
 }
 
+/* svgf_tap_weight's SQUARINGS for the normal weight 2^(-sigma_n log2 e (1 -
+ * dot)) (svgf's normal_weight=exp): the first-order form of max(0, dot)^
+ * sigma_n, within 0.0021 of it at sigma_n 128, in the exponent (no power). */
+#define SVGF_NORMAL_EXP (-2)
+
 /* The weight h w_n w_z w_l of one tap from s_zl = (|dz| / dd + |dl| /
  * dl_max) log2 e (>= 0) and the normals' `dot`. SQUARINGS is a
  * compile-time constant at every call (the caller dispatches once per
@@ -154,6 +193,10 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
                                                 float sigma_n_log2e, float dot_floor,
                                                 const svgf_exp2_poly *p) {
   float w;
+  if (squarings == SVGF_NORMAL_EXP) {
+    w = svgf_exp2_neg_h(fmaf(sigma_n_log2e, 1.0f - dot, s_zl), SVGF_S_MAX, p);
+    return w > p->floor ? w : 0.0f;
+  }
   if (squarings < 0) {
     w = svgf_exp2_neg_h(fmaf(-sigma_n_log2e, svgf_log_pos(dot), s_zl), SVGF_S_MAX, p);
     return w > p->floor ? w : 0.0f;
