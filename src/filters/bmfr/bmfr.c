@@ -435,6 +435,7 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
   for (int c = 0; c < BMFR_CHANNELS; c++) {
     zc[c] = zb + (size_t)c * ld;
     gather(fr->z[c], W, xs, ys, B, inside_x, zc[c]);
+    for (size_t i = (size_t)n; i < ld; i++) zc[c][i] = 0.0f; /* the fit reads ld rows */
   }
   if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, B, fr->outlier, spare, spare + ld);
   for (int k = 0; k < BMFR_BASE_COUNT; k++)
