@@ -322,14 +322,17 @@ typedef struct fit_frame {
 } fit_frame;
 
 /* dst[r B + c] = plane[ys[r] W + xs[c]]: the block's pixels, mirrored at
- * the image edges; whole rows are copied where the block is inside in x. */
-static void gather(const float *plane, int W, const int *xs, const int *ys, int B, int inside_x,
-                   float *restrict dst) {
+ * the image edges; whole rows from column x0 are copied where the block is
+ * inside in x (inside_x: xs[c] = x0 + c). */
+static void gather(const float *plane, int W, const int *xs, const int *ys, int B, int x0,
+                   int inside_x, float *restrict dst) {
   for (int r = 0; r < B; r++) {
     const float *row = plane + (size_t)ys[r] * W;
     float *d = dst + (size_t)r * B;
     if (inside_x) {
-      memcpy(d, row + xs[0], (size_t)B * sizeof *d);
+      const float *restrict src = row + x0;
+#pragma omp simd
+      for (int c = 0; c < B; c++) d[c] = src[c]; /* B floats: a call to memcpy would cost more */
     } else {
       for (int c = 0; c < B; c++) d[c] = row[xs[c]];
     }
@@ -378,11 +381,25 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
     if (!(count > 0.0f)) return 0;
     const float limit = ratio * total / count;
     /* bright flags on a grid with a zero border, then the neighbour count */
+    int bright = 0;
     for (int y = 0; y < B; y++) {
       float *restrict row = pad + (size_t)(y + 1) * P + 1;
       const float *restrict l = lum + (size_t)y * B;
-#pragma omp simd
-      for (int x = 0; x < B; x++) row[x] = l[x] > limit ? 1.0f : 0.0f;
+#pragma omp simd reduction(+ : bright)
+      for (int x = 0; x < B; x++) {
+        row[x] = l[x] > limit ? 1.0f : 0.0f;
+        bright += l[x] > limit;
+      }
+    }
+    if (bright == 0) {
+      /* nothing above the limit (the usual block): the mask stays, and so
+       * would a second pass's mean and limit */
+      if (pass == 0) {
+        nvalid = 0;
+#pragma omp simd reduction(+ : nvalid)
+        for (int k = 0; k < n; k++) nvalid += mask[k] > 0.0f;
+      }
+      return nvalid;
     }
     for (int y = 0; y < B; y++) {
       const float *restrict up = pad + (size_t)y * P + 1, *restrict mid = up + P,
@@ -424,7 +441,7 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
   const int inside_x = x0 >= 0 && x0 + B <= W;
 
   /* gather: validity, radiance, the channels the features use */
-  gather(fr->depth, W, xs, ys, B, inside_x, spare);
+  gather(fr->depth, W, xs, ys, B, x0, inside_x, spare);
   int nvalid = 0;
   for (int i = 0; i < n; i++) {
     mask[i] = spare[i] > 0.0f ? 1.0f : 0.0f;
@@ -434,12 +451,12 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
   float *zc[BMFR_CHANNELS];
   for (int c = 0; c < BMFR_CHANNELS; c++) {
     zc[c] = zb + (size_t)c * ld;
-    gather(fr->z[c], W, xs, ys, B, inside_x, zc[c]);
+    gather(fr->z[c], W, xs, ys, B, x0, inside_x, zc[c]);
     for (size_t i = (size_t)n; i < ld; i++) zc[c][i] = 0.0f; /* the fit reads ld rows */
   }
   if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, B, fr->outlier, spare, spare + ld);
   for (int k = 0; k < BMFR_BASE_COUNT; k++)
-    if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, inside_x, base + (size_t)k * ld);
+    if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, x0, inside_x, base + (size_t)k * ld);
   if (fr->set->gradients)
     for (int r = 0; r < B; r++)
       for (int c = 0; c < B; c++) {
