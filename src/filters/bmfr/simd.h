@@ -1,8 +1,8 @@
 /*
  * simd.h — one vector register of floats for BMFR's per-block loops
- * (regression.c, features.c): the GCC/Clang vector extension, as
- * src/filters/nca/model.c, 16 lanes with AVX-512 and 8 otherwise, with a
- * fused multiply-add where the target has one.
+ * (regression.c): the GCC/Clang vector extension, as
+ * src/filters/nca/model.c, 16 lanes with AVX-512, 8 with AVX, else 4,
+ * with a fused multiply-add where the target has one.
  *
  * Why not plain loops: the block fit keeps several running sums per column
  * (the Householder dot products, the three colour channels) in registers
@@ -17,10 +17,14 @@
 #  include <immintrin.h>
 #endif
 
-#ifdef __AVX512F__
+/* One register wide (passing a vector wider than the target's registers by
+ * value would change the ABI; 4 lanes are SSE2, always there on x86-64). */
+#if defined(__AVX512F__)
 #  define VF_LANES 16
-#else
+#elif defined(__AVX__)
 #  define VF_LANES 8
+#else
+#  define VF_LANES 4
 #endif
 
 typedef float vf __attribute__((vector_size(VF_LANES * 4)));
@@ -40,7 +44,7 @@ static inline vf vf_set1(float x) { return x - (vf){0}; } /* x - 0 is x, also fo
 static inline vf vf_fma(vf a, vf b, vf c) {
 #if defined(__AVX512F__)
   return _mm512_fmadd_ps(a, b, c);
-#elif defined(__FMA__)
+#elif defined(__FMA__) && VF_LANES == 8
   return _mm256_fmadd_ps(a, b, c);
 #else
   return a * b + c;
@@ -51,7 +55,7 @@ static inline vf vf_fma(vf a, vf b, vf c) {
 static inline vf vf_fnma(vf a, vf b, vf c) {
 #if defined(__AVX512F__)
   return _mm512_fnmadd_ps(a, b, c);
-#elif defined(__FMA__)
+#elif defined(__FMA__) && VF_LANES == 8
   return _mm256_fnmadd_ps(a, b, c);
 #else
   return c - a * b;
