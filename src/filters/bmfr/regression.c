@@ -195,28 +195,47 @@ static inline double clamp_coef(double v) {
   return v == v ? v : 0.0;
 }
 
-/* R_kj of the factorised A (upper triangle, rows 0..count-1). */
-#define R_AT(A, ld, k, j) ((double)(A)[(size_t)(j) * (ld) + (k)])
+/* R of the factorised A (upper triangle, rows 0..count-1) as a dense
+ * row-major double matrix, read many times by the substitutions. */
+typedef struct r_factor {
+  double r[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES];
+  int count;
+  double tol; /* a pivot at or below it gives weight 0 */
+} r_factor;
 
-/* x = R^-1 b by back substitution; a pivot at or below tol gives 0. */
-static void back_substitute(const float *A, size_t ld, int count, double tol, const double *b,
-                            double *x) {
-  for (int k = count - 1; k >= 0; k--) {
-    double s = b[k];
-    for (int j = k + 1; j < count; j++) s -= R_AT(A, ld, k, j) * x[j];
-    const double rkk = R_AT(A, ld, k, k);
-    x[k] = clamp_coef(fabs(rkk) > tol ? s / rkk : 0.0);
+static void r_factor_of(r_factor *R, const float *A, size_t ld, int count, double tol) {
+  R->count = count;
+  R->tol = tol;
+  for (int k = 0; k < count; k++)
+    for (int j = k; j < count; j++) R->r[k][j] = (double)A[(size_t)j * ld + k];
+}
+
+/* x[c] = R^-1 b[c] by back substitution for the three channels together
+ * (independent chains: the divisions of one overlap the others'). */
+static void back_substitute(const r_factor *R, const double b[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                            double x[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  for (int k = R->count - 1; k >= 0; k--) {
+    const double rkk = R->r[k][k];
+    const int use = fabs(rkk) > R->tol;
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      double s = b[c][k];
+      for (int j = k + 1; j < R->count; j++) s -= R->r[k][j] * x[c][j];
+      x[c][k] = clamp_coef(use ? s / rkk : 0.0);
+    }
   }
 }
 
-/* x = R^-T b by forward substitution; a pivot at or below tol gives 0. */
-static void forward_substitute(const float *A, size_t ld, int count, double tol,
-                               const double *b, double *x) {
-  for (int k = 0; k < count; k++) {
-    double s = b[k];
-    for (int j = 0; j < k; j++) s -= R_AT(A, ld, j, k) * x[j];
-    const double rkk = R_AT(A, ld, k, k);
-    x[k] = clamp_coef(fabs(rkk) > tol ? s / rkk : 0.0);
+/* x[c] = R^-T b[c] by forward substitution, the three channels together. */
+static void forward_substitute(const r_factor *R, const double b[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                               double x[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  for (int k = 0; k < R->count; k++) {
+    const double rkk = R->r[k][k];
+    const int use = fabs(rkk) > R->tol;
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      double s = b[c][k];
+      for (int j = 0; j < k; j++) s -= R->r[j][k] * x[c][j];
+      x[c][k] = clamp_coef(use ? s / rkk : 0.0);
+    }
   }
 }
 
@@ -251,12 +270,12 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * sqrt(nvalid); the regularisation noise alone gives about
    * eps sqrt(nvalid / 3), far above the cut-off for the default eps). */
   const double tol = 1e-4 * sqrt((double)(nvalid > 0 ? nvalid : 1));
-  double w[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-  for (int c = 0; c < BMFR_CHANNELS; c++) {
-    double r[BMFR_MAX_FEATURES];
-    for (int k = 0; k < count; k++) r[k] = A[(size_t)(count + c) * ld + k];
-    back_substitute(A, ld, count, tol, r, w[c]);
-  }
+  r_factor R;
+  r_factor_of(&R, A, ld, count, tol);
+  double w[BMFR_CHANNELS][BMFR_MAX_FEATURES], r[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+  for (int c = 0; c < BMFR_CHANNELS; c++)
+    for (int k = 0; k < count; k++) r[c][k] = A[(size_t)(count + c) * ld + k];
+  back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])r, w);
 
   /* Refinement towards eq. 2's solution on the noise-free features: the
    * noise that keeps the factorisation stable also perturbs the weights
@@ -295,12 +314,11 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
       dot3_all(T + (size_t)m * ld, r0, r1, r2, ld, d3);
       for (int c = 0; c < BMFR_CHANNELS; c++) g[c][m] = d3[c];
     }
-    for (int c = 0; c < BMFR_CHANNELS; c++) {
-      double u[BMFR_MAX_FEATURES], d[BMFR_MAX_FEATURES];
-      forward_substitute(A, ld, count, tol, g[c], u);
-      back_substitute(A, ld, count, tol, u, d);
-      for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[m]);
-    }
+    double u[BMFR_CHANNELS][BMFR_MAX_FEATURES], d[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+    forward_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])g, u);
+    back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])u, d);
+    for (int c = 0; c < BMFR_CHANNELS; c++)
+      for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[c][m]);
   }
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
