@@ -293,6 +293,49 @@ static void test_resolve_smooth(hush_device dev, int H) {
   hush__planar_free(&expect);
 }
 
+/* Frames of 1 and 2 rows (fewer than the three rows of a thread's ring),
+ * with more threads than rows: against reference(), without and with a
+ * plan (2 rows: random bilinear and no-history footprints). */
+static void test_resolve_tiny(hush_device dev) {
+  for (int H = 1; H <= 2; H++) {
+    const int W = 19;
+    const size_t n = (size_t)W * H;
+    hush_planar color[2], expect;
+    for (int f = 0; f < 2; f++) REQUIRE(hush__planar_init(dev, &color[f], 3, W, H) == HUSH_OK);
+    REQUIRE(hush__planar_init(dev, &expect, 3, W, H) == HUSH_OK);
+    for (int f = 0; f < 2; f++)
+      for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < n; i++) color[f].plane[k][i] = 2.0f * frand();
+    hush_reproject_plan plan;
+    REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+    if (H == 2) { /* bilinear footprints (all inside two rows) and no-history pixels */
+      random_plan(&plan, W, H);
+      for (size_t i = 0; i < n; i++)
+        if (plan.kind[i] == HUSH_FOOTPRINT_3X3) {
+          plan.kind[i] = HUSH_FOOTPRINT_NONE;
+          plan.origin[i] = 0;
+          plan.mask[i] = 0;
+        }
+    }
+    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1};
+    hush_taa taa;
+    REQUIRE(hush__taa_init(dev, &taa, W, H) == HUSH_OK);
+    hush__taa_resolve(&taa, NULL, (const float *const *)color[0].plane, &p, 4);
+    reference(NULL, (const float *const *)color[0].plane, NULL, &p, W, H, expect.plane);
+    CHECK_MSG(max_rel_diff(hush__taa_output(&taa), expect.plane, n) < 1e-5f, "H %d, frame 0", H);
+    if (H == 2) {
+      reference(&plan, (const float *const *)color[1].plane,
+                (const float *const *)hush__taa_output(&taa)->plane, &p, W, H, expect.plane);
+      hush__taa_resolve(&taa, &plan, (const float *const *)color[1].plane, &p, 4);
+      CHECK_MSG(max_rel_diff(hush__taa_output(&taa), expect.plane, n) < 2e-5f, "H 2, frame 1");
+    }
+    hush__taa_free(&taa);
+    hush__reproject_plan_free(&plan);
+    for (int f = 0; f < 2; f++) hush__planar_free(&color[f]);
+    hush__planar_free(&expect);
+  }
+}
+
 /*
  * Frames with holes (hush__taa_resolve_holes; Dundr 2018 §4.2.6, docs/holes.md):
  * with every pixel traced it is the definition above; a hole never blends
@@ -416,6 +459,7 @@ int main(void) {
         test_resolve(dev, (hush_taa_box)box, tonemap, threads);
   test_resolve_smooth(dev, 29);
   test_resolve_smooth(dev, 7); /* two bands of three rows at most */
+  test_resolve_tiny(dev);
   test_resolve_holes(dev, 1);
   test_resolve_holes(dev, 2);
   hush_device_release(dev);

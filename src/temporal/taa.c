@@ -288,8 +288,9 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
     const int y0 = (int)((long)H * me / nt), y1 = (int)((long)H * (me + 1) / nt);
     float *slot[3][3]; /* [row mod 3][component] */
     int held[3] = {-1, -1, -1}; /* the source row in each slot */
-    for (int s = 0; s < 3; s++)
-      for (int k = 0; k < 3; k++) slot[s][k] = cur->plane[k] + (size_t)(3 * me + s) * W;
+    for (int s = 0; s < 3; s++) /* a frame of fewer than 3 rows uses slots 0..H-1 only */
+      for (int k = 0; k < 3; k++)
+        slot[s][k] = cur->plane[k] + (size_t)(3 * me + (s < H ? s : 0)) * W;
     for (int y = y0; y < y1; y++) {
       const int yu = y > 0 ? y - 1 : 0, yd = y + 1 < H ? y + 1 : y;
       const int need[3] = {yu, y, yd};
