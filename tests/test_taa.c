@@ -8,7 +8,9 @@
  * bilinear, 3x3 and no-history pixels at random, so the vectorised rows,
  * the border columns and the 3x3 fix-up are all compared; a plan without
  * blocks (every pixel through its taps) must give the same image, and the
- * fused remodulation must equal resolving color * max(albedo, eps).
+ * fused remodulation must equal resolving color * max(albedo, eps). A plan
+ * of smooth motion exercises the contiguous-load chunks, and the thread
+ * count (row bands) must not change a bit.
  */
 #include "hush.h"
 
@@ -218,6 +220,123 @@ static void test_resolve(hush_device dev, hush_taa_box box, int tonemap, int thr
 }
 
 /*
+ * Smooth motion: rows whose block origins run consecutively (a whole-pixel
+ * shift: the contiguous-load chunks), rows whose shift steps by one pixel
+ * part-way (chunks that gather), a band of 3x3 and no-history pixels; on
+ * a frame of odd size, against reference(); the result is the same bit for
+ * bit whatever the thread count (each thread resolves its own band of
+ * rows), down to a frame too short for one band per thread.
+ */
+static void test_resolve_smooth(hush_device dev, int H) {
+  const int W = 70;
+  const size_t n = (size_t)W * H;
+  hush_planar color[2], expect;
+  for (int f = 0; f < 2; f++) REQUIRE(hush__planar_init(dev, &color[f], 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &expect, 3, W, H) == HUSH_OK);
+  for (int f = 0; f < 2; f++)
+    for (int k = 0; k < 3; k++)
+      for (size_t i = 0; i < n; i++) color[f].plane[k][i] = 2.0f * frand() * frand();
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  int runs = 0;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      const int dx = y % 3 == 0 ? (x < W / 3 ? 1 : 2) : 1, dy = y % 2; /* steps on rows 0 mod 3 */
+      const int ox = x + dx < W - 1 ? x + dx : W - 2, oy = y + dy < H - 1 ? y + dy : H - 2;
+      plan.w[0][i] = plan.w[1][i] = plan.w[2][i] = plan.w[3][i] = 0.0f;
+      plan.fx[i] = plan.fy[i] = 0.0f;
+      if (y == H / 2 && x % 7 == 3) {
+        plan.kind[i] = x % 2 ? HUSH_FOOTPRINT_3X3 : HUSH_FOOTPRINT_NONE;
+        plan.origin[i] = oy > 0 ? (oy - 1) * W + (ox > 0 ? ox - 1 : 0) : 0;
+        plan.mask[i] = plan.kind[i] == HUSH_FOOTPRINT_NONE ? 0 : 0x1ff;
+        continue;
+      }
+      plan.kind[i] = HUSH_FOOTPRINT_BILINEAR;
+      plan.origin[i] = oy * W + ox;
+      plan.mask[i] = frand() < 0.9f ? 15 : (uint16_t)(1 + (int)(frand() * 14.0f));
+      plan.fx[i] = 0.05f + 0.9f * frand();
+      plan.fy[i] = 0.05f + 0.9f * frand();
+      float w[4];
+      hush__reproject_renormalised(plan.mask[i], plan.fx[i], plan.fy[i], w);
+      for (int t = 0; t < 4; t++) plan.w[t][i] = w[t];
+      runs += ox == x + 1 && plan.kind[i] == HUSH_FOOTPRINT_BILINEAR;
+    }
+  plan.blocks = 1;
+  CHECK(runs > (int)n / 3);
+  hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1};
+  hush_planar outs[4];
+  for (int threads = 1; threads <= 4; threads++) {
+    hush_taa taa;
+    REQUIRE(hush__taa_init(dev, &taa, W, H) == HUSH_OK);
+    hush__taa_resolve(&taa, NULL, (const float *const *)color[0].plane, &p, threads);
+    const hush_planar *hist = hush__taa_output(&taa);
+    if (threads == 1)
+      reference(&plan, (const float *const *)color[1].plane, (const float *const *)hist->plane,
+                &p, W, H, expect.plane);
+    hush__taa_resolve(&taa, &plan, (const float *const *)color[1].plane, &p, threads);
+    const float d = max_rel_diff(hush__taa_output(&taa), expect.plane, n);
+    CHECK_MSG(d < 2e-5f, "smooth motion, H %d, threads %d: max relative difference %g", H,
+              threads, (double)d);
+    REQUIRE(hush__planar_init(dev, &outs[threads - 1], 3, W, H) == HUSH_OK);
+    for (int k = 0; k < 3; k++)
+      memcpy(outs[threads - 1].plane[k], hush__taa_output(&taa)->plane[k], n * sizeof(float));
+    hush__taa_free(&taa);
+  }
+  for (int t = 1; t < 4; t++)
+    for (int k = 0; k < 3; k++)
+      CHECK_MSG(memcmp(outs[t].plane[k], outs[0].plane[k], n * sizeof(float)) == 0,
+                "H %d: %d threads differ from 1", H, t + 1);
+  for (int t = 0; t < 4; t++) hush__planar_free(&outs[t]);
+  hush__reproject_plan_free(&plan);
+  for (int f = 0; f < 2; f++) hush__planar_free(&color[f]);
+  hush__planar_free(&expect);
+}
+
+/* Frames of 1 and 2 rows (fewer than the three rows of a thread's ring),
+ * with more threads than rows: against reference(), without and with a
+ * plan (2 rows: random bilinear and no-history footprints). */
+static void test_resolve_tiny(hush_device dev) {
+  for (int H = 1; H <= 2; H++) {
+    const int W = 19;
+    const size_t n = (size_t)W * H;
+    hush_planar color[2], expect;
+    for (int f = 0; f < 2; f++) REQUIRE(hush__planar_init(dev, &color[f], 3, W, H) == HUSH_OK);
+    REQUIRE(hush__planar_init(dev, &expect, 3, W, H) == HUSH_OK);
+    for (int f = 0; f < 2; f++)
+      for (int k = 0; k < 3; k++)
+        for (size_t i = 0; i < n; i++) color[f].plane[k][i] = 2.0f * frand();
+    hush_reproject_plan plan;
+    REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+    if (H == 2) { /* bilinear footprints (all inside two rows) and no-history pixels */
+      random_plan(&plan, W, H);
+      for (size_t i = 0; i < n; i++)
+        if (plan.kind[i] == HUSH_FOOTPRINT_3X3) {
+          plan.kind[i] = HUSH_FOOTPRINT_NONE;
+          plan.origin[i] = 0;
+          plan.mask[i] = 0;
+        }
+    }
+    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1};
+    hush_taa taa;
+    REQUIRE(hush__taa_init(dev, &taa, W, H) == HUSH_OK);
+    hush__taa_resolve(&taa, NULL, (const float *const *)color[0].plane, &p, 4);
+    reference(NULL, (const float *const *)color[0].plane, NULL, &p, W, H, expect.plane);
+    CHECK_MSG(max_rel_diff(hush__taa_output(&taa), expect.plane, n) < 1e-5f, "H %d, frame 0", H);
+    if (H == 2) {
+      reference(&plan, (const float *const *)color[1].plane,
+                (const float *const *)hush__taa_output(&taa)->plane, &p, W, H, expect.plane);
+      hush__taa_resolve(&taa, &plan, (const float *const *)color[1].plane, &p, 4);
+      CHECK_MSG(max_rel_diff(hush__taa_output(&taa), expect.plane, n) < 2e-5f, "H 2, frame 1");
+    }
+    hush__taa_free(&taa);
+    hush__reproject_plan_free(&plan);
+    for (int f = 0; f < 2; f++) hush__planar_free(&color[f]);
+    hush__planar_free(&expect);
+  }
+}
+
+/*
  * Frames with holes (hush__taa_resolve_holes; Dundr 2018 §4.2.6, docs/holes.md):
  * with every pixel traced it is the definition above; a hole never blends
  * its (absent) sample: it keeps its history, clamped to the box of its
@@ -338,6 +457,9 @@ int main(void) {
     for (int tonemap = 0; tonemap < 2; tonemap++)
       for (int threads = 1; threads <= 2; threads++)
         test_resolve(dev, (hush_taa_box)box, tonemap, threads);
+  test_resolve_smooth(dev, 29);
+  test_resolve_smooth(dev, 7); /* two bands of three rows at most */
+  test_resolve_tiny(dev);
   test_resolve_holes(dev, 1);
   test_resolve_holes(dev, 2);
   hush_device_release(dev);

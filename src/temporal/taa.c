@@ -2,9 +2,10 @@
  * taa.c — temporal anti-aliasing resolve; see taa.h. Karis 2014 (neighbourhood
  * clamp/clip in YCoCg, constant blend), as papers/NOTES.md summarises it.
  *
- * Two passes over memory: (1) this frame, modulated and tone-mapped if
- * asked, to YCoCg planes; (2) per row, the history gathered through the
- * plan's 2x2 blocks, the 3x3 box of (1), clamp or clip, blend and inverse
+ * One pass over memory, per row: the rows the 3x3 box needs, modulated
+ * and tone-mapped if asked, to YCoCg in a per-thread ring of three rows
+ * (each source row converted once per band); then the history gathered
+ * through the plan's 2x2 blocks, the box, clamp or clip, blend and inverse
  * tone mapping, in one vectorised loop over the interior columns (the two
  * border columns and the rare 3X3-footprint pixels go through the same
  * per-pixel function afterwards).
@@ -13,6 +14,7 @@
 
 #include "filters/albedo.h"
 
+#include <omp.h>
 #include <string.h>
 
 hush_status hush__taa_init(hush_device device, hush_taa *taa, uint32_t width, uint32_t height) {
@@ -146,26 +148,72 @@ static void resolve_taps(const taa_row *t, const hush_reproject_plan *plan, cons
                 h[0], h[1], h[2]);
 }
 
-/* The interior columns 1..W-2 of a row at offset row: every pixel as a
- * 2x2 block (weights 0 and no history unless BILINEAR), vectorised; clip
- * and tonemap are constants in each instantiation, so the loop computes
- * only the variant asked for. */
+/* Columns x0..x0+n-1 of a row at offset row (interior: 1 <= x0,
+ * x0 + n <= W - 1), every pixel as a 2x2 block: j[l] its block origin
+ * (hush__reproject_block_origin), has[l] its kind is BILINEAR (else its
+ * weights are 0 and it takes no history); the history gathered through
+ * j, vectorised. clip and tonemap are constants in each instantiation, so
+ * the loop computes only the variant asked for. */
+static HUSH_ALWAYS_INLINE void span_gather(const taa_row *t, const hush_reproject_plan *plan,
+                                           const float *const *prev, size_t row, int W, int x0,
+                                           int n, const int32_t *restrict j,
+                                           const int32_t *restrict has, const int clip,
+                                           const int tonemap) {
+  const int32_t Wi = (int32_t)W;
+  const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
+  const float *w0 = plan->w[0] + row + x0, *w1 = plan->w[1] + row + x0,
+              *w2 = plan->w[2] + row + x0, *w3 = plan->w[3] + row + x0;
+#pragma omp simd
+  for (int l = 0; l < n; l++) {
+    const int32_t i = j[l];
+    const float hr = w0[l] * p0[i] + w1[l] * p0[i + 1] + w2[l] * p0[i + Wi] + w3[l] * p0[i + Wi + 1];
+    const float hg = w0[l] * p1[i] + w1[l] * p1[i + 1] + w2[l] * p1[i + Wi] + w3[l] * p1[i + Wi + 1];
+    const float hb = w0[l] * p2[i] + w1[l] * p2[i + 1] + w2[l] * p2[i + Wi] + w3[l] * p2[i + Wi + 1];
+    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, has[l], hr, hg, hb);
+  }
+}
+
+/* TAA_RUN columns from x0 whose block origins are j0, j0 + 1, ... (all
+ * BILINEAR): the common case of smooth motion, where the history's 2x2
+ * taps are contiguous vector loads instead of gathers. The same arithmetic
+ * as span_gather, so the same result bit for bit. */
+enum { TAA_RUN = 16 };
+static HUSH_ALWAYS_INLINE void span_run(const taa_row *t, const hush_reproject_plan *plan,
+                                        const float *const *prev, size_t row, int W, int x0,
+                                        int32_t j0, const int clip, const int tonemap) {
+  const float *p0 = prev[0] + j0, *p1 = prev[1] + j0, *p2 = prev[2] + j0;
+  const float *q0 = p0 + W, *q1 = p1 + W, *q2 = p2 + W;
+  const float *w0 = plan->w[0] + row + x0, *w1 = plan->w[1] + row + x0,
+              *w2 = plan->w[2] + row + x0, *w3 = plan->w[3] + row + x0;
+#pragma omp simd
+  for (int l = 0; l < TAA_RUN; l++) {
+    const float hr = w0[l] * p0[l] + w1[l] * p0[l + 1] + w2[l] * q0[l] + w3[l] * q0[l + 1];
+    const float hg = w0[l] * p1[l] + w1[l] * p1[l + 1] + w2[l] * q1[l] + w3[l] * q1[l + 1];
+    const float hb = w0[l] * p2[l] + w1[l] * p2[l + 1] + w2[l] * q2[l] + w3[l] * q2[l + 1];
+    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, 1, hr, hg, hb);
+  }
+}
+
+/* The interior columns 1..W-2 of a row, in chunks of TAA_RUN: a chunk
+ * whose block origins run consecutively takes span_run, the others
+ * span_gather. */
 static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproject_plan *plan,
                                              const float *const *prev, size_t row, int W,
                                              const int clip, const int tonemap) {
-  const int32_t Wi = (int32_t)W;
-  const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
-  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row, *w2 = plan->w[2] + row,
-              *w3 = plan->w[3] + row;
   const uint8_t *kind = plan->kind + row;
-#pragma omp simd
-  for (int x = 1; x < W - 1; x++) {
-    const int32_t j = hush__reproject_block_origin(plan, row + (size_t)x);
-    const float hr = w0[x] * p0[j] + w1[x] * p0[j + 1] + w2[x] * p0[j + Wi] + w3[x] * p0[j + Wi + 1];
-    const float hg = w0[x] * p1[j] + w1[x] * p1[j + 1] + w2[x] * p1[j + Wi] + w3[x] * p1[j + Wi + 1];
-    const float hb = w0[x] * p2[j] + w1[x] * p2[j + 1] + w2[x] * p2[j + Wi] + w3[x] * p2[j + Wi + 1];
-    resolve_pixel(t, clip, tonemap, x, x - 1, x + 1, kind[x] == HUSH_FOOTPRINT_BILINEAR, hr, hg,
-                  hb);
+  const int32_t *origin = plan->origin + row;
+  int32_t j[TAA_RUN], has[TAA_RUN];
+  for (int x = 1; x < W - 1; x += TAA_RUN) {
+    const int n = W - 1 - x < TAA_RUN ? W - 1 - x : TAA_RUN;
+    int run = n == TAA_RUN;
+    for (int l = 0; l < n; l++) {
+      has[l] = kind[x + l] == HUSH_FOOTPRINT_BILINEAR;
+      j[l] = origin[x + l] & -has[l];
+      run &= has[l] & (j[l] == origin[x] + l);
+    }
+    if (run) span_run(t, plan, prev, row, W, x, j[0], clip, tonemap);
+    else if (n == TAA_RUN) span_gather(t, plan, prev, row, W, x, TAA_RUN, j, has, clip, tonemap);
+    else span_gather(t, plan, prev, row, W, x, n, j, has, clip, tonemap);
   }
 }
 
@@ -180,6 +228,48 @@ static void interior_row(const taa_row *t, const hush_reproject_plan *plan,
   }
 }
 
+/* Row `row` of this frame, modulated by the albedo (NULL: none) and
+ * tone-mapped if asked, to YCoCg in v[0..2] (W floats each). */
+static void ycocg_row(const float *const *color, const float *const *albedo, size_t row, int W,
+                      int tonemap, float *const v[3]) {
+  const float *restrict cr = color[0] + row, *restrict cg = color[1] + row,
+                        *restrict cb = color[2] + row;
+  float *restrict v0 = v[0], *restrict v1 = v[1], *restrict v2 = v[2];
+  if (albedo) {
+    const float *restrict ar = albedo[0] + row, *restrict ag = albedo[1] + row,
+                          *restrict ab = albedo[2] + row;
+    /* as hush__remodulate: filtered * max(albedo, eps) */
+#pragma omp simd
+    for (int x = 0; x < W; x++) {
+      const float r = cr[x] * maxf(ar[x], HUSH_ALBEDO_EPS), g = cg[x] * maxf(ag[x], HUSH_ALBEDO_EPS),
+                  b = cb[x] * maxf(ab[x], HUSH_ALBEDO_EPS);
+      const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
+      v0[x] = ycocg_y(r * s, g * s, b * s);
+      v1[x] = ycocg_co(r * s, g * s, b * s);
+      v2[x] = ycocg_cg(r * s, g * s, b * s);
+    }
+  } else {
+#pragma omp simd
+    for (int x = 0; x < W; x++) {
+      const float r = cr[x], g = cg[x], b = cb[x];
+      const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
+      v0[x] = ycocg_y(r * s, g * s, b * s);
+      v1[x] = ycocg_co(r * s, g * s, b * s);
+      v2[x] = ycocg_cg(r * s, g * s, b * s);
+    }
+  }
+}
+
+/*
+ * One pass over the frame: each thread resolves a band of rows, keeping the
+ * YCoCg of the three rows the 3x3 box reads in a ring of its own (rows of
+ * taa->current: thread t owns rows 3t..3t+2 of each plane, so at most H / 3
+ * threads), converting each source row once as the band moves down (the
+ * rows just above and below a band are converted by both neighbours). No
+ * whole-frame intermediate is written or read back. Every pixel is
+ * computed the same way whatever the banding, so the result does not
+ * depend on the thread count.
+ */
 void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
                                  const float *const *color, const float *const *albedo,
                                  const hush_taa_params *params, int threads) {
@@ -189,54 +279,32 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
   const int use_history = taa->has_history && plan;
   const float *const *prev = (const float *const *)taa->history[taa->latest].plane;
   hush_planar *out = &taa->history[1 - taa->latest];
+  if (threads > H / 3) threads = H / 3;
   if (threads < 1) threads = 1;
 
 #pragma omp parallel num_threads(threads)
   {
-    /* (1) this frame, modulated and tone-mapped, to YCoCg */
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; y++) {
-      const size_t row = (size_t)y * W;
-      const float *restrict cr = color[0] + row, *restrict cg = color[1] + row,
-                            *restrict cb = color[2] + row;
-      float *restrict v0 = cur->plane[0] + row, *restrict v1 = cur->plane[1] + row,
-                      *restrict v2 = cur->plane[2] + row;
-      if (albedo) {
-        const float *restrict ar = albedo[0] + row, *restrict ag = albedo[1] + row,
-                              *restrict ab = albedo[2] + row;
-        /* as hush__remodulate: filtered * max(albedo, eps) */
-#pragma omp simd
-        for (int x = 0; x < W; x++) {
-          const float r = cr[x] * maxf(ar[x], HUSH_ALBEDO_EPS),
-                      g = cg[x] * maxf(ag[x], HUSH_ALBEDO_EPS),
-                      b = cb[x] * maxf(ab[x], HUSH_ALBEDO_EPS);
-          const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
-          v0[x] = ycocg_y(r * s, g * s, b * s);
-          v1[x] = ycocg_co(r * s, g * s, b * s);
-          v2[x] = ycocg_cg(r * s, g * s, b * s);
+    const int nt = omp_get_num_threads(), me = omp_get_thread_num();
+    const int y0 = (int)((long)H * me / nt), y1 = (int)((long)H * (me + 1) / nt);
+    float *slot[3][3]; /* [row mod 3][component] */
+    int held[3] = {-1, -1, -1}; /* the source row in each slot */
+    for (int s = 0; s < 3; s++) /* a frame of fewer than 3 rows uses slots 0..H-1 only */
+      for (int k = 0; k < 3; k++)
+        slot[s][k] = cur->plane[k] + (size_t)(3 * me + (s < H ? s : 0)) * W;
+    for (int y = y0; y < y1; y++) {
+      const int yu = y > 0 ? y - 1 : 0, yd = y + 1 < H ? y + 1 : y;
+      const int need[3] = {yu, y, yd};
+      for (int q = 0; q < 3; q++)
+        if (held[need[q] % 3] != need[q]) {
+          ycocg_row(color, albedo, (size_t)need[q] * W, W, tonemap, slot[need[q] % 3]);
+          held[need[q] % 3] = need[q];
         }
-      } else {
-#pragma omp simd
-        for (int x = 0; x < W; x++) {
-          const float r = cr[x], g = cg[x], b = cb[x];
-          const float s = tonemap ? tonemap_scale(r, g, b) : 1.0f;
-          v0[x] = ycocg_y(r * s, g * s, b * s);
-          v1[x] = ycocg_co(r * s, g * s, b * s);
-          v2[x] = ycocg_cg(r * s, g * s, b * s);
-        }
-      }
-    }
-
-    /* (2) gather, box, clamp, blend, per row */
-#pragma omp for schedule(static)
-    for (int y = 0; y < H; y++) {
       const size_t row = (size_t)y * W;
-      const size_t rup = (size_t)(y > 0 ? y - 1 : 0) * W, rdn = (size_t)(y + 1 < H ? y + 1 : y) * W;
       taa_row t;
       for (int k = 0; k < 3; k++) {
-        t.up[k] = cur->plane[k] + rup;
-        t.mid[k] = cur->plane[k] + row;
-        t.dn[k] = cur->plane[k] + rdn;
+        t.up[k] = slot[yu % 3][k];
+        t.mid[k] = slot[y % 3][k];
+        t.dn[k] = slot[yd % 3][k];
         t.out[k] = out->plane[k] + row;
       }
       t.alpha = params->alpha;

@@ -31,7 +31,9 @@ typedef struct hush_taa_params {
 
 typedef struct hush_taa {
   hush_planar history[2]; /* 3 planes: the last outputs */
-  hush_planar current;    /* 3 planes: this frame (tone-mapped when asked) in YCoCg */
+  hush_planar current;    /* 3 planes: this frame (tone-mapped when asked) in YCoCg, whole
+                           * (hush__taa_resolve_holes) or as per-thread rings of three
+                           * rows (hush__taa_resolve, _modulated) */
   int latest;
   int has_history;
 } hush_taa;

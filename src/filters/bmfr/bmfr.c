@@ -322,17 +322,17 @@ typedef struct fit_frame {
 } fit_frame;
 
 /* dst[r B + c] = plane[ys[r] W + xs[c]]: the block's pixels, mirrored at
- * the image edges; whole rows are copied where the block is inside in x. */
-static void gather(const float *plane, int W, const int *xs, const int *ys, int B, int inside_x,
-                   float *restrict dst) {
+ * the image edges. Columns c0..c1-1 are inside the image (xs[c] = x0 + c)
+ * and copied as a run; only the mirrored ones go through xs. */
+static void gather(const float *plane, int W, const int *xs, const int *ys, int B, int x0,
+                   int c0, int c1, float *restrict dst) {
   for (int r = 0; r < B; r++) {
     const float *row = plane + (size_t)ys[r] * W;
     float *d = dst + (size_t)r * B;
-    if (inside_x) {
-      memcpy(d, row + xs[0], (size_t)B * sizeof *d);
-    } else {
-      for (int c = 0; c < B; c++) d[c] = row[xs[c]];
-    }
+    for (int c = 0; c < c0; c++) d[c] = row[xs[c]];
+#pragma omp simd
+    for (int c = c0; c < c1; c++) d[c] = row[x0 + c]; /* a call to memcpy would cost more */
+    for (int c = c1; c < B; c++) d[c] = row[xs[c]];
   }
 }
 
@@ -378,11 +378,25 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
     if (!(count > 0.0f)) return 0;
     const float limit = ratio * total / count;
     /* bright flags on a grid with a zero border, then the neighbour count */
+    int bright = 0;
     for (int y = 0; y < B; y++) {
       float *restrict row = pad + (size_t)(y + 1) * P + 1;
       const float *restrict l = lum + (size_t)y * B;
-#pragma omp simd
-      for (int x = 0; x < B; x++) row[x] = l[x] > limit ? 1.0f : 0.0f;
+#pragma omp simd reduction(+ : bright)
+      for (int x = 0; x < B; x++) {
+        row[x] = l[x] > limit ? 1.0f : 0.0f;
+        bright += l[x] > limit;
+      }
+    }
+    if (bright == 0) {
+      /* nothing above the limit (the usual block): the mask stays, and so
+       * would a second pass's mean and limit */
+      if (pass == 0) {
+        nvalid = 0;
+#pragma omp simd reduction(+ : nvalid)
+        for (int k = 0; k < n; k++) nvalid += mask[k] > 0.0f;
+      }
+      return nvalid;
     }
     for (int y = 0; y < B; y++) {
       const float *restrict up = pad + (size_t)y * P + 1, *restrict mid = up + P,
@@ -421,10 +435,11 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
     xs[i] = hush__bmfr_mirror(x0 + i, W);
     ys[i] = hush__bmfr_mirror(y0 + i, H);
   }
-  const int inside_x = x0 >= 0 && x0 + B <= W;
+  /* the block's columns inside the image (the others are mirrored) */
+  const int c0 = x0 < 0 ? -x0 : 0, c1 = x0 + B > W ? W - x0 : B;
 
   /* gather: validity, radiance, the channels the features use */
-  gather(fr->depth, W, xs, ys, B, inside_x, spare);
+  gather(fr->depth, W, xs, ys, B, x0, c0, c1, spare);
   int nvalid = 0;
   for (int i = 0; i < n; i++) {
     mask[i] = spare[i] > 0.0f ? 1.0f : 0.0f;
@@ -434,11 +449,12 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
   float *zc[BMFR_CHANNELS];
   for (int c = 0; c < BMFR_CHANNELS; c++) {
     zc[c] = zb + (size_t)c * ld;
-    gather(fr->z[c], W, xs, ys, B, inside_x, zc[c]);
+    gather(fr->z[c], W, xs, ys, B, x0, c0, c1, zc[c]);
+    for (size_t i = (size_t)n; i < ld; i++) zc[c][i] = 0.0f; /* the fit reads ld rows */
   }
   if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, B, fr->outlier, spare, spare + ld);
   for (int k = 0; k < BMFR_BASE_COUNT; k++)
-    if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, inside_x, base + (size_t)k * ld);
+    if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, x0, c0, c1, base + (size_t)k * ld);
   if (fr->set->gradients)
     for (int r = 0; r < B; r++)
       for (int c = 0; c < B; c++) {
@@ -461,7 +477,6 @@ static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
   /* the block's own pixels (not its mirrored margin); holes and outliers
    * keep their accumulated radiance */
   const int r0 = y0 < 0 ? -y0 : 0, r1 = y0 + B > H ? H - y0 : B;
-  const int c0 = x0 < 0 ? -x0 : 0, c1 = x0 + B > W ? W - x0 : B;
   for (int r = r0; r < r1; r++) {
     const size_t row = (size_t)(y0 + r) * W;
     const int i0 = r * B;

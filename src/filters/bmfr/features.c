@@ -52,14 +52,12 @@ static void valid_range(const float *restrict x, const float *restrict mask, int
   *hi = h;
 }
 
-/* out = x scaled from its valid range to [-1, 1], clamped there, 0 on
- * holes. A channel that varies by less than 1e-5 of its magnitude over the
- * block is float rounding, not signal: it becomes 0 (the constant feature
+/* out = x scaled from [lo, hi] to [-1, 1], clamped there, 0 on holes. A
+ * channel that varies by less than 1e-5 of its magnitude over the block
+ * is float rounding, not signal: it becomes 0 (the constant feature
  * already covers it) rather than rounding noise stretched to [-1, 1]. */
-static void scale_unit(const float *restrict x, const float *restrict mask, int n,
-                       float *restrict out) {
-  float lo, hi;
-  valid_range(x, mask, n, &lo, &hi);
+static void scale_range(const float *x, const float *restrict mask, int n, float lo, float hi,
+                        float *out) { /* out may be x: element by element */
   const float mid = 0.5f * (lo + hi), half = 0.5f * (hi - lo);
   const int flat = !(half > 1e-5f * fabsf(mid)) || !(half > 1e-30f);
   const float inv = flat ? 0.0f : 1.0f / half;
@@ -73,19 +71,51 @@ static void scale_unit(const float *restrict x, const float *restrict mask, int 
   }
 }
 
-/* t = s^g in place for s in [-1, 1]: repeated products for small integer
+/* out = x scaled from its valid range to [-1, 1] (scale_range). */
+static void scale_unit(const float *restrict x, const float *restrict mask, int n,
+                       float *restrict out) {
+  float lo, hi;
+  valid_range(x, mask, n, &lo, &hi);
+  scale_range(x, mask, n, lo, hi, out);
+}
+
+/* t = s^g for s in [-1, 1], with the min and max of t over the valid rows
+ * (lo > hi when there is none), the range taken in the last pass: repeated products for small integer
  * exponents (vectorised), sign-preserving powf otherwise. */
-static void power(float *restrict t, const float *restrict s, int n, float g) {
+static void power_range(float *t, const float *restrict s, const float *restrict mask,
+                        int n, float g, float *lo, float *hi) {
   const float r = roundf(g);
+  float l = FLT_MAX, h = -FLT_MAX;
   if (r == g && g >= 1.0f && g <= 16.0f) {
-    memcpy(t, s, (size_t)n * sizeof *t);
-    for (int k = 1; k < (int)g; k++) {
+    /* t = s, then k - 1 products, the last one fused with the range */
+    const int k = (int)g;
+    if (k > 2) memcpy(t, s, (size_t)n * sizeof *t);
+    for (int e = 1; e < k - 1; e++) {
 #pragma omp simd
       for (int i = 0; i < n; i++) t[i] *= s[i];
     }
-    return;
+    const float *u = k > 2 ? t : s; /* s^(k-1) */
+#pragma omp simd reduction(min : l) reduction(max : h)
+    for (int i = 0; i < n; i++) {
+      const float v = k > 1 ? u[i] * s[i] : s[i];
+      t[i] = v;
+      const int ok = mask[i] > 0.5f;
+      const float a = ok ? v : FLT_MAX, b = ok ? v : -FLT_MAX;
+      l = a < l ? a : l;
+      h = b > h ? b : h;
+    }
+  } else {
+    for (int i = 0; i < n; i++) {
+      const float v = copysignf(powf(fabsf(s[i]), g), s[i]);
+      t[i] = v;
+      if (mask[i] > 0.5f) {
+        l = v < l ? v : l;
+        h = v > h ? v : h;
+      }
+    }
   }
-  for (int i = 0; i < n; i++) t[i] = copysignf(powf(fabsf(s[i]), g), s[i]);
+  *lo = l;
+  *hi = h;
 }
 
 void hush__bmfr_features_block(const bmfr_feature_set *set, const float *base, const float *mask,
@@ -98,10 +128,18 @@ void hush__bmfr_features_block(const bmfr_feature_set *set, const float *base, c
     } else if (f->exponent == 1.0f) {
       scale_unit(base + (size_t)f->base * ld, mask, n, col);
     } else {
-      scale_unit(base + (size_t)f->base * ld, mask, n, scratch);
-      power(col, scratch, n, f->exponent);
-      memcpy(scratch, col, (size_t)n * sizeof *col);
-      scale_unit(scratch, mask, n, col);
+      /* the scaled channel: an earlier feature's column when the set has
+       * the channel with exponent 1 (eq. 8's w and w^2), else computed */
+      const float *s = NULL;
+      for (int q = 1; q < m && !s; q++)
+        if (set->f[q].base == f->base && set->f[q].exponent == 1.0f) s = T + (size_t)q * ld;
+      if (!s) {
+        scale_unit(base + (size_t)f->base * ld, mask, n, scratch);
+        s = scratch;
+      }
+      float lo, hi;
+      power_range(col, s, mask, n, f->exponent, &lo, &hi);
+      scale_range(col, mask, n, lo, hi, col);
     }
     for (size_t i = (size_t)n; i < ld; i++) col[i] = 0.0f;
   }

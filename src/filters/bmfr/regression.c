@@ -7,6 +7,7 @@
 #include "filters/bmfr/regression.h"
 
 #include "core/rng.h"
+#include "filters/bmfr/simd.h"
 
 #include <math.h>
 #include <string.h>
@@ -37,102 +38,151 @@ void hush__bmfr_noise_table(float *table, int count, int n, size_t ld, uint64_t 
   }
 }
 
-/* Independent partial sums of a dot product: one vector accumulator would
- * wait on the FMA latency every iteration; DOT_LANES lanes give the core
- * several chains to overlap (a fixed order, so still deterministic). */
-#define DOT_LANES 32
+/* The loops below run over whole vectors of VF_LANES rows: ld is a
+ * multiple of 16, and rows n..ld-1 are zero in every column (and in the
+ * mask), so they add nothing to a sum and stay zero under an update. */
 
-/* sum_{i = k}^{n-1} a[i] b[i] */
-static inline float dot_from(const float *restrict a, const float *restrict b, int k, int n) {
-  float acc[DOT_LANES] = {0};
-  int i = k;
-  for (; i + DOT_LANES <= n; i += DOT_LANES)
-    for (int l = 0; l < DOT_LANES; l++) acc[l] += a[i + l] * b[i + l];
-  float s = 0.0f;
-  for (; i < n; i++) s += a[i] * b[i];
-  for (int w = DOT_LANES / 2; w > 0; w /= 2)
-    for (int l = 0; l < w; l++) acc[l] += acc[l + w];
-  return s + acc[0];
-}
-
-/* a[i] -= c x[i] for i = k..n-1 */
-static inline void axpy_from(float *restrict a, const float *restrict x, float c, int k, int n) {
-#pragma omp simd
-  for (int i = k; i < n; i++) a[i] -= c * x[i];
-}
-
-/* a[i] -= c x[i] and returns sum y[i] a[i] (after the update), over
- * i = k..n-1: one step's update fused with the next step's dot product, so
- * each column is streamed once per step instead of twice. y == NULL means
- * y = a (the sum of squares). */
-static HUSH_INLINE float axpy_dot_from(float *restrict a, const float *restrict x,
-                                       const float *restrict y, float c, int k, int n) {
-  float acc[DOT_LANES] = {0};
-  int i = k;
-  for (; i + DOT_LANES <= n; i += DOT_LANES)
-    for (int l = 0; l < DOT_LANES; l++) {
-      const float t = a[i + l] - c * x[i + l];
-      a[i + l] = t;
-      acc[l] += (y ? y[i + l] : t) * t;
-    }
-  float s = 0.0f;
-  for (; i < n; i++) {
-    a[i] -= c * x[i];
-    s += (y ? y[i] : a[i]) * a[i];
+/* sum_{i = k}^{ld-1} a[i] b[i]: the vector holding row k with the rows
+ * above k weighted 0, then whole vectors, two running sums. */
+static float dot_from(const float *restrict a, const float *restrict b, int k, size_t ld) {
+  size_t i = (size_t)k & ~(size_t)(VF_LANES - 1);
+  vf s0 = vf_from((int)i, k) * vf_load(a + i) * vf_load(b + i), s1 = {0};
+  for (i += VF_LANES; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
+    s0 = vf_fma(vf_load(a + i), vf_load(b + i), s0);
+    s1 = vf_fma(vf_load(a + i + VF_LANES), vf_load(b + i + VF_LANES), s1);
   }
-  for (int w = DOT_LANES / 2; w > 0; w /= 2)
-    for (int l = 0; l < w; l++) acc[l] += acc[l + w];
-  return s + acc[0];
+  if (i < ld) s0 = vf_fma(vf_load(a + i), vf_load(b + i), s0);
+  return vf_sum(s0 + s1);
+}
+
+/*
+ * One Householder step on a group of g <= 4 columns a[0..g-1], rows k..ld-1
+ * (rows above k untouched): a_j -= c_j x, fused with the next step's dot
+ * products dots[j] = sum_{i >= k} y[i] a_j[i] after the update. y == NULL:
+ * a[0] is the next pivot column itself (y = a[0], updated first in each
+ * vector). Each vector of x and y is loaded once for the whole group and
+ * each column streamed once, with its running sum in a register. The
+ * vector holding row k is done with a 0/1 weight per row (rows above k:
+ * a - (0 c) x = a exactly, and no term in the sum), so no row is left to
+ * a scalar loop.
+ */
+static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const int g,
+                                      const float *restrict x, const float *restrict y, int k,
+                                      size_t ld, float dots[4]) {
+  size_t i = (size_t)k & ~(size_t)(VF_LANES - 1);
+  const vf keep = vf_from((int)i, k);
+  vf cv[4], s[4];
+  {
+    const vf xv = vf_load(x + i);
+    vf yv = y ? vf_load(y + i) : (vf){0};
+    for (int j = 0; j < g; j++) {
+      cv[j] = vf_set1(c[j]);
+      const vf t = vf_fnma(cv[j] * keep, xv, vf_load(a[j] + i));
+      vf_store(a[j] + i, t);
+      if (!y && j == 0) yv = t;
+      s[j] = keep * yv * t;
+    }
+  }
+  for (i += VF_LANES; i < ld; i += VF_LANES) {
+    const vf xv = vf_load(x + i);
+    vf yv = y ? vf_load(y + i) : (vf){0};
+    for (int j = 0; j < g; j++) {
+      const vf t = vf_fnma(cv[j], xv, vf_load(a[j] + i));
+      vf_store(a[j] + i, t);
+      if (!y && j == 0) yv = t;
+      s[j] = vf_fma(yv, t, s[j]);
+    }
+  }
+  for (int j = 0; j < g; j++) dots[j] = vf_sum(s[j]);
+}
+
+/* d[c] = sum_i t[i] r_c[i] over the ld rows for the three residuals, one
+ * pass over t */
+static void dot3_all(const float *restrict t, const float *restrict r0, const float *restrict r1,
+                     const float *restrict r2, size_t ld, float d[BMFR_CHANNELS]) {
+  vf s0 = {0}, s1 = {0}, s2 = {0};
+  for (size_t i = 0; i < ld; i += VF_LANES) {
+    const vf tv = vf_load(t + i);
+    s0 = vf_fma(tv, vf_load(r0 + i), s0);
+    s1 = vf_fma(tv, vf_load(r1 + i), s1);
+    s2 = vf_fma(tv, vf_load(r2 + i), s2);
+  }
+  d[0] = vf_sum(s0);
+  d[1] = vf_sum(s1);
+  d[2] = vf_sum(s2);
+}
+
+/* One column of the augmented matrix: a = t + mask (u - mean) (t NULL: 0),
+ * returning sum_{i >= 1} mask[i] a[i], the first reflection's dot product
+ * with column 0 (the mask), taken while the column is written. */
+static float build_column(float *restrict a, const float *restrict t, const float *restrict u,
+                          float mean, const float *restrict mask, size_t ld) {
+  const vf mv = vf_set1(mean);
+  vf s = {0};
+  for (size_t i = 0; i < ld; i += VF_LANES) {
+    const vf mk = vf_load(mask + i);
+    const vf v = vf_fma(mk, vf_load(u + i) - mv, t ? vf_load(t + i) : (vf){0});
+    vf_store(a + i, v);
+    s = vf_fma(i ? mk : vf_from(0, 1) * mk, v, s);
+  }
+  return vf_sum(s);
 }
 
 /*
  * The first m Householder reflections of the n x ncols matrix A (columns of
- * ld floats), applied to all its columns; Q is never formed. Afterwards
- * rows 0..m-1 of columns k >= row hold R (and the right-hand sides r in
- * columns m..ncols-1). Below the diagonal, the columns keep the
- * reflection vectors' tails, which nothing reads.
+ * ld floats, rows n..ld-1 zero), applied to all its columns; Q is never
+ * formed. Afterwards rows 0..m-1 of columns k >= row hold R (and the
+ * right-hand sides r in columns m..ncols-1). Below the diagonal, the
+ * columns keep the reflection vectors' tails, which nothing reads.
  * Per step k, with x = A[k..n-1][k]: alpha = -sign(x_k) |x|, v = x - alpha
  * e_k, and every later column a gets a -= (2 v.a / v.v) v. The dot
  * products x.a below the pivot come from the previous step's update pass
- * (dots[j]; dots0, when not NULL, gives step 0's); column k + 1 is updated
- * first so the others can use it.
+ * (dots[j]; dots0 gives step 0's); rows k and k + 1 are updated apart,
+ * then rows k + 2.. in groups of four columns, the first group led by
+ * column k + 1 (the next pivot column, whose updated rows the others'
+ * next dot products need).
  */
 static void householder_r(float *A, size_t ld, int n, int m, int ncols, const float *dots0) {
   float dots[BMFR_MAX_FEATURES + BMFR_CHANNELS]; /* sum_{i > k} x_i a_ij, this step */
-  int have_dots = dots0 != NULL;
-  if (have_dots) memcpy(dots, dots0, (size_t)ncols * sizeof *dots);
+  memcpy(dots, dots0, (size_t)ncols * sizeof *dots);
   for (int k = 0; k < m && k < n; k++) {
     float *restrict x = A + (size_t)k * ld;
-    if (!have_dots)
-      for (int j = k; j < ncols; j++) dots[j] = dot_from(x, A + (size_t)j * ld, k + 1, n);
-    have_dots = 0;
     const float xk = x[k], sigma = dots[k];
     const float norm = sqrtf(xk * xk + sigma);
-    if (!(norm > 0.0f)) continue; /* a zero column: R_kk = 0, nothing to reflect */
+    if (!(norm > 0.0f)) {
+      /* a zero column: R_kk = 0, nothing to reflect; the next step's dots
+       * are over rows k + 2.. */
+      if (k + 1 < m)
+        for (int j = k + 1; j < ncols; j++)
+          dots[j] = dot_from(A + (size_t)(k + 1) * ld, A + (size_t)j * ld, k + 2, ld);
+      continue;
+    }
     const float alpha = xk > 0.0f ? -norm : norm;
     const float vk = xk - alpha; /* |vk| >= norm: no cancellation */
     const float scale = 2.0f / (sigma + vk * vk);
-    if (k + 1 < ncols && k + 2 <= n) {
-      /* column k + 1, then the others with the dots of step k + 1 */
-      float *y = A + (size_t)(k + 1) * ld;
-      for (int j = k + 1; j < ncols; j++) {
-        float *a = A + (size_t)j * ld;
-        const float c = (vk * a[k] + dots[j]) * scale;
-        a[k] -= c * vk;
-        a[k + 1] -= c * x[k + 1];
-        dots[j] = j == k + 1 ? axpy_dot_from(a, x, NULL, c, k + 2, n)
-                             : axpy_dot_from(a, x, y, c, k + 2, n);
-      }
-      have_dots = 1;
-    } else {
-      for (int j = k + 1; j < ncols; j++) {
-        float *restrict a = A + (size_t)j * ld;
-        const float c = (vk * a[k] + dots[j]) * scale;
-        a[k] -= c * vk;
-        axpy_from(a, x, c, k + 1, n);
-      }
+    float c[BMFR_MAX_FEATURES + BMFR_CHANNELS];
+    for (int j = k + 1; j < ncols; j++) {
+      float *a = A + (size_t)j * ld;
+      c[j] = (vk * a[k] + dots[j]) * scale;
+      a[k] -= c[j] * vk;
+      a[k + 1] -= c[j] * x[k + 1];
     }
     x[k] = alpha;
+    /* the last reflection: rows below m are never read */
+    if (k + 1 >= m || k + 2 > n) continue;
+    const float *y = A + (size_t)(k + 1) * ld;
+    for (int j = k + 1; j < ncols; j += 4) {
+      const int g = ncols - j < 4 ? ncols - j : 4;
+      float *cols[4] = {NULL, NULL, NULL, NULL};
+      for (int q = 0; q < g; q++) cols[q] = A + (size_t)(j + q) * ld;
+      const float *yy = j == k + 1 ? NULL : y;
+      switch (g) {
+        case 4: reflect_group(cols, c + j, 4, x, yy, k + 2, ld, dots + j); break;
+        case 3: reflect_group(cols, c + j, 3, x, yy, k + 2, ld, dots + j); break;
+        case 2: reflect_group(cols, c + j, 2, x, yy, k + 2, ld, dots + j); break;
+        default: reflect_group(cols, c + j, 1, x, yy, k + 2, ld, dots + j); break;
+      }
+    }
   }
 }
 
@@ -145,28 +195,47 @@ static inline double clamp_coef(double v) {
   return v == v ? v : 0.0;
 }
 
-/* R_kj of the factorised A (upper triangle, rows 0..count-1). */
-#define R_AT(A, ld, k, j) ((double)(A)[(size_t)(j) * (ld) + (k)])
+/* R of the factorised A (upper triangle, rows 0..count-1) as a dense
+ * row-major double matrix, read many times by the substitutions. */
+typedef struct r_factor {
+  double r[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES];
+  int count;
+  double tol; /* a pivot at or below it gives weight 0 */
+} r_factor;
 
-/* x = R^-1 b by back substitution; a pivot at or below tol gives 0. */
-static void back_substitute(const float *A, size_t ld, int count, double tol, const double *b,
-                            double *x) {
-  for (int k = count - 1; k >= 0; k--) {
-    double s = b[k];
-    for (int j = k + 1; j < count; j++) s -= R_AT(A, ld, k, j) * x[j];
-    const double rkk = R_AT(A, ld, k, k);
-    x[k] = clamp_coef(fabs(rkk) > tol ? s / rkk : 0.0);
+static void r_factor_of(r_factor *R, const float *A, size_t ld, int count, double tol) {
+  R->count = count;
+  R->tol = tol;
+  for (int k = 0; k < count; k++)
+    for (int j = k; j < count; j++) R->r[k][j] = (double)A[(size_t)j * ld + k];
+}
+
+/* x[c] = R^-1 b[c] by back substitution for the three channels together
+ * (independent chains: the divisions of one overlap the others'). */
+static void back_substitute(const r_factor *R, const double b[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                            double x[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  for (int k = R->count - 1; k >= 0; k--) {
+    const double rkk = R->r[k][k];
+    const int use = fabs(rkk) > R->tol;
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      double s = b[c][k];
+      for (int j = k + 1; j < R->count; j++) s -= R->r[k][j] * x[c][j];
+      x[c][k] = clamp_coef(use ? s / rkk : 0.0);
+    }
   }
 }
 
-/* x = R^-T b by forward substitution; a pivot at or below tol gives 0. */
-static void forward_substitute(const float *A, size_t ld, int count, double tol,
-                               const double *b, double *x) {
-  for (int k = 0; k < count; k++) {
-    double s = b[k];
-    for (int j = 0; j < k; j++) s -= R_AT(A, ld, j, k) * x[j];
-    const double rkk = R_AT(A, ld, k, k);
-    x[k] = clamp_coef(fabs(rkk) > tol ? s / rkk : 0.0);
+/* x[c] = R^-T b[c] by forward substitution, the three channels together. */
+static void forward_substitute(const r_factor *R, const double b[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                               double x[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  for (int k = 0; k < R->count; k++) {
+    const double rkk = R->r[k][k];
+    const int use = fabs(rkk) > R->tol;
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      double s = b[c][k];
+      for (int j = 0; j < k; j++) s -= R->r[j][k] * x[c][j];
+      x[c][k] = clamp_coef(use ? s / rkk : 0.0);
+    }
   }
 }
 
@@ -177,31 +246,21 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * is written, its dot product with column 0 below row 0 (the first
    * reflection's) is taken, which saves the QR a pass per column */
   float dots0[BMFR_MAX_FEATURES + BMFR_CHANNELS];
-  const float *restrict x0 = T; /* column 0: the mask */
-  memcpy(A, T, ld * sizeof *A);
-  dots0[0] = dot_from(x0, x0, 1, n);
+  dots0[0] = build_column(A, NULL, mask, 0.0f, mask, ld);
   for (int m = 1; m < count; m++) {
-    const float *restrict t = T + (size_t)m * ld, *restrict nz = noise + (size_t)m * ld;
-    float *restrict a = A + (size_t)m * ld;
+    const float *restrict nz = noise + (size_t)m * ld;
     float mean = 0.0f;
     if (nvalid < n && nvalid > 0) {
       /* keep the noise zero-mean over the rows that take part */
       double s = 0.0;
+#pragma omp simd reduction(+ : s)
       for (int i = 0; i < n; i++) s += (double)(mask[i] * nz[i]);
       mean = (float)(s / nvalid);
     }
-#pragma omp simd
-    for (size_t i = 0; i < ld; i++) a[i] = t[i] + mask[i] * (nz[i] - mean);
-    dots0[m] = dot_from(x0, a, 1, n);
+    dots0[m] = build_column(A + (size_t)m * ld, T + (size_t)m * ld, nz, mean, mask, ld);
   }
-  for (int c = 0; c < BMFR_CHANNELS; c++) {
-    const float *restrict zc = z[c];
-    float *restrict a = A + (size_t)(count + c) * ld;
-#pragma omp simd
-    for (int i = 0; i < n; i++) a[i] = zc[i] * mask[i];
-    for (size_t i = (size_t)n; i < ld; i++) a[i] = 0.0f;
-    dots0[count + c] = dot_from(x0, a, 1, n);
-  }
+  for (int c = 0; c < BMFR_CHANNELS; c++)
+    dots0[count + c] = build_column(A + (size_t)(count + c) * ld, NULL, z[c], 0.0f, mask, ld);
 
   householder_r(A, ld, n, count, count + BMFR_CHANNELS, dots0);
 
@@ -211,12 +270,12 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * sqrt(nvalid); the regularisation noise alone gives about
    * eps sqrt(nvalid / 3), far above the cut-off for the default eps). */
   const double tol = 1e-4 * sqrt((double)(nvalid > 0 ? nvalid : 1));
-  double w[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-  for (int c = 0; c < BMFR_CHANNELS; c++) {
-    double r[BMFR_MAX_FEATURES];
-    for (int k = 0; k < count; k++) r[k] = A[(size_t)(count + c) * ld + k];
-    back_substitute(A, ld, count, tol, r, w[c]);
-  }
+  r_factor R;
+  r_factor_of(&R, A, ld, count, tol);
+  double w[BMFR_CHANNELS][BMFR_MAX_FEATURES], r[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+  for (int c = 0; c < BMFR_CHANNELS; c++)
+    for (int k = 0; k < count; k++) r[c][k] = A[(size_t)(count + c) * ld + k];
+  back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])r, w);
 
   /* Refinement towards eq. 2's solution on the noise-free features: the
    * noise that keeps the factorisation stable also perturbs the weights
@@ -226,38 +285,40 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * (near-collinear features), R^T R is dominated by the noise and the
    * step stays small, so the regularisation keeps its effect there. */
   for (int it = 0; it < refine; it++) {
-    /* residuals of the three channels, then their dots with each feature */
+    /* residuals of the three channels (one pass, the features summed
+     * per row), then their dots with each feature (one pass per feature) */
     float *restrict r0 = scratch, *restrict r1 = scratch + ld, *restrict r2 = scratch + 2 * ld;
     const float *restrict z0 = z[0], *restrict z1 = z[1], *restrict z2 = z[2];
-#pragma omp simd
-    for (int i = 0; i < n; i++) {
-      r0[i] = z0[i] * mask[i];
-      r1[i] = z1[i] * mask[i];
-      r2[i] = z2[i] * mask[i];
-    }
+    float a0[BMFR_MAX_FEATURES], a1[BMFR_MAX_FEATURES], a2[BMFR_MAX_FEATURES];
     for (int m = 0; m < count; m++) {
-      const float *restrict t = T + (size_t)m * ld;
-      const float a0 = (float)w[0][m], a1 = (float)w[1][m], a2 = (float)w[2][m];
-#pragma omp simd
-      for (int i = 0; i < n; i++) {
-        r0[i] -= a0 * t[i];
-        r1[i] -= a1 * t[i];
-        r2[i] -= a2 * t[i];
+      a0[m] = (float)w[0][m];
+      a1[m] = (float)w[1][m];
+      a2[m] = (float)w[2][m];
+    }
+    for (size_t i = 0; i < ld; i += VF_LANES) {
+      const vf mk = vf_load(mask + i);
+      vf s0 = vf_load(z0 + i) * mk, s1 = vf_load(z1 + i) * mk, s2 = vf_load(z2 + i) * mk;
+      for (int m = 0; m < count; m++) {
+        const vf t = vf_load(T + (size_t)m * ld + i);
+        s0 = vf_fnma(vf_set1(a0[m]), t, s0);
+        s1 = vf_fnma(vf_set1(a1[m]), t, s1);
+        s2 = vf_fnma(vf_set1(a2[m]), t, s2);
       }
+      vf_store(r0 + i, s0);
+      vf_store(r1 + i, s1);
+      vf_store(r2 + i, s2);
     }
     double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
     for (int m = 0; m < count; m++) {
-      const float *t = T + (size_t)m * ld;
-      g[0][m] = dot_from(t, r0, 0, n);
-      g[1][m] = dot_from(t, r1, 0, n);
-      g[2][m] = dot_from(t, r2, 0, n);
+      float d3[BMFR_CHANNELS];
+      dot3_all(T + (size_t)m * ld, r0, r1, r2, ld, d3);
+      for (int c = 0; c < BMFR_CHANNELS; c++) g[c][m] = d3[c];
     }
-    for (int c = 0; c < BMFR_CHANNELS; c++) {
-      double u[BMFR_MAX_FEATURES], d[BMFR_MAX_FEATURES];
-      forward_substitute(A, ld, count, tol, g[c], u);
-      back_substitute(A, ld, count, tol, u, d);
-      for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[m]);
-    }
+    double u[BMFR_CHANNELS][BMFR_MAX_FEATURES], d[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+    forward_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])g, u);
+    back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])u, d);
+    for (int c = 0; c < BMFR_CHANNELS; c++)
+      for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[c][m]);
   }
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
@@ -267,22 +328,21 @@ void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
                            const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
                            float *const y[BMFR_CHANNELS]) {
   float *restrict y0 = y[0], *restrict y1 = y[1], *restrict y2 = y[2];
-  for (int i = 0; i < n; i++) y0[i] = y1[i] = y2[i] = 0.0f;
-  for (int m = 0; m < count; m++) {
-    const float *restrict t = T + (size_t)m * ld;
-    const float c0 = coef[0][m], c1 = coef[1][m], c2 = coef[2][m];
-#pragma omp simd
-    for (int i = 0; i < n; i++) {
-      y0[i] += c0 * t[i];
-      y1[i] += c1 * t[i];
-      y2[i] += c2 * t[i];
+  const float *c0 = coef[0], *c1 = coef[1], *c2 = coef[2];
+  /* per vector of rows, the features summed in registers: one store per
+   * channel (rows n..ld-1 of T are zero: they give 0) */
+  const vf zero = {0};
+  for (size_t i = 0; i < ld; i += VF_LANES) {
+    vf s0 = zero, s1 = zero, s2 = zero;
+    for (int m = 0; m < count; m++) {
+      const vf t = vf_load(T + (size_t)m * ld + i);
+      s0 = vf_fma(vf_set1(c0[m]), t, s0);
+      s1 = vf_fma(vf_set1(c1[m]), t, s1);
+      s2 = vf_fma(vf_set1(c2[m]), t, s2);
     }
-  }
-  /* > 0 also maps a NaN (impossible with finite inputs) to 0 */
-#pragma omp simd
-  for (int i = 0; i < n; i++) {
-    y0[i] = y0[i] > 0.0f ? y0[i] : 0.0f;
-    y1[i] = y1[i] > 0.0f ? y1[i] : 0.0f;
-    y2[i] = y2[i] > 0.0f ? y2[i] : 0.0f;
+    /* > 0 also maps a NaN (impossible with finite inputs) to 0 */
+    vf_store(y0 + i, vf_select(s0 > zero, s0, zero));
+    vf_store(y1 + i, vf_select(s1 > zero, s1, zero));
+    vf_store(y2 + i, vf_select(s2 > zero, s2, zero));
   }
 }

@@ -36,7 +36,9 @@ void hush__bmfr_noise_table(float *table, int count, int n, size_t ld, uint64_t 
 /*
  * Fits one block. T: the set's `count` noise-free columns (features.h:
  * column 0 is the 0/1 validity mask, all columns 0 on holes); z:
- * BMFR_CHANNELS columns of the block's (accumulated) radiance; noise: the
+ * BMFR_CHANNELS columns of ld floats, the block's (accumulated) radiance
+ * (rows n..ld-1 finite: they are read, weighted by the mask's 0); mask: ld
+ * floats, 0 from row n on; noise: the
  * frame's table; nvalid: how many rows are valid (when below n the noise
  * is re-centred over the valid rows, and holes get none). A is the
  * (count + 3) x ld scratch the QR works in. refine: steps of iterative
@@ -50,8 +52,9 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
                     int refine, float *scratch, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]);
 
-/* y[c][i] = sum_m coef[c][m] T_m[i] for i < n (eq. 6), clamped below at 0
- * as the published code does (radiance is not negative). */
+/* y[c][i] = sum_m coef[c][m] T_m[i] (eq. 6), clamped below at 0 as the
+ * published code does (radiance is not negative); y: columns of ld floats,
+ * all written (rows n..ld-1 get 0). */
 void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
                            const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
                            float *const y[BMFR_CHANNELS]);
