@@ -6,6 +6,8 @@
  */
 #include "psf/psf_render.h"
 
+#include "psf/psf_internal.h"
+
 #include "core/device.h"
 #include "core/timer.h"
 #include "render/bsdf.h"
@@ -45,7 +47,8 @@ struct hush_psf_renderer {
   sample_result *results;
   hush_psf_vertex *vertices;
   uint32_t *tickets;
-  float *filtered;         /* 3 per sample: the cell average (lookup) */
+  float *filtered;         /* per thread, one row of cell averages (3 per sample) */
+  int filtered_threads;    /* threads filtered has room for */
   uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
@@ -78,9 +81,8 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->results = calloc(r->samples, sizeof *r->results);
   r->vertices = calloc(r->samples, sizeof *r->vertices);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
-  r->filtered = calloc(r->samples * 3, sizeof *r->filtered);
   r->has = calloc(r->samples, 1);
-  if (!r->psf || !r->traces || !r->results || !r->vertices || !r->tickets || !r->filtered || !r->has) {
+  if (!r->psf || !r->traces || !r->results || !r->vertices || !r->tickets || !r->has) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
@@ -231,27 +233,48 @@ hush_status hush__psf_renderer_repeat(hush_psf_renderer *r) {
  * NOT_TRACED for the holes of a progressive frame. */
 static int has_vertex(const hush_psf_renderer *r, size_t i) { return r->has[i] == WITH_VERTEX; }
 
-/* Adds (lookup 0) or looks up (1) the selected vertices of rows [y0, y1)
- * in screen order: each run of consecutive samples with a vertex goes in
- * place, without a copy. */
-static void vertex_runs(hush_psf_renderer *r, uint32_t y0, uint32_t y1, int lookup) {
-  const size_t end = (size_t)y1 * r->width * r->spp;
-  size_t i = (size_t)y0 * r->width * r->spp;
-  while (i < end) {
-    while (i < end && !has_vertex(r, i)) i++;
-    const size_t start = i;
-    while (i < end && has_vertex(r, i)) i++;
-    const uint32_t n = (uint32_t)(i - start);
-    if (n && !lookup) hush_psf_add_vertices(r->psf, r->vertices + start, n, r->tickets + start);
-    if (n && lookup)
-      hush_psf_lookup(r->psf, r->vertices + start, r->tickets + start, n, r->filtered + 3 * start);
-  }
+/* The next run of consecutive samples with a vertex in [*i, end): returns
+ * its first sample, its length in *n (0: none left), and moves *i past it.
+ * The runs go to the table in place, without a copy. */
+static size_t next_run(const hush_psf_renderer *r, size_t *i, size_t end, uint32_t *n) {
+  size_t k = *i;
+  while (k < end && !has_vertex(r, k)) k++;
+  const size_t start = k;
+  while (k < end && has_vertex(r, k)) k++;
+  *n = (uint32_t)(k - start);
+  *i = k;
+  return start;
 }
 
-/* The "psf" layer of rows [y0, y1). */
-static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *out) {
-  vertex_runs(r, y0, y1, 1);
-  for (uint32_t y = y0; y < y1; y++)
+/* Adds the selected vertices of rows [y0, y1) through one batch, so that
+ * the cells they share are visited once (psf_batch.h). */
+static void add_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1) {
+  hush_psf_batch batch;
+  if (hush__psf_batch_open(r->psf, &batch) != HUSH_OK) return;
+  const size_t row = (size_t)r->width * r->spp;
+  for (size_t i = y0 * row; i < y1 * row;) {
+    uint32_t n;
+    const size_t start = next_run(r, &i, y1 * row, &n);
+    if (n) hush__psf_batch_vertices(r->psf, &batch, r->vertices + start, n, r->tickets + start);
+  }
+  hush__psf_batch_end(&batch);
+}
+
+/* The "psf" layer of rows [y0, y1); filtered holds one row's cell averages
+ * (3 per sample), looked up just before they are composed so that they are
+ * still in the cache. */
+static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *filtered,
+                         float *out) {
+  const size_t row = (size_t)r->width * r->spp;
+  for (uint32_t y = y0; y < y1; y++) {
+    const size_t first = y * row;
+    for (size_t i = first; i < first + row;) {
+      uint32_t n;
+      const size_t start = next_run(r, &i, first + row, &n);
+      if (n)
+        hush_psf_lookup(r->psf, r->vertices + start, r->tickets + start, n,
+                        filtered + 3 * (start - first));
+    }
     for (uint32_t x = 0; x < r->width; x++) {
       float sum[3] = {0.0f, 0.0f, 0.0f};
       for (uint32_t s = 0; s < r->spp; s++) {
@@ -262,7 +285,7 @@ static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *
           for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
           continue;
         }
-        const float *f = r->filtered + 3 * i;
+        const float *f = filtered + 3 * (i - first);
         for (int c = 0; c < 3; c++) {
           const float v = rec->prefix[c] + rec->throughput[c] * f[c];
           sum[c] += isfinite(v) ? v : rec->total[c];
@@ -271,9 +294,14 @@ static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *
       float *o = out + 3 * ((size_t)y * r->width + x);
       for (int c = 0; c < 3; c++) o[c] = sum[c] / (float)r->spp;
     }
+  }
 }
 
-/* Rows per band of the parallel passes. */
+/* Rows per band of the add pass: a batch of 8 rows of 1280 pixels holds
+ * about 3000 cells, so most cells are visited once or twice (a cell is cut
+ * where a band or a full batch ends). */
+#define ADD_BAND 8u
+/* Rows per band of the lookup pass. */
 #define BAND 4u
 
 hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
@@ -282,12 +310,20 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   hush_status st = hush_frame_add_layer(frame, "psf", 3, &view);
   if (st != HUSH_OK) return st;
   const int threads = hush_device_threads(r->device);
+  if (threads > r->filtered_threads) {
+    free(r->filtered);
+    r->filtered_threads = 0;
+    r->filtered = malloc((size_t)threads * r->width * r->spp * 3 * sizeof *r->filtered);
+    if (!r->filtered) return hush__fail(r->device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory");
+    r->filtered_threads = threads;
+  }
+  const int64_t add_bands = (r->height + ADD_BAND - 1) / ADD_BAND;
   const int64_t bands = (r->height + BAND - 1) / BAND;
   const double t0 = hush__now_ms(), cpu0 = hush__cpu_seconds();
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (int64_t b = 0; b < bands; b++) {
-    const uint32_t y0 = (uint32_t)b * BAND;
-    vertex_runs(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, 0);
+  for (int64_t b = 0; b < add_bands; b++) {
+    const uint32_t y0 = (uint32_t)b * ADD_BAND;
+    add_rows(r, y0, y0 + ADD_BAND < r->height ? y0 + ADD_BAND : r->height);
   }
   const double t1 = hush__now_ms();
   st = hush_psf_resolve(r->psf);
@@ -297,7 +333,8 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int64_t b = 0; b < bands; b++) {
     const uint32_t y0 = (uint32_t)b * BAND;
-    compose_rows(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, out);
+    float *filtered = r->filtered + (size_t)omp_get_thread_num() * r->width * r->spp * 3;
+    compose_rows(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, filtered, out);
   }
   const double t3 = hush__now_ms();
   if (timings) {
