@@ -287,6 +287,8 @@ hush_status hush_psf_lookup(hush_psf psf, const hush_psf_vertex *vertices, const
   return HUSH_OK;
 }
 
+const hush_psf_table *hush__psf_resolved_table(hush_psf psf) { return &psf->table; }
+
 hush_status hush_psf_get_stats(hush_psf psf, hush_psf_stats *stats) {
   if (!psf || !stats) return hush__fail(psf ? psf->device : NULL, HUSH_ERROR_INVALID_ARGUMENT,
                                         "psf: NULL argument");

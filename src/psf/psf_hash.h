@@ -195,6 +195,9 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, uint32_t 
   }
 }
 
+/* How many vertices ahead hush__psf_keys prefetches (about 2 KB). */
+#define HUSH_PSF_VERTEX_AHEAD 32u
+
 /* Keys of n vertices: keys[j] and valid[j] (0 when the vertex cannot be
  * keyed: not finite, or too far out for 32-bit cell coordinates; its key is
  * then 0). The vertices are first copied to planar arrays so that the
@@ -207,6 +210,8 @@ static inline void hush__psf_keys(const hush_psf_key_params *k, const hush_psf_v
   for (uint32_t at = 0; at < n; at += B) {
     const uint32_t m = n - at < B ? n - at : B;
     for (uint32_t j = 0; j < m; j++) {
+      /* the vertices stream from memory: ask for them well ahead */
+      if (at + j + HUSH_PSF_VERTEX_AHEAD < n) __builtin_prefetch(&vs[at + j + HUSH_PSF_VERTEX_AHEAD]);
       const hush_psf_vertex *v = &vs[at + j];
       for (int c = 0; c < 3; c++) {
         P[c * B + j] = v->position[c];

@@ -47,8 +47,6 @@ struct hush_psf_renderer {
   sample_result *results;
   hush_psf_vertex *vertices;
   uint32_t *tickets;
-  float *filtered;         /* per thread, one row of cell averages (3 per sample) */
-  int filtered_threads;    /* threads filtered has room for */
   uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
@@ -99,7 +97,6 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   free(r->results);
   free(r->vertices);
   free(r->tickets);
-  free(r->filtered);
   free(r->has);
   free(r);
 }
@@ -260,32 +257,32 @@ static void add_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1) {
   hush__psf_batch_end(&batch);
 }
 
-/* The "psf" layer of rows [y0, y1); filtered holds one row's cell averages
- * (3 per sample), looked up just before they are composed so that they are
- * still in the cache. */
-static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *filtered,
+/* How many samples ahead compose prefetches the cell of a ticket: the
+ * cells of a band are scattered over the table. */
+#define LOOKUP_AHEAD 16u
+
+/* The "psf" layer of rows [y0, y1): per sample its cell's average (what
+ * hush_psf_lookup returns, read here in the same pass) times the
+ * throughput plus the prefix. */
+static void compose_rows(hush_psf_renderer *r, const hush_psf_table *t, uint32_t y0, uint32_t y1,
                          float *out) {
-  const size_t row = (size_t)r->width * r->spp;
-  for (uint32_t y = y0; y < y1; y++) {
-    const size_t first = y * row;
-    for (size_t i = first; i < first + row;) {
-      uint32_t n;
-      const size_t start = next_run(r, &i, first + row, &n);
-      if (n)
-        hush_psf_lookup(r->psf, r->vertices + start, r->tickets + start, n,
-                        filtered + 3 * (start - first));
-    }
+  const size_t end = (size_t)y1 * r->width * r->spp;
+  for (uint32_t y = y0; y < y1; y++)
     for (uint32_t x = 0; x < r->width; x++) {
       float sum[3] = {0.0f, 0.0f, 0.0f};
       for (uint32_t s = 0; s < r->spp; s++) {
         const size_t i = sample_index(r, x, y, s);
+        if (i + LOOKUP_AHEAD < end && has_vertex(r, i + LOOKUP_AHEAD) &&
+            r->tickets[i + LOOKUP_AHEAD] < t->slots)
+          __builtin_prefetch(&t->cells[r->tickets[i + LOOKUP_AHEAD]]);
         const sample_result *rec = &r->results[i];
         if (r->has[i] == NOT_TRACED) continue; /* a hole of a progressive frame */
         if (r->has[i] == NO_VERTEX) {
           for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
           continue;
         }
-        const float *f = filtered + 3 * (i - first);
+        const uint32_t tk = r->tickets[i];
+        const float *f = tk < t->slots ? t->cells[tk].mean : r->vertices[i].radiance;
         for (int c = 0; c < 3; c++) {
           const float v = rec->prefix[c] + rec->throughput[c] * f[c];
           sum[c] += isfinite(v) ? v : rec->total[c];
@@ -294,7 +291,6 @@ static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *
       float *o = out + 3 * ((size_t)y * r->width + x);
       for (int c = 0; c < 3; c++) o[c] = sum[c] / (float)r->spp;
     }
-  }
 }
 
 /* Rows per band of the add pass: a batch of 8 rows of 1280 pixels holds
@@ -310,13 +306,6 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   hush_status st = hush_frame_add_layer(frame, "psf", 3, &view);
   if (st != HUSH_OK) return st;
   const int threads = hush_device_threads(r->device);
-  if (threads > r->filtered_threads) {
-    free(r->filtered);
-    r->filtered_threads = 0;
-    r->filtered = malloc((size_t)threads * r->width * r->spp * 3 * sizeof *r->filtered);
-    if (!r->filtered) return hush__fail(r->device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory");
-    r->filtered_threads = threads;
-  }
   const int64_t add_bands = (r->height + ADD_BAND - 1) / ADD_BAND;
   const int64_t bands = (r->height + BAND - 1) / BAND;
   const double t0 = hush__now_ms(), cpu0 = hush__cpu_seconds();
@@ -330,11 +319,11 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   if (st != HUSH_OK) return st;
   const double t2 = hush__now_ms();
   float *out = view.data;
+  const hush_psf_table *table = hush__psf_resolved_table(r->psf);
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int64_t b = 0; b < bands; b++) {
     const uint32_t y0 = (uint32_t)b * BAND;
-    float *filtered = r->filtered + (size_t)omp_get_thread_num() * r->width * r->spp * 3;
-    compose_rows(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, filtered, out);
+    compose_rows(r, table, y0, y0 + BAND < r->height ? y0 + BAND : r->height, out);
   }
   const double t3 = hush__now_ms();
   if (timings) {
