@@ -223,13 +223,11 @@ hush_status hush__psf_batch_vertices(hush_psf psf, hush_psf_batch *b,
   if (!psf || !b || (count && (!vertices || !tickets))) return HUSH_ERROR_INVALID_ARGUMENT;
   if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
   hush_psf_key keys[CHUNK];
-  float radiance[3 * CHUNK];
   int valid[CHUNK];
   for (uint32_t at = 0; at < count; at += CHUNK) {
     const uint32_t n = count - at < CHUNK ? count - at : CHUNK;
     hush__psf_keys(&psf->key, vertices + at, n, keys, valid);
-    for (uint32_t j = 0; j < n; j++) memcpy(radiance + 3 * j, vertices[at + j].radiance, 12);
-    hush__psf_batch_add(b, keys, radiance, valid, n, tickets + at);
+    hush__psf_batch_add(b, keys, vertices + at, valid, n, tickets + at);
   }
   return HUSH_OK;
 }

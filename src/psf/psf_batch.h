@@ -58,9 +58,10 @@ typedef struct hush_psf_batch {
 void hush__psf_batch_begin(hush_psf_batch *b, hush_psf_table *t, const hush_psf_probe *p);
 
 /* Adds n vertices with keys keys[j] (usable where valid[j]) and radiance
- * radiance[3 j .. 3 j + 2]; tickets[j] receives the vertex's slot or
+ * vertices[j].radiance; tickets[j] receives the vertex's slot or
  * HUSH_PSF_NO_CELL by hush__psf_batch_end at the latest. */
-void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys, const float *radiance,
+void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys,
+                         const hush_psf_vertex *vertices,
                          const int *valid, uint32_t n, uint32_t *tickets);
 
 /* Takes every pending group to the table, writes the pending tickets and
