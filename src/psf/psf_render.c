@@ -259,7 +259,7 @@ static void add_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1) {
 
 /* How many samples ahead compose prefetches the cell of a ticket: the
  * cells of a band are scattered over the table. */
-#define LOOKUP_AHEAD 16u
+#define LOOKUP_AHEAD 64u
 
 /* The "psf" layer of rows [y0, y1): per sample its cell's average (what
  * hush_psf_lookup returns, read here in the same pass) times the
