@@ -222,12 +222,31 @@ hush_status hush__psf_batch_vertices(hush_psf psf, hush_psf_batch *b,
                                      uint32_t *tickets) {
   if (!psf || !b || (count && (!vertices || !tickets))) return HUSH_ERROR_INVALID_ARGUMENT;
   if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
+  hush_psf_block block;
+  hush_psf_planes planes;
+  hush_psf_key keys[HUSH_PSF_KEY_BLOCK];
+  int valid[HUSH_PSF_KEY_BLOCK];
+  for (uint32_t at = 0; at < count; at += HUSH_PSF_KEY_BLOCK) {
+    const uint32_t n = count - at < HUSH_PSF_KEY_BLOCK ? count - at : HUSH_PSF_KEY_BLOCK;
+    hush__psf_block_fill(&block, vertices + at, n, &planes);
+    hush__psf_keys_planar(&psf->key, &planes, 0, n, keys, valid);
+    hush__psf_batch_add(b, keys, planes.radiance, valid, n, tickets + at);
+  }
+  return HUSH_OK;
+}
+
+hush_status hush__psf_batch_planes(hush_psf psf, hush_psf_batch *b, const hush_psf_planes *v,
+                                   size_t first, uint32_t count, uint32_t *tickets) {
+  if (!psf || !b || !v || (count && !tickets)) return HUSH_ERROR_INVALID_ARGUMENT;
+  if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
   hush_psf_key keys[CHUNK];
   int valid[CHUNK];
   for (uint32_t at = 0; at < count; at += CHUNK) {
     const uint32_t n = count - at < CHUNK ? count - at : CHUNK;
-    hush__psf_keys(&psf->key, vertices + at, n, keys, valid);
-    hush__psf_batch_add(b, keys, vertices + at, valid, n, tickets + at);
+    hush__psf_keys_planar(&psf->key, v, first + at, n, keys, valid);
+    const float *const r[3] = {v->radiance[0] + first + at, v->radiance[1] + first + at,
+                               v->radiance[2] + first + at};
+    hush__psf_batch_add(b, keys, r, valid, n, tickets + at);
   }
   return HUSH_OK;
 }

@@ -95,8 +95,7 @@ static void queue(hush_psf_batch *b, uint32_t *tickets, uint32_t n) {
   if (++b->segments == HUSH_PSF_BATCH_SEGMENTS) drain(b);
 }
 
-void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys,
-                         const hush_psf_vertex *vertices,
+void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys, const float *const r[3],
                          const int *valid, uint32_t n, uint32_t *tickets) {
   uint32_t start = 0;
   for (uint32_t j = 0; j < n; j++) {
@@ -113,7 +112,7 @@ void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys,
     }
     const uint32_t g = group_of(b, keys[j]);
     hush_psf_group *grp = &b->group[g];
-    for (int c = 0; c < 3; c++) grp->sum[c] += vertices[j].radiance[c];
+    for (int c = 0; c < 3; c++) grp->sum[c] += r[c][j];
     grp->count++;
     tickets[j] = g;
   }

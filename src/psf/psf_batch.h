@@ -58,10 +58,9 @@ typedef struct hush_psf_batch {
 void hush__psf_batch_begin(hush_psf_batch *b, hush_psf_table *t, const hush_psf_probe *p);
 
 /* Adds n vertices with keys keys[j] (usable where valid[j]) and radiance
- * vertices[j].radiance; tickets[j] receives the vertex's slot or
+ * (r[0][j], r[1][j], r[2][j]); tickets[j] receives the vertex's slot or
  * HUSH_PSF_NO_CELL by hush__psf_batch_end at the latest. */
-void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys,
-                         const hush_psf_vertex *vertices,
+void hush__psf_batch_add(hush_psf_batch *b, const hush_psf_key *keys, const float *const r[3],
                          const int *valid, uint32_t n, uint32_t *tickets);
 
 /* Takes every pending group to the table, writes the pending tickets and

@@ -22,6 +22,11 @@ hush_status hush__psf_batch_vertices(hush_psf psf, hush_psf_batch *b,
                                      const hush_psf_vertex *vertices, uint32_t count,
                                      uint32_t *tickets);
 
+/* The same for vertices first .. first + count - 1 of planes v (the
+ * caller's arrays), without copying them to planes first. */
+hush_status hush__psf_batch_planes(hush_psf psf, hush_psf_batch *b, const hush_psf_planes *v,
+                                   size_t first, uint32_t count, uint32_t *tickets);
+
 /* The table after hush_psf_resolve, for composing in the same pass as the
  * look-up: a vertex with ticket k < slots has the average cells[k].mean,
  * any other keeps its own radiance (what hush_psf_lookup returns). */

@@ -25,7 +25,7 @@ typedef struct sample_trace {
   float distance;          /* path length to last */
   uint32_t epoch;          /* frame counter of the last write; stale otherwise */
   uint8_t seen;            /* sufficiently diffuse vertices so far */
-  uint8_t selected;        /* vertices[] holds this sample's vertex */
+  uint8_t selected;        /* the planes hold this sample's vertex */
 } sample_trace;
 
 typedef struct sample_result {
@@ -33,6 +33,10 @@ typedef struct sample_result {
   float throughput[3];
   float total[3];
 } sample_result;
+
+/* The selected vertices, one plane (array over the samples) per component,
+ * so that the key loop reads them with vector loads (psf_hash.h). */
+enum { POSITION = 0, NORMAL = 3, ORIGIN = 6, DISTANCE = 9, RADIANCE = 10, PLANES = 13 };
 
 /* has[] values, per sample. */
 enum { NOT_TRACED = 0, NO_VERTEX = 1, WITH_VERTEX = 2 };
@@ -45,7 +49,9 @@ struct hush_psf_renderer {
   size_t samples;          /* width * height * spp */
   sample_trace *traces;
   sample_result *results;
-  hush_psf_vertex *vertices;
+  float *plane;            /* PLANES planes of `samples` floats */
+  uint32_t *seed, *flags;  /* per sample, of the selected vertex */
+  hush_psf_planes planes;  /* pointing at them */
   uint32_t *tickets;
   uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
@@ -77,15 +83,26 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->psf = hush_psf_new(device, width, height);
   r->traces = calloc(r->samples, sizeof *r->traces);
   r->results = calloc(r->samples, sizeof *r->results);
-  r->vertices = calloc(r->samples, sizeof *r->vertices);
+  r->plane = calloc(r->samples * PLANES, sizeof *r->plane);
+  r->seed = calloc(r->samples, sizeof *r->seed);
+  r->flags = calloc(r->samples, sizeof *r->flags);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
   r->has = calloc(r->samples, 1);
-  if (!r->psf || !r->traces || !r->results || !r->vertices || !r->tickets || !r->has) {
+  if (!r->psf || !r->traces || !r->results || !r->plane || !r->seed || !r->flags || !r->tickets || !r->has) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
                    : HUSH_ERROR_OUT_OF_MEMORY;
   }
+  for (int c = 0; c < 3; c++) {
+    r->planes.position[c] = r->plane + (POSITION + c) * r->samples;
+    r->planes.normal[c] = r->plane + (NORMAL + c) * r->samples;
+    r->planes.origin[c] = r->plane + (ORIGIN + c) * r->samples;
+    r->planes.radiance[c] = r->plane + (RADIANCE + c) * r->samples;
+  }
+  r->planes.distance = r->plane + DISTANCE * r->samples;
+  r->planes.seed = r->seed;
+  r->planes.flags = r->flags;
   *out = r;
   return HUSH_OK;
 }
@@ -95,7 +112,9 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   hush_psf_release(r->psf);
   free(r->traces);
   free(r->results);
-  free(r->vertices);
+  free(r->plane);
+  free(r->seed);
+  free(r->flags);
   free(r->tickets);
   free(r->has);
   free(r);
@@ -140,16 +159,22 @@ static int vertex_kind(const hush_material *m) {
   }
 }
 
+static float *plane_of(const hush_psf_renderer *r, int component) {
+  return r->plane + (size_t)component * r->samples;
+}
+
 static void select_vertex(hush_psf_renderer *r, size_t idx, sample_trace *tr,
                           sample_result *res, const hush_path_vertex *v, const hush_material *m,
                           int kind) {
-  hush_psf_vertex *pv = &r->vertices[idx];
-  memcpy(pv->position, &v->p, sizeof pv->position);
-  memcpy(pv->normal, &v->n, sizeof pv->normal);
-  memcpy(pv->origin, tr->last, sizeof pv->origin);
-  pv->distance = tr->distance;
-  pv->seed = (uint32_t)idx;
-  pv->flags = kind == 2 ? HUSH_PSF_GLOSSY : 0u;
+  const float p[3] = {v->p.x, v->p.y, v->p.z}, n[3] = {v->n.x, v->n.y, v->n.z};
+  for (int c = 0; c < 3; c++) {
+    plane_of(r, POSITION + c)[idx] = p[c];
+    plane_of(r, NORMAL + c)[idx] = n[c];
+    plane_of(r, ORIGIN + c)[idx] = tr->last[c];
+  }
+  plane_of(r, DISTANCE)[idx] = tr->distance;
+  r->seed[idx] = (uint32_t)idx;
+  r->flags[idx] = kind == 2 ? HUSH_PSF_GLOSSY : 0u;
   float albedo[3];
   hush__bsdf_albedo(m, v->surface, albedo);
   for (int c = 0; c < 3; c++)
@@ -187,10 +212,9 @@ static void on_path_end(void *user, uint32_t x, uint32_t y, uint32_t sample,
   memcpy(res->total, radiance, sizeof res->total);
   r->has[idx] = tr->selected ? WITH_VERTEX : NO_VERTEX;
   if (!tr->selected) return;
-  float *own = r->vertices[idx].radiance;
   for (int c = 0; c < 3; c++) {
     const float t = res->throughput[c];
-    own[c] = t > 1e-20f ? (radiance[c] - res->prefix[c]) / t : 0.0f;
+    plane_of(r, RADIANCE + c)[idx] = t > 1e-20f ? (radiance[c] - res->prefix[c]) / t : 0.0f;
   }
 }
 
@@ -252,7 +276,7 @@ static void add_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1) {
   for (size_t i = y0 * row; i < y1 * row;) {
     uint32_t n;
     const size_t start = next_run(r, &i, y1 * row, &n);
-    if (n) hush__psf_batch_vertices(r->psf, &batch, r->vertices + start, n, r->tickets + start);
+    if (n) hush__psf_batch_planes(r->psf, &batch, &r->planes, start, n, r->tickets + start);
   }
   hush__psf_batch_end(&batch);
 }
@@ -282,7 +306,12 @@ static void compose_rows(hush_psf_renderer *r, const hush_psf_table *t, uint32_t
           continue;
         }
         const uint32_t tk = r->tickets[i];
-        const float *f = tk < t->slots ? t->cells[tk].mean : r->vertices[i].radiance;
+        float own[3];
+        const float *f = own;
+        if (tk < t->slots) /* else no cell: the vertex keeps its own radiance (rare) */
+          f = t->cells[tk].mean;
+        else
+          for (int c = 0; c < 3; c++) own[c] = r->planes.radiance[c][i];
         for (int c = 0; c < 3; c++) {
           const float v = rec->prefix[c] + rec->throughput[c] * f[c];
           sum[c] += isfinite(v) ? v : rec->total[c];
