@@ -18,8 +18,11 @@
 #include <string.h>
 
 /* What the hooks keep for one camera sample, written only by the thread
- * tracing it, in two arrays: the state of the path being traced, and what
- * composing the layer reads (so that pass streams 36 bytes per sample). */
+ * tracing it, in three arrays: the state of the path being traced, what
+ * composing the layer reads for a sample with a vertex (so that pass
+ * streams 24 bytes per sample), and the path's unfiltered radiance (read
+ * only for samples without a vertex, or when the filtered value is not
+ * finite). */
 typedef struct sample_trace {
   float last[3];           /* the previous vertex (the eye at first) */
   float distance;          /* path length to last */
@@ -31,7 +34,6 @@ typedef struct sample_trace {
 typedef struct sample_result {
   float prefix[3];
   float throughput[3];
-  float total[3];
 } sample_result;
 
 /* The selected vertices, one plane (array over the samples) per component,
@@ -49,6 +51,7 @@ struct hush_psf_renderer {
   size_t samples;          /* width * height * spp */
   sample_trace *traces;
   sample_result *results;
+  float *total;            /* 3 per sample: the path's unfiltered radiance */
   float *plane;            /* PLANES planes of `samples` floats */
   uint32_t *seed, *flags;  /* per sample, of the selected vertex */
   hush_psf_planes planes;  /* pointing at them */
@@ -83,12 +86,14 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->psf = hush_psf_new(device, width, height);
   r->traces = calloc(r->samples, sizeof *r->traces);
   r->results = calloc(r->samples, sizeof *r->results);
+  r->total = calloc(r->samples * 3, sizeof *r->total);
   r->plane = calloc(r->samples * PLANES, sizeof *r->plane);
   r->seed = calloc(r->samples, sizeof *r->seed);
   r->flags = calloc(r->samples, sizeof *r->flags);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
   r->has = calloc(r->samples, 1);
-  if (!r->psf || !r->traces || !r->results || !r->plane || !r->seed || !r->flags || !r->tickets || !r->has) {
+  if (!r->psf || !r->traces || !r->results || !r->total || !r->plane || !r->seed || !r->flags ||
+      !r->tickets || !r->has) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
@@ -112,6 +117,7 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   hush_psf_release(r->psf);
   free(r->traces);
   free(r->results);
+  free(r->total);
   free(r->plane);
   free(r->seed);
   free(r->flags);
@@ -209,7 +215,7 @@ static void on_path_end(void *user, uint32_t x, uint32_t y, uint32_t sample,
   sample_trace *tr = &r->traces[idx];
   sample_result *res = &r->results[idx];
   if (tr->epoch != r->epoch) reset(r, tr, res); /* no surface: the sky or a light */
-  memcpy(res->total, radiance, sizeof res->total);
+  memcpy(r->total + 3 * idx, radiance, 3 * sizeof *radiance);
   r->has[idx] = tr->selected ? WITH_VERTEX : NO_VERTEX;
   if (!tr->selected) return;
   for (int c = 0; c < 3; c++) {
@@ -302,7 +308,7 @@ static void compose_rows(hush_psf_renderer *r, const hush_psf_table *t, uint32_t
         const sample_result *rec = &r->results[i];
         if (r->has[i] == NOT_TRACED) continue; /* a hole of a progressive frame */
         if (r->has[i] == NO_VERTEX) {
-          for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
+          for (int c = 0; c < 3; c++) sum[c] += r->total[3 * i + c];
           continue;
         }
         const uint32_t tk = r->tickets[i];
@@ -312,10 +318,11 @@ static void compose_rows(hush_psf_renderer *r, const hush_psf_table *t, uint32_t
           f = t->cells[tk].mean;
         else
           for (int c = 0; c < 3; c++) own[c] = r->planes.radiance[c][i];
-        for (int c = 0; c < 3; c++) {
-          const float v = rec->prefix[c] + rec->throughput[c] * f[c];
-          sum[c] += isfinite(v) ? v : rec->total[c];
-        }
+        float v[3];
+        for (int c = 0; c < 3; c++) v[c] = rec->prefix[c] + rec->throughput[c] * f[c];
+        if (!(isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]))) /* rare: then total is read */
+          for (int c = 0; c < 3; c++) v[c] = isfinite(v[c]) ? v[c] : r->total[3 * i + c];
+        for (int c = 0; c < 3; c++) sum[c] += v[c];
       }
       float *o = out + 3 * ((size_t)y * r->width + x);
       for (int c = 0; c < 3; c++) o[c] = sum[c] / (float)r->spp;
