@@ -253,11 +253,14 @@ hush_status hush__psf_batch_planes(hush_psf psf, hush_psf_batch *b, const hush_p
 
 hush_status hush_psf_add_vertices(hush_psf psf, const hush_psf_vertex *vertices, uint32_t count,
                                   uint32_t *tickets) {
-  hush_psf_batch batch;
-  hush_status st = hush__psf_batch_open(psf, &batch);
-  if (st != HUSH_OK) return st;
-  st = hush__psf_batch_vertices(psf, &batch, vertices, count, tickets);
-  hush__psf_batch_end(&batch);
+  hush_psf_batch *batch = malloc(sizeof *batch);
+  if (!batch) return HUSH_ERROR_OUT_OF_MEMORY;
+  hush_status st = hush__psf_batch_open(psf, batch);
+  if (st == HUSH_OK) {
+    st = hush__psf_batch_vertices(psf, batch, vertices, count, tickets);
+    hush__psf_batch_end(batch);
+  }
+  free(batch);
   return st;
 }
 

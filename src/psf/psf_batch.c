@@ -72,13 +72,13 @@ static void drain(hush_psf_batch *b) {
   }
   /* the probes brought the groups' cells into the cache (or a neighbour
    * slot's, a collision): the atomic sums find them there */
-  uint32_t fresh[HUSH_PSF_BATCH_GROUPS], nf = 0;
+  uint32_t nf = 0;
   for (uint32_t g = 0; g < n; g++) {
     const uint32_t s = b->slot[g];
     if (s != HUSH_PSF_NO_CELL && hush__psf_table_accumulate(t, s, b->group[g].sum, b->group[g].count))
-      fresh[nf++] = s;
+      b->fresh[nf++] = s;
   }
-  hush__psf_table_mark_used(t, fresh, nf);
+  hush__psf_table_mark_used(t, b->fresh, nf);
   for (uint32_t k = 0; k < b->segments; k++) {
     uint32_t *tk = b->segment[k].tickets;
     const uint32_t m = b->segment[k].n;

@@ -16,7 +16,8 @@
  * Until then a vertex's ticket holds its group number; the drain rewrites
  * it to the group's slot. Tickets are written only by the batch's thread.
  *
- * Ownership: a batch is the caller's (usually on its stack: about 60 KB);
+ * Ownership: a batch is the caller's (about 150 KB: on the heap, not on a
+ * thread's stack);
  * it points into the table and the tickets arrays it was given, which must
  * live until hush__psf_batch_end.
  */
@@ -27,8 +28,11 @@
 
 #include <stdint.h>
 
-#define HUSH_PSF_BATCH_GROUPS 2048u   /* distinct keys pending */
-#define HUSH_PSF_BATCH_INDEX 4096u    /* local hash slots: a power of 2, twice the groups */
+/* Distinct keys pending: a band of 8 rows of 1280 pixels has about 3000
+ * cells, so it fits in one batch (2048 groups: add 7% slower on the
+ * courtyard at 1280x720, 1024: 15%). */
+#define HUSH_PSF_BATCH_GROUPS 4096u
+#define HUSH_PSF_BATCH_INDEX 8192u    /* local hash slots: a power of 2, twice the groups */
 #define HUSH_PSF_BATCH_SEGMENTS 256u  /* ticket arrays pending */
 #define HUSH_PSF_BATCH_VERTICES 16384u /* vertices pending (their tickets stay in cache) */
 
@@ -50,6 +54,7 @@ typedef struct hush_psf_batch {
   uint16_t index[HUSH_PSF_BATCH_INDEX]; /* 1 + group, 0: empty */
   hush_psf_group group[HUSH_PSF_BATCH_GROUPS];
   uint32_t slot[HUSH_PSF_BATCH_GROUPS]; /* of each group, at the drain */
+  uint32_t fresh[HUSH_PSF_BATCH_GROUPS]; /* slots first used this frame, at the drain */
   hush_psf_segment segment[HUSH_PSF_BATCH_SEGMENTS];
   uint64_t vertices, collisions, failed, evictions;
 } hush_psf_batch;

@@ -56,6 +56,8 @@ struct hush_psf_renderer {
   uint32_t *seed, *flags;  /* per sample, of the selected vertex */
   hush_psf_planes planes;  /* pointing at them */
   uint32_t *tickets;
+  hush_psf_batch *batches; /* one per thread of the add pass, batch_threads of them */
+  int batch_threads;
   uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
@@ -122,6 +124,7 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   free(r->seed);
   free(r->flags);
   free(r->tickets);
+  free(r->batches);
   free(r->has);
   free(r);
 }
@@ -275,16 +278,15 @@ static size_t next_run(const hush_psf_renderer *r, size_t *i, size_t end, uint32
 
 /* Adds the selected vertices of rows [y0, y1) through one batch, so that
  * the cells they share are visited once (psf_batch.h). */
-static void add_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1) {
-  hush_psf_batch batch;
-  if (hush__psf_batch_open(r->psf, &batch) != HUSH_OK) return;
+static void add_rows(hush_psf_renderer *r, hush_psf_batch *batch, uint32_t y0, uint32_t y1) {
+  if (hush__psf_batch_open(r->psf, batch) != HUSH_OK) return;
   const size_t row = (size_t)r->width * r->spp;
   for (size_t i = y0 * row; i < y1 * row;) {
     uint32_t n;
     const size_t start = next_run(r, &i, y1 * row, &n);
-    if (n) hush__psf_batch_planes(r->psf, &batch, &r->planes, start, n, r->tickets + start);
+    if (n) hush__psf_batch_planes(r->psf, batch, &r->planes, start, n, r->tickets + start);
   }
-  hush__psf_batch_end(&batch);
+  hush__psf_batch_end(batch);
 }
 
 /* How many samples ahead compose prefetches the cell of a ticket: the
@@ -342,13 +344,21 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   hush_status st = hush_frame_add_layer(frame, "psf", 3, &view);
   if (st != HUSH_OK) return st;
   const int threads = hush_device_threads(r->device);
+  if (threads > r->batch_threads) {
+    free(r->batches);
+    r->batch_threads = 0;
+    r->batches = malloc((size_t)threads * sizeof *r->batches);
+    if (!r->batches) return hush__fail(r->device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory");
+    r->batch_threads = threads;
+  }
   const int64_t add_bands = (r->height + ADD_BAND - 1) / ADD_BAND;
   const int64_t bands = (r->height + BAND - 1) / BAND;
   const double t0 = hush__now_ms(), cpu0 = hush__cpu_seconds();
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int64_t b = 0; b < add_bands; b++) {
     const uint32_t y0 = (uint32_t)b * ADD_BAND;
-    add_rows(r, y0, y0 + ADD_BAND < r->height ? y0 + ADD_BAND : r->height);
+    add_rows(r, &r->batches[omp_get_thread_num()], y0,
+             y0 + ADD_BAND < r->height ? y0 + ADD_BAND : r->height);
   }
   const double t1 = hush__now_ms();
   st = hush_psf_resolve(r->psf);
