@@ -261,14 +261,18 @@ uint64_t hush__psf_table_resolve(hush_psf_table *t, const hush_psf_resolve_param
    * is zeroed when its slot is claimed again (start_history) */
   const int64_t slots = t->slots;
   const uint32_t max_age = p->max_age < HUSH_PSF_AGE_MAX ? p->max_age : HUSH_PSF_AGE_MAX - 1;
+  /* every thread that added has returned (the API's contract), so the keys
+   * are read and written as plain integers here: the loop then vectorises
+   * (atomic accesses do not), and it touches every slot of the table */
+  _Static_assert(sizeof(_Atomic uint32_t) == sizeof(uint32_t), "atomic keys are plain words");
+  uint32_t *restrict keys = (uint32_t *)t->keys;
   uint64_t occupied = 0, freed = 0;
 #pragma omp parallel for schedule(static) num_threads(p->threads) reduction(+ : occupied, freed)
   for (int64_t s = 0; s < slots; s++) {
-    const uint32_t key = atomic_load_explicit(&t->keys[s], memory_order_relaxed);
+    const uint32_t key = keys[s];
     const uint32_t age = age_of(key) + 1;
     const uint32_t full = key != 0, keep = full & (age <= max_age);
-    const uint32_t aged = ((key & HUSH_PSF_VMASK) | age << HUSH_PSF_AGE_SHIFT) & (0u - keep);
-    atomic_store_explicit(&t->keys[s], aged, memory_order_relaxed);
+    keys[s] = ((key & HUSH_PSF_VMASK) | age << HUSH_PSF_AGE_SHIFT) & (0u - keep);
     occupied += keep;
     freed += full & !keep;
   }
