@@ -366,7 +366,7 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   const double t2 = hush__now_ms();
   float *out = view.data;
   const hush_psf_table *table = hush__psf_resolved_table(r->psf);
-#pragma omp parallel for schedule(static) num_threads(threads)
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int64_t b = 0; b < bands; b++) {
     const uint32_t y0 = (uint32_t)b * BAND;
     compose_rows(r, table, y0, y0 + BAND < r->height ? y0 + BAND : r->height, out);

@@ -247,35 +247,45 @@ static void blend(hush_psf_table *t, uint32_t slot, const hush_psf_resolve_param
  * the cells were first filled, so their lines are scattered over the table. */
 #define RESOLVE_AHEAD 16
 
+/* Work items per chunk of resolve's loops: dynamic chunks, so that on a
+ * shared machine a thread that loses its core does not hold the other up
+ * for its whole half. */
+#define BLEND_CHUNK 4096
+#define AGE_CHUNK 65536
+
 uint64_t hush__psf_table_resolve(hush_psf_table *t, const hush_psf_resolve_params *p) {
   const int64_t used = atomic_load(&t->used_count);
-#pragma omp parallel for schedule(static) num_threads(p->threads)
-  for (int64_t k = 0; k < used; k++) {
-    if (k + RESOLVE_AHEAD < used) __builtin_prefetch(&t->cells[t->used[k + RESOLVE_AHEAD]], 1);
-    blend(t, t->used[k], p);
-  }
-  atomic_store(&t->used_count, 0u);
-
-  /* age every key by one frame (the cells just used go from 0 to 1) and
-   * free those unused for more than max_age frames; a freed cell's history
-   * is zeroed when its slot is claimed again (start_history) */
   const int64_t slots = t->slots;
   const uint32_t max_age = p->max_age < HUSH_PSF_AGE_MAX ? p->max_age : HUSH_PSF_AGE_MAX - 1;
   /* every thread that added has returned (the API's contract), so the keys
-   * are read and written as plain integers here: the loop then vectorises
-   * (atomic accesses do not), and it touches every slot of the table */
+   * are read and written as plain integers here: the ageing loop then
+   * vectorises (atomic accesses do not), and it touches every slot */
   _Static_assert(sizeof(_Atomic uint32_t) == sizeof(uint32_t), "atomic keys are plain words");
   uint32_t *restrict keys = (uint32_t *)t->keys;
   uint64_t occupied = 0, freed = 0;
-#pragma omp parallel for schedule(static) num_threads(p->threads) reduction(+ : occupied, freed)
-  for (int64_t s = 0; s < slots; s++) {
-    const uint32_t key = keys[s];
-    const uint32_t age = age_of(key) + 1;
-    const uint32_t full = key != 0, keep = full & (age <= max_age);
-    keys[s] = ((key & HUSH_PSF_VMASK) | age << HUSH_PSF_AGE_SHIFT) & (0u - keep);
-    occupied += keep;
-    freed += full & !keep;
+  /* blending (cells) and ageing (keys) touch different arrays: one
+   * parallel region, no barrier between them */
+#pragma omp parallel num_threads(p->threads)
+  {
+#pragma omp for schedule(dynamic, BLEND_CHUNK) nowait
+    for (int64_t k = 0; k < used; k++) {
+      if (k + RESOLVE_AHEAD < used) __builtin_prefetch(&t->cells[t->used[k + RESOLVE_AHEAD]], 1);
+      blend(t, t->used[k], p);
+    }
+    /* age every key by one frame (the cells just used go from 0 to 1) and
+     * free those unused for more than max_age frames; a freed cell's
+     * history is zeroed when its slot is claimed again (start_history) */
+#pragma omp for schedule(dynamic, AGE_CHUNK) reduction(+ : occupied, freed)
+    for (int64_t s = 0; s < slots; s++) {
+      const uint32_t key = keys[s];
+      const uint32_t age = age_of(key) + 1;
+      const uint32_t full = key != 0, keep = full & (age <= max_age);
+      keys[s] = ((key & HUSH_PSF_VMASK) | age << HUSH_PSF_AGE_SHIFT) & (0u - keep);
+      occupied += keep;
+      freed += full & !keep;
+    }
   }
+  atomic_store(&t->used_count, 0u);
   atomic_fetch_add(&t->evictions, freed);
   return occupied;
 }
