@@ -41,7 +41,7 @@
 #define HUSH_PSF_LINE 16u
 
 /* A slot's data, 32 bytes (two per cache line): what the vertices of this
- * frame add (two 64-bit words, so that one vertex, or one combined run,
+ * frame add (two 64-bit words, so that one group of vertices (psf_batch.h)
  * costs two compare-and-swaps rather than four atomics), and the cell's filtered
  * radiance with the vertex count behind it. Together so that resolve and
  * lookup touch one line per cell. */
