@@ -5,6 +5,8 @@
  *
  *   - every cell returns the exact mean of the vertices that went into it,
  *     and under uniform radiance every vertex gets exactly that radiance;
+ *   - the same with more cells and vertices than a batch holds, in one call
+ *     or in many short calls through one batch (as the renderer adds);
  *   - vertices with different keys never share a cell, even when a tiny
  *     table forces collisions, evictions and failures (those keep their own
  *     radiance);
@@ -19,6 +21,7 @@
 
 #include "hush.h"
 #include "psf/psf_hash.h"
+#include "psf/psf_internal.h"
 #include "psf/psf_render.h"
 #include "render/scene.h"
 
@@ -148,6 +151,49 @@ static void test_exact_means(hush_device dev) {
   hush_psf_release(p);
   free(v);
   free(t);
+}
+
+/* Batches (psf_batch.h): more distinct cells than a batch groups and more
+ * vertices than it keeps pending, given in one call and in many short calls
+ * through one batch kept across them (as the renderer adds a band): every
+ * cell still holds the exact mean of its vertices. */
+static void test_batches(hush_device dev) {
+  enum { N = 3 * HUSH_PSF_BATCH_VERTICES / 2, RUN = 7 };
+  hush_psf_vertex *v = malloc(N * sizeof *v);
+  uint32_t *t = malloc(N * sizeof *t);
+  hush_psf_batch *batch = malloc(sizeof *batch);
+  REQUIRE(v && t && batch);
+  make_vertices(v, N, 8.0f, 0);
+  uint64_t cells[2] = {0, 0};
+  for (int calls = 0; calls < 2; calls++) {
+    hush_psf p = make_psf(dev, 400, 200, 4.0f, 0); /* occupancy below 10%: every vertex has a cell */
+    REQUIRE(hush_psf_begin_frame(p, 0, 0.002f, HUSH_HISTORY_RESET) == HUSH_OK);
+    if (calls == 0) {
+      REQUIRE(hush_psf_add_vertices(p, v, N, t) == HUSH_OK);
+    } else {
+      REQUIRE(hush__psf_batch_open(p, batch) == HUSH_OK);
+      for (uint32_t at = 0; at < N; at += RUN)
+        REQUIRE(hush__psf_batch_vertices(p, batch, v + at, N - at < RUN ? N - at : RUN, t + at) ==
+                HUSH_OK);
+      hush__psf_batch_end(batch);
+    }
+    REQUIRE(hush_psf_resolve(p) == HUSH_OK);
+    hush_psf_stats s;
+    REQUIRE(hush_psf_get_stats(p, &s) == HUSH_OK);
+    CHECK(s.vertices == N);
+    CHECK(s.failed == 0);
+    CHECK_MSG(s.cells_used > 2 * HUSH_PSF_BATCH_GROUPS, "only %llu cells",
+              (unsigned long long)s.cells_used);
+    CHECK(s.occupancy < 0.1);
+    cells[calls] = s.cells_used;
+    hush_psf_key_params kp = key_params(p, 0, 0.002f);
+    check_exact_means(p, v, t, N, &kp, (uint32_t)s.table_size);
+    hush_psf_release(p);
+  }
+  CHECK(cells[0] == cells[1]);
+  free(v);
+  free(t);
+  free(batch);
 }
 
 /* Equal positions, different normals: same primary hash, different
@@ -532,6 +578,7 @@ int main(void) {
   hush_device dev = hush_device_new("threads=1");
   REQUIRE(dev);
   test_exact_means(dev);
+  test_batches(dev);
   test_no_mixing(dev);
   test_threads(dev);
   test_temporal(dev);

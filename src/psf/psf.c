@@ -5,6 +5,7 @@
  * §3 (Algorithm 1, §3.1-3.4).
  */
 #include "psf/psf_hash.h"
+#include "psf/psf_internal.h"
 #include "psf/psf_table.h"
 
 #include "core/device.h"
@@ -205,27 +206,62 @@ hush_status hush_psf_begin_frame(hush_psf psf, uint64_t frame_index, float pixel
   return HUSH_OK;
 }
 
-/* Vertices per chunk of keys computed before the table is touched. */
+/* Vertices per chunk of keys computed before they go into the batch. */
 #define CHUNK 256u
+
+hush_status hush__psf_batch_open(hush_psf psf, hush_psf_batch *b) {
+  if (!psf || !b) return HUSH_ERROR_INVALID_ARGUMENT;
+  if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
+  const hush_psf_probe probe = {(uint32_t)psf->params[P_PROBES]};
+  hush__psf_batch_begin(b, &psf->table, &probe);
+  return HUSH_OK;
+}
+
+hush_status hush__psf_batch_vertices(hush_psf psf, hush_psf_batch *b,
+                                     const hush_psf_vertex *vertices, uint32_t count,
+                                     uint32_t *tickets) {
+  if (!psf || !b || (count && (!vertices || !tickets))) return HUSH_ERROR_INVALID_ARGUMENT;
+  if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
+  hush_psf_block block;
+  hush_psf_planes planes;
+  hush_psf_key keys[HUSH_PSF_KEY_BLOCK];
+  int valid[HUSH_PSF_KEY_BLOCK];
+  for (uint32_t at = 0; at < count; at += HUSH_PSF_KEY_BLOCK) {
+    const uint32_t n = count - at < HUSH_PSF_KEY_BLOCK ? count - at : HUSH_PSF_KEY_BLOCK;
+    hush__psf_block_fill(&block, vertices + at, n, &planes);
+    hush__psf_keys_planar(&psf->key, &planes, 0, n, keys, valid);
+    hush__psf_batch_add(b, keys, planes.radiance, valid, n, tickets + at);
+  }
+  return HUSH_OK;
+}
+
+hush_status hush__psf_batch_planes(hush_psf psf, hush_psf_batch *b, const hush_psf_planes *v,
+                                   size_t first, uint32_t count, uint32_t *tickets) {
+  if (!psf || !b || !v || (count && !tickets)) return HUSH_ERROR_INVALID_ARGUMENT;
+  if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
+  hush_psf_key keys[CHUNK];
+  int valid[CHUNK];
+  for (uint32_t at = 0; at < count; at += CHUNK) {
+    const uint32_t n = count - at < CHUNK ? count - at : CHUNK;
+    hush__psf_keys_planar(&psf->key, v, first + at, n, keys, valid);
+    const float *const r[3] = {v->radiance[0] + first + at, v->radiance[1] + first + at,
+                               v->radiance[2] + first + at};
+    hush__psf_batch_add(b, keys, r, valid, n, tickets + at);
+  }
+  return HUSH_OK;
+}
 
 hush_status hush_psf_add_vertices(hush_psf psf, const hush_psf_vertex *vertices, uint32_t count,
                                   uint32_t *tickets) {
-  if (!psf || (count && (!vertices || !tickets))) return HUSH_ERROR_INVALID_ARGUMENT;
-  if (psf->state != 1) return HUSH_ERROR_INVALID_OPERATION;
-  const hush_psf_probe probe = {(uint32_t)psf->params[P_PROBES]};
-  hush_psf_key keys[CHUNK];
-  float radiance[3 * CHUNK];
-  int valid[CHUNK];
-  hush_psf_combiner combiner;
-  hush__psf_combiner_init(&combiner);
-  for (uint32_t at = 0; at < count; at += CHUNK) {
-    const uint32_t n = count - at < CHUNK ? count - at : CHUNK;
-    hush__psf_keys(&psf->key, vertices + at, n, keys, valid);
-    for (uint32_t j = 0; j < n; j++) memcpy(radiance + 3 * j, vertices[at + j].radiance, 12);
-    hush__psf_table_add(&psf->table, &probe, &combiner, keys, radiance, valid, n, tickets + at);
+  hush_psf_batch *batch = malloc(sizeof *batch);
+  if (!batch) return HUSH_ERROR_OUT_OF_MEMORY;
+  hush_status st = hush__psf_batch_open(psf, batch);
+  if (st == HUSH_OK) {
+    st = hush__psf_batch_vertices(psf, batch, vertices, count, tickets);
+    hush__psf_batch_end(batch);
   }
-  hush__psf_combiner_flush(&psf->table, &combiner);
-  return HUSH_OK;
+  free(batch);
+  return st;
 }
 
 hush_status hush_psf_resolve(hush_psf psf) {
@@ -270,6 +306,8 @@ hush_status hush_psf_lookup(hush_psf psf, const hush_psf_vertex *vertices, const
   }
   return HUSH_OK;
 }
+
+const hush_psf_table *hush__psf_resolved_table(hush_psf psf) { return &psf->table; }
 
 hush_status hush_psf_get_stats(hush_psf psf, hush_psf_stats *stats) {
   if (!psf || !stats) return hush__fail(psf ? psf->device : NULL, HUSH_ERROR_INVALID_ARGUMENT,

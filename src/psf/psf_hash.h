@@ -125,26 +125,39 @@ static inline float hush__psf_dist3(const float a[3], const float b[3]) {
   return sqrtf(dx * dx + dy * dy + dz * dz);
 }
 
-/* Keys of n vertices: keys[j] and valid[j] (0 when the vertex cannot be
- * keyed: not finite, or too far out for 32-bit cell coordinates; its key is
- * then 0). Written without branches on the vertex so the loop vectorises:
- * this is most of the cost of adding a vertex. */
+/* The key loop (hush__psf_keys_planar) is written without branches on the
+ * vertex so that it vectorises: it is most of the cost of adding a vertex.
+ * Vertex records (hush_psf_vertex) are copied to planes this many at a time
+ * first; a caller that keeps planes (the renderer) saves the copy. */
 #define HUSH_PSF_KEY_BLOCK 64u
 
-/* Keys of at most HUSH_PSF_KEY_BLOCK vertices given as planar arrays. */
-static inline void hush__psf_keys_planar(const hush_psf_key_params *k, uint32_t n,
-                                         const float *restrict P, const float *restrict N,
-                                         const float *restrict O, const float *restrict D,
-                                         const float *restrict R, const uint32_t *restrict S,
-                                         const uint32_t *restrict G, hush_psf_key *restrict keys,
+/* Vertices as one array per component (a structure of arrays), so that
+ * the key loop reads them with vector loads. The arrays are the caller's. */
+typedef struct hush_psf_planes {
+  const float *position[3], *normal[3], *origin[3], *distance, *radiance[3];
+  const uint32_t *seed, *flags;
+} hush_psf_planes;
+
+/* Keys of the vertices first .. first + n - 1 of v: keys[j] and valid[j]
+ * (0 when the vertex cannot be keyed: not finite, or too far out for 32-bit
+ * cell coordinates; its key is then 0). */
+static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hush_psf_planes *v,
+                                         size_t first, uint32_t n, hush_psf_key *restrict keys,
                                          int *restrict valid) {
-  const size_t B = HUSH_PSF_KEY_BLOCK; /* size_t indices: affine, so the loop vectorises */
+  const float *restrict P0 = v->position[0] + first, *restrict P1 = v->position[1] + first;
+  const float *restrict P2 = v->position[2] + first, *restrict N0 = v->normal[0] + first;
+  const float *restrict N1 = v->normal[1] + first, *restrict N2 = v->normal[2] + first;
+  const float *restrict O0 = v->origin[0] + first, *restrict O1 = v->origin[1] + first;
+  const float *restrict O2 = v->origin[2] + first, *restrict D = v->distance + first;
+  const float *restrict R0 = v->radiance[0] + first, *restrict R1 = v->radiance[1] + first;
+  const float *restrict R2 = v->radiance[2] + first;
+  const uint32_t *restrict S = v->seed + first, *restrict G = v->flags + first;
   const float base = k->scale * k->pixel_angle, jit = k->jitter;
   const uint32_t frame = k->frame, normals = k->normals ? 1u : 0u;
-  for (size_t j = 0; j < n; j++) {
-    const float x0 = P[j], x1 = P[B + j], x2 = P[2 * B + j];
-    const float n0 = N[j], n1 = N[B + j], n2 = N[2 * B + j];
-    const float o0 = O[j], o1 = O[B + j], o2 = O[2 * B + j];
+  for (size_t j = 0; j < n; j++) { /* size_t: affine indices, so the loop vectorises */
+    const float x0 = P0[j], x1 = P1[j], x2 = P2[j];
+    const float n0 = N0[j], n1 = N1[j], n2 = N2[j];
+    const float o0 = O0[j], o1 = O1[j], o2 = O2[j];
     float w0 = o0 - x0, w1 = o1 - x1, w2 = o2 - x2;
     const float len = hush__psf_sqrt(w0 * w0 + w1 * w1 + w2 * w2);
     const int level0 = hush__psf_level(D[j] + len);
@@ -166,8 +179,8 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, uint32_t 
     const int level = hush__psf_level(D[j] + hush__psf_sqrt(e0 * e0 + e1 * e1 + e2 * e2));
     const float inv = 1.0f / (base * hush__psf_exp2i(level));
     /* NaN fails every comparison: this also rejects non-finite input */
-    int ok = (fabsf(R[j]) < 3.0e38f) & (fabsf(R[B + j]) < 3.0e38f) &
-             (fabsf(R[2 * B + j]) < 3.0e38f) & (fabsf(D[j]) < 3.0e38f) & (fabsf(len) < 3.0e38f);
+    int ok = (fabsf(R0[j]) < 3.0e38f) & (fabsf(R1[j]) < 3.0e38f) & (fabsf(R2[j]) < 3.0e38f) &
+             (fabsf(D[j]) < 3.0e38f) & (fabsf(len) < 3.0e38f);
     const uint32_t q0 = hush__psf_floor_i32(y0 * inv, &ok);
     const uint32_t q1 = hush__psf_floor_i32(y1 * inv, &ok);
     const uint32_t q2 = hush__psf_floor_i32(y2 * inv, &ok);
@@ -195,30 +208,52 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, uint32_t 
   }
 }
 
-/* Keys of n vertices: keys[j] and valid[j] (0 when the vertex cannot be
- * keyed: not finite, or too far out for 32-bit cell coordinates; its key is
- * then 0). The vertices are first copied to planar arrays so that the
- * arithmetic, most of the cost of adding a vertex, vectorises. */
+/* How many vertices ahead hush__psf_keys prefetches (about 2 KB). */
+#define HUSH_PSF_VERTEX_AHEAD 32u
+
+/* Planar copies of at most HUSH_PSF_KEY_BLOCK vertices (the caller's
+ * hush_psf_vertex array), and planes pointing into them. */
+typedef struct hush_psf_block {
+  float f[13][HUSH_PSF_KEY_BLOCK];
+  uint32_t seed[HUSH_PSF_KEY_BLOCK], flags[HUSH_PSF_KEY_BLOCK];
+} hush_psf_block;
+
+static inline void hush__psf_block_fill(hush_psf_block *b, const hush_psf_vertex *vs, uint32_t n,
+                                        hush_psf_planes *planes) {
+  for (uint32_t j = 0; j < n; j++) {
+    const hush_psf_vertex *v = &vs[j];
+    for (int c = 0; c < 3; c++) {
+      b->f[c][j] = v->position[c];
+      b->f[3 + c][j] = v->normal[c];
+      b->f[6 + c][j] = v->origin[c];
+      b->f[10 + c][j] = v->radiance[c];
+    }
+    b->f[9][j] = v->distance;
+    b->seed[j] = v->seed;
+    b->flags[j] = v->flags;
+  }
+  for (int c = 0; c < 3; c++) {
+    planes->position[c] = b->f[c];
+    planes->normal[c] = b->f[3 + c];
+    planes->origin[c] = b->f[6 + c];
+    planes->radiance[c] = b->f[10 + c];
+  }
+  planes->distance = b->f[9];
+  planes->seed = b->seed;
+  planes->flags = b->flags;
+}
+
+/* Keys of n vertices given as hush_psf_vertex records: keys[j] and valid[j]
+ * (0 when the vertex cannot be keyed: not finite, or too far out for 32-bit
+ * cell coordinates; its key is then 0). */
 static inline void hush__psf_keys(const hush_psf_key_params *k, const hush_psf_vertex *vs,
                                   uint32_t n, hush_psf_key *keys, int *valid) {
-  enum { B = HUSH_PSF_KEY_BLOCK };
-  float P[3 * B], N[3 * B], O[3 * B], D[B], R[3 * B];
-  uint32_t S[B], G[B];
-  for (uint32_t at = 0; at < n; at += B) {
-    const uint32_t m = n - at < B ? n - at : B;
-    for (uint32_t j = 0; j < m; j++) {
-      const hush_psf_vertex *v = &vs[at + j];
-      for (int c = 0; c < 3; c++) {
-        P[c * B + j] = v->position[c];
-        N[c * B + j] = v->normal[c];
-        O[c * B + j] = v->origin[c];
-        R[c * B + j] = v->radiance[c];
-      }
-      D[j] = v->distance;
-      S[j] = v->seed;
-      G[j] = v->flags;
-    }
-    hush__psf_keys_planar(k, m, P, N, O, D, R, S, G, keys + at, valid + at);
+  hush_psf_block block;
+  hush_psf_planes planes;
+  for (uint32_t at = 0; at < n; at += HUSH_PSF_KEY_BLOCK) {
+    const uint32_t m = n - at < HUSH_PSF_KEY_BLOCK ? n - at : HUSH_PSF_KEY_BLOCK;
+    hush__psf_block_fill(&block, vs + at, m, &planes);
+    hush__psf_keys_planar(k, &planes, 0, m, keys + at, valid + at);
   }
 }
 

@@ -6,6 +6,8 @@
  */
 #include "psf/psf_render.h"
 
+#include "psf/psf_internal.h"
+
 #include "core/device.h"
 #include "core/timer.h"
 #include "render/bsdf.h"
@@ -16,21 +18,27 @@
 #include <string.h>
 
 /* What the hooks keep for one camera sample, written only by the thread
- * tracing it, in two arrays: the state of the path being traced, and what
- * composing the layer reads (so that pass streams 36 bytes per sample). */
+ * tracing it, in three arrays: the state of the path being traced, what
+ * composing the layer reads for a sample with a vertex (so that pass
+ * streams 24 bytes per sample), and the path's unfiltered radiance (read
+ * only for samples without a vertex, or when the filtered value is not
+ * finite). */
 typedef struct sample_trace {
   float last[3];           /* the previous vertex (the eye at first) */
   float distance;          /* path length to last */
   uint32_t epoch;          /* frame counter of the last write; stale otherwise */
   uint8_t seen;            /* sufficiently diffuse vertices so far */
-  uint8_t selected;        /* vertices[] holds this sample's vertex */
+  uint8_t selected;        /* the planes hold this sample's vertex */
 } sample_trace;
 
 typedef struct sample_result {
   float prefix[3];
   float throughput[3];
-  float total[3];
 } sample_result;
+
+/* The selected vertices, one plane (array over the samples) per component,
+ * so that the key loop reads them with vector loads (psf_hash.h). */
+enum { POSITION = 0, NORMAL = 3, ORIGIN = 6, DISTANCE = 9, RADIANCE = 10, PLANES = 13 };
 
 /* has[] values, per sample. */
 enum { NOT_TRACED = 0, NO_VERTEX = 1, WITH_VERTEX = 2 };
@@ -43,9 +51,13 @@ struct hush_psf_renderer {
   size_t samples;          /* width * height * spp */
   sample_trace *traces;
   sample_result *results;
-  hush_psf_vertex *vertices;
+  float *total;            /* 3 per sample: the path's unfiltered radiance */
+  float *plane;            /* PLANES planes of `samples` floats */
+  uint32_t *seed, *flags;  /* per sample, of the selected vertex */
+  hush_psf_planes planes;  /* pointing at them */
   uint32_t *tickets;
-  float *filtered;         /* 3 per sample: the cell average (lookup) */
+  hush_psf_batch *batches; /* one per thread of the add pass, batch_threads of them */
+  int batch_threads;
   uint8_t *has;            /* per sample: NOT_TRACED, NO_VERTEX, WITH_VERTEX (set at path end) */
   const hush_scene *scene; /* of the frame being rendered */
   float eye[3];
@@ -76,16 +88,28 @@ hush_status hush__psf_renderer_new(hush_device device, uint32_t width, uint32_t 
   r->psf = hush_psf_new(device, width, height);
   r->traces = calloc(r->samples, sizeof *r->traces);
   r->results = calloc(r->samples, sizeof *r->results);
-  r->vertices = calloc(r->samples, sizeof *r->vertices);
+  r->total = calloc(r->samples * 3, sizeof *r->total);
+  r->plane = calloc(r->samples * PLANES, sizeof *r->plane);
+  r->seed = calloc(r->samples, sizeof *r->seed);
+  r->flags = calloc(r->samples, sizeof *r->flags);
   r->tickets = calloc(r->samples, sizeof *r->tickets);
-  r->filtered = calloc(r->samples * 3, sizeof *r->filtered);
   r->has = calloc(r->samples, 1);
-  if (!r->psf || !r->traces || !r->results || !r->vertices || !r->tickets || !r->filtered || !r->has) {
+  if (!r->psf || !r->traces || !r->results || !r->total || !r->plane || !r->seed || !r->flags ||
+      !r->tickets || !r->has) {
     const int had_psf = r->psf != NULL;
     hush__psf_renderer_free(r);
     return had_psf ? hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory")
                    : HUSH_ERROR_OUT_OF_MEMORY;
   }
+  for (int c = 0; c < 3; c++) {
+    r->planes.position[c] = r->plane + (POSITION + c) * r->samples;
+    r->planes.normal[c] = r->plane + (NORMAL + c) * r->samples;
+    r->planes.origin[c] = r->plane + (ORIGIN + c) * r->samples;
+    r->planes.radiance[c] = r->plane + (RADIANCE + c) * r->samples;
+  }
+  r->planes.distance = r->plane + DISTANCE * r->samples;
+  r->planes.seed = r->seed;
+  r->planes.flags = r->flags;
   *out = r;
   return HUSH_OK;
 }
@@ -95,9 +119,12 @@ void hush__psf_renderer_free(hush_psf_renderer *r) {
   hush_psf_release(r->psf);
   free(r->traces);
   free(r->results);
-  free(r->vertices);
+  free(r->total);
+  free(r->plane);
+  free(r->seed);
+  free(r->flags);
   free(r->tickets);
-  free(r->filtered);
+  free(r->batches);
   free(r->has);
   free(r);
 }
@@ -141,16 +168,22 @@ static int vertex_kind(const hush_material *m) {
   }
 }
 
+static float *plane_of(const hush_psf_renderer *r, int component) {
+  return r->plane + (size_t)component * r->samples;
+}
+
 static void select_vertex(hush_psf_renderer *r, size_t idx, sample_trace *tr,
                           sample_result *res, const hush_path_vertex *v, const hush_material *m,
                           int kind) {
-  hush_psf_vertex *pv = &r->vertices[idx];
-  memcpy(pv->position, &v->p, sizeof pv->position);
-  memcpy(pv->normal, &v->n, sizeof pv->normal);
-  memcpy(pv->origin, tr->last, sizeof pv->origin);
-  pv->distance = tr->distance;
-  pv->seed = (uint32_t)idx;
-  pv->flags = kind == 2 ? HUSH_PSF_GLOSSY : 0u;
+  const float p[3] = {v->p.x, v->p.y, v->p.z}, n[3] = {v->n.x, v->n.y, v->n.z};
+  for (int c = 0; c < 3; c++) {
+    plane_of(r, POSITION + c)[idx] = p[c];
+    plane_of(r, NORMAL + c)[idx] = n[c];
+    plane_of(r, ORIGIN + c)[idx] = tr->last[c];
+  }
+  plane_of(r, DISTANCE)[idx] = tr->distance;
+  r->seed[idx] = (uint32_t)idx;
+  r->flags[idx] = kind == 2 ? HUSH_PSF_GLOSSY : 0u;
   float albedo[3];
   hush__bsdf_albedo(m, v->surface, albedo);
   for (int c = 0; c < 3; c++)
@@ -185,13 +218,12 @@ static void on_path_end(void *user, uint32_t x, uint32_t y, uint32_t sample,
   sample_trace *tr = &r->traces[idx];
   sample_result *res = &r->results[idx];
   if (tr->epoch != r->epoch) reset(r, tr, res); /* no surface: the sky or a light */
-  memcpy(res->total, radiance, sizeof res->total);
+  memcpy(r->total + 3 * idx, radiance, 3 * sizeof *radiance);
   r->has[idx] = tr->selected ? WITH_VERTEX : NO_VERTEX;
   if (!tr->selected) return;
-  float *own = r->vertices[idx].radiance;
   for (int c = 0; c < 3; c++) {
     const float t = res->throughput[c];
-    own[c] = t > 1e-20f ? (radiance[c] - res->prefix[c]) / t : 0.0f;
+    plane_of(r, RADIANCE + c)[idx] = t > 1e-20f ? (radiance[c] - res->prefix[c]) / t : 0.0f;
   }
 }
 
@@ -231,49 +263,79 @@ hush_status hush__psf_renderer_repeat(hush_psf_renderer *r) {
  * NOT_TRACED for the holes of a progressive frame. */
 static int has_vertex(const hush_psf_renderer *r, size_t i) { return r->has[i] == WITH_VERTEX; }
 
-/* Adds (lookup 0) or looks up (1) the selected vertices of rows [y0, y1)
- * in screen order: each run of consecutive samples with a vertex goes in
- * place, without a copy. */
-static void vertex_runs(hush_psf_renderer *r, uint32_t y0, uint32_t y1, int lookup) {
-  const size_t end = (size_t)y1 * r->width * r->spp;
-  size_t i = (size_t)y0 * r->width * r->spp;
-  while (i < end) {
-    while (i < end && !has_vertex(r, i)) i++;
-    const size_t start = i;
-    while (i < end && has_vertex(r, i)) i++;
-    const uint32_t n = (uint32_t)(i - start);
-    if (n && !lookup) hush_psf_add_vertices(r->psf, r->vertices + start, n, r->tickets + start);
-    if (n && lookup)
-      hush_psf_lookup(r->psf, r->vertices + start, r->tickets + start, n, r->filtered + 3 * start);
-  }
+/* The next run of consecutive samples with a vertex in [*i, end): returns
+ * its first sample, its length in *n (0: none left), and moves *i past it.
+ * The runs go to the table in place, without a copy. */
+static size_t next_run(const hush_psf_renderer *r, size_t *i, size_t end, uint32_t *n) {
+  size_t k = *i;
+  while (k < end && !has_vertex(r, k)) k++;
+  const size_t start = k;
+  while (k < end && has_vertex(r, k)) k++;
+  *n = (uint32_t)(k - start);
+  *i = k;
+  return start;
 }
 
-/* The "psf" layer of rows [y0, y1). */
-static void compose_rows(hush_psf_renderer *r, uint32_t y0, uint32_t y1, float *out) {
-  vertex_runs(r, y0, y1, 1);
+/* Adds the selected vertices of rows [y0, y1) through one batch, so that
+ * the cells they share are visited once (psf_batch.h). */
+static void add_rows(hush_psf_renderer *r, hush_psf_batch *batch, uint32_t y0, uint32_t y1) {
+  if (hush__psf_batch_open(r->psf, batch) != HUSH_OK) return;
+  const size_t row = (size_t)r->width * r->spp;
+  for (size_t i = y0 * row; i < y1 * row;) {
+    uint32_t n;
+    const size_t start = next_run(r, &i, y1 * row, &n);
+    if (n) hush__psf_batch_planes(r->psf, batch, &r->planes, start, n, r->tickets + start);
+  }
+  hush__psf_batch_end(batch);
+}
+
+/* How many samples ahead compose prefetches the cell of a ticket: the
+ * cells of a band are scattered over the table. */
+#define LOOKUP_AHEAD 64u
+
+/* The "psf" layer of rows [y0, y1): per sample its cell's average (what
+ * hush_psf_lookup returns, read here in the same pass) times the
+ * throughput plus the prefix. */
+static void compose_rows(hush_psf_renderer *r, const hush_psf_table *t, uint32_t y0, uint32_t y1,
+                         float *out) {
+  const size_t end = (size_t)y1 * r->width * r->spp;
   for (uint32_t y = y0; y < y1; y++)
     for (uint32_t x = 0; x < r->width; x++) {
       float sum[3] = {0.0f, 0.0f, 0.0f};
       for (uint32_t s = 0; s < r->spp; s++) {
         const size_t i = sample_index(r, x, y, s);
+        if (i + LOOKUP_AHEAD < end && has_vertex(r, i + LOOKUP_AHEAD) &&
+            r->tickets[i + LOOKUP_AHEAD] < t->slots)
+          __builtin_prefetch(&t->cells[r->tickets[i + LOOKUP_AHEAD]]);
         const sample_result *rec = &r->results[i];
         if (r->has[i] == NOT_TRACED) continue; /* a hole of a progressive frame */
         if (r->has[i] == NO_VERTEX) {
-          for (int c = 0; c < 3; c++) sum[c] += rec->total[c];
+          for (int c = 0; c < 3; c++) sum[c] += r->total[3 * i + c];
           continue;
         }
-        const float *f = r->filtered + 3 * i;
-        for (int c = 0; c < 3; c++) {
-          const float v = rec->prefix[c] + rec->throughput[c] * f[c];
-          sum[c] += isfinite(v) ? v : rec->total[c];
-        }
+        const uint32_t tk = r->tickets[i];
+        float own[3];
+        const float *f = own;
+        if (tk < t->slots) /* else no cell: the vertex keeps its own radiance (rare) */
+          f = t->cells[tk].mean;
+        else
+          for (int c = 0; c < 3; c++) own[c] = r->planes.radiance[c][i];
+        float v[3];
+        for (int c = 0; c < 3; c++) v[c] = rec->prefix[c] + rec->throughput[c] * f[c];
+        if (!(isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]))) /* rare: then total is read */
+          for (int c = 0; c < 3; c++) v[c] = isfinite(v[c]) ? v[c] : r->total[3 * i + c];
+        for (int c = 0; c < 3; c++) sum[c] += v[c];
       }
       float *o = out + 3 * ((size_t)y * r->width + x);
       for (int c = 0; c < 3; c++) o[c] = sum[c] / (float)r->spp;
     }
 }
 
-/* Rows per band of the parallel passes. */
+/* Rows per band of the add pass: a batch of 8 rows of 1280 pixels holds
+ * about 3000 cells, so most cells are visited once or twice (a cell is cut
+ * where a band or a full batch ends). */
+#define ADD_BAND 8u
+/* Rows per band of the lookup pass. */
 #define BAND 4u
 
 hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
@@ -282,22 +344,32 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   hush_status st = hush_frame_add_layer(frame, "psf", 3, &view);
   if (st != HUSH_OK) return st;
   const int threads = hush_device_threads(r->device);
+  if (threads > r->batch_threads) {
+    free(r->batches);
+    r->batch_threads = 0;
+    r->batches = malloc((size_t)threads * sizeof *r->batches);
+    if (!r->batches) return hush__fail(r->device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory");
+    r->batch_threads = threads;
+  }
+  const int64_t add_bands = (r->height + ADD_BAND - 1) / ADD_BAND;
   const int64_t bands = (r->height + BAND - 1) / BAND;
   const double t0 = hush__now_ms(), cpu0 = hush__cpu_seconds();
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
-  for (int64_t b = 0; b < bands; b++) {
-    const uint32_t y0 = (uint32_t)b * BAND;
-    vertex_runs(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, 0);
+  for (int64_t b = 0; b < add_bands; b++) {
+    const uint32_t y0 = (uint32_t)b * ADD_BAND;
+    add_rows(r, &r->batches[omp_get_thread_num()], y0,
+             y0 + ADD_BAND < r->height ? y0 + ADD_BAND : r->height);
   }
   const double t1 = hush__now_ms();
   st = hush_psf_resolve(r->psf);
   if (st != HUSH_OK) return st;
   const double t2 = hush__now_ms();
   float *out = view.data;
-#pragma omp parallel for schedule(static) num_threads(threads)
+  const hush_psf_table *table = hush__psf_resolved_table(r->psf);
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int64_t b = 0; b < bands; b++) {
     const uint32_t y0 = (uint32_t)b * BAND;
-    compose_rows(r, y0, y0 + BAND < r->height ? y0 + BAND : r->height, out);
+    compose_rows(r, table, y0, y0 + BAND < r->height ? y0 + BAND : r->height, out);
   }
   const double t3 = hush__now_ms();
   if (timings) {

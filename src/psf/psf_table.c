@@ -71,16 +71,15 @@ void hush__psf_table_begin_frame(hush_psf_table *t) {
 
 static inline uint32_t age_of(uint32_t key) { return key >> HUSH_PSF_AGE_SHIFT; }
 
-/* Line of the primary hash: its top 28 bits scaled to [0, lines). */
-static inline uint32_t line_of(const hush_psf_table *t, uint32_t i) {
-  return (uint32_t)(((uint64_t)(i >> 4) * t->lines) >> 28);
-}
+typedef hush_psf_probe_result probe_result;
 
-typedef struct probe_result {
-  uint32_t slot;           /* HUSH_PSF_NO_CELL if none */
-  int collided;            /* not the first slot probed */
-  int evicted;
-} probe_result;
+/* A slot (re)claimed for a new cell: only the claiming thread touches its
+ * history this frame (its sums are 0: an unused or freed cell's sums were
+ * cleared at resolve), so the history starts over without atomics. */
+static void start_history(hush_psf_cell *c) {
+  c->mean[0] = c->mean[1] = c->mean[2] = 0.0f;
+  c->samples = 0.0f;
+}
 
 /* Step 1: the slot holding v, refreshed to age 0. */
 static int find(hush_psf_table *t, uint32_t base, uint32_t start, uint32_t probes, uint32_t v,
@@ -111,6 +110,7 @@ static int claim(hush_psf_table *t, uint32_t base, uint32_t start, uint32_t prob
     if (key == 0 && atomic_compare_exchange_strong_explicit(&t->keys[s], &key, v,
                                                             memory_order_relaxed,
                                                             memory_order_relaxed)) {
+      start_history(&t->cells[s]);
       r->slot = s;
       r->collided = k > 0;
       return 1;
@@ -145,20 +145,19 @@ static int evict(hush_psf_table *t, uint32_t base, uint32_t start, uint32_t prob
   if (!atomic_compare_exchange_strong_explicit(&t->keys[best], &best_key, v, memory_order_relaxed,
                                                memory_order_relaxed))
     return 0;
-  /* only this thread owns the new cell's history this frame: sums are 0
-   * (the old cell was not used this frame), the history starts over */
-  hush_psf_cell *c = &t->cells[best];
-  c->mean[0] = c->mean[1] = c->mean[2] = 0.0f;
-  c->samples = 0.0f;
+  start_history(&t->cells[best]);
   r->slot = best;
   r->collided = 1;
   r->evicted = 1;
   return 1;
 }
 
-static probe_result probe(hush_psf_table *t, uint32_t probes, hush_psf_key key) {
+hush_psf_probe_result hush__psf_table_probe(hush_psf_table *t, const hush_psf_probe *p,
+                                            hush_psf_key key) {
   probe_result r = {HUSH_PSF_NO_CELL, 0, 0};
-  const uint32_t base = line_of(t, key.i) * HUSH_PSF_LINE, start = key.i & (HUSH_PSF_LINE - 1);
+  const uint32_t probes = p->probes;
+  const uint32_t first = hush__psf_table_first_slot(t, key);
+  const uint32_t base = first & ~(HUSH_PSF_LINE - 1), start = first & (HUSH_PSF_LINE - 1);
   /* a few rounds: a failed compare-and-swap means the line changed */
   for (int round = 0; round < 4; round++) {
     if (find(t, base, start, probes, key.v, &r)) return r;
@@ -189,10 +188,8 @@ static inline uint64_t float_bits(float f) {
   return u;
 }
 
-/* Adds sum and count to a slot: one compare-and-swap loop per 64-bit word.
- * The thread whose count leaves 0 puts the slot on the list of this frame. */
-static void flush(hush_psf_table *t, uint32_t slot, const float sum[3], uint32_t count) {
-  if (slot == HUSH_PSF_NO_CELL || count == 0) return;
+int hush__psf_table_accumulate(hush_psf_table *t, uint32_t slot, const float sum[3],
+                               uint32_t count) {
   hush_psf_cell *a = &t->cells[slot];
   uint64_t old = atomic_load_explicit(&a->rg, memory_order_relaxed), now;
   do {
@@ -204,74 +201,22 @@ static void flush(hush_psf_table *t, uint32_t slot, const float sum[3], uint32_t
     now = float_bits(lo_float(old) + sum[2]) | ((old >> 32) + count) << 32;
   } while (!atomic_compare_exchange_weak_explicit(&a->bn, &old, now, memory_order_relaxed,
                                                   memory_order_relaxed));
-  if ((old >> 32) == 0) {
-    const uint32_t at = atomic_fetch_add_explicit(&t->used_count, 1u, memory_order_relaxed);
-    t->used[at] = slot; /* a slot's count leaves 0 once per frame: at < slots */
-  }
+  return (old >> 32) == 0; /* a slot's count leaves 0 once per frame */
 }
 
-/* How many vertices ahead the key line and the likely cell are prefetched:
- * the table is far larger than the caches and its accesses are random, so
- * the loop is bound by memory latency unless several misses overlap. */
-#define PREFETCH_AHEAD 8u
-
-static inline void prefetch_slot(const hush_psf_table *t, hush_psf_key k) {
-  const uint32_t slot = line_of(t, k.i) * HUSH_PSF_LINE + (k.i & (HUSH_PSF_LINE - 1));
-  __builtin_prefetch(&t->keys[slot], 1);
-  __builtin_prefetch(&t->cells[slot], 1);
+void hush__psf_table_mark_used(hush_psf_table *t, const uint32_t *slots, uint32_t n) {
+  if (!n) return;
+  /* each slot is marked once per frame, so at + n <= slots */
+  const uint32_t at = atomic_fetch_add_explicit(&t->used_count, n, memory_order_relaxed);
+  memcpy(t->used + at, slots, (size_t)n * sizeof *slots);
 }
 
-void hush__psf_combiner_init(hush_psf_combiner *c) { memset(c, 0, sizeof *c); }
-
-static inline uint32_t combine_index(hush_psf_key k) {
-  return (k.i ^ (k.v * 0x9e3779b1u)) >> (32 - HUSH_PSF_COMBINE_BITS);
-}
-
-void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, hush_psf_combiner *c,
-                         const hush_psf_key *keys, const float *radiance, const int *valid,
-                         uint32_t n, uint32_t *tickets) {
-  for (uint32_t j = 0; j < n && j < PREFETCH_AHEAD; j++)
-    if (valid[j]) prefetch_slot(t, keys[j]);
-  for (uint32_t j = 0; j < n; j++) {
-    if (j + PREFETCH_AHEAD < n && valid[j + PREFETCH_AHEAD])
-      prefetch_slot(t, keys[j + PREFETCH_AHEAD]);
-    if (!valid[j]) {
-      tickets[j] = HUSH_PSF_NO_CELL;
-      c->failed++;
-      continue;
-    }
-    hush_psf_combine_entry *e = &c->entries[combine_index(keys[j])];
-    if (!e->used || e->key.i != keys[j].i || e->key.v != keys[j].v) {
-      if (e->used) flush(t, e->slot, e->sum, e->count);
-      const probe_result r = probe(t, p->probes, keys[j]);
-      c->evictions += (uint64_t)r.evicted;
-      e->used = 1;
-      e->key = keys[j];
-      e->slot = r.slot;
-      e->collided = r.collided;
-      e->count = 0;
-      e->sum[0] = e->sum[1] = e->sum[2] = 0.0f;
-    }
-    tickets[j] = e->slot;
-    c->collisions += (uint64_t)e->collided;
-    if (e->slot == HUSH_PSF_NO_CELL) {
-      c->failed++;
-      continue;
-    }
-    for (int k = 0; k < 3; k++) e->sum[k] += radiance[3 * j + k];
-    e->count++;
-  }
-  c->vertices += n;
-}
-
-void hush__psf_combiner_flush(hush_psf_table *t, hush_psf_combiner *c) {
-  for (uint32_t k = 0; k < HUSH_PSF_COMBINE; k++)
-    if (c->entries[k].used) flush(t, c->entries[k].slot, c->entries[k].sum, c->entries[k].count);
-  atomic_fetch_add_explicit(&t->vertices, c->vertices, memory_order_relaxed);
-  atomic_fetch_add_explicit(&t->collisions, c->collisions, memory_order_relaxed);
-  atomic_fetch_add_explicit(&t->failed, c->failed, memory_order_relaxed);
-  atomic_fetch_add_explicit(&t->evictions, c->evictions, memory_order_relaxed);
-  hush__psf_combiner_init(c);
+void hush__psf_table_add_stats(hush_psf_table *t, uint64_t vertices, uint64_t collisions,
+                               uint64_t failed, uint64_t evictions) {
+  atomic_fetch_add_explicit(&t->vertices, vertices, memory_order_relaxed);
+  atomic_fetch_add_explicit(&t->collisions, collisions, memory_order_relaxed);
+  atomic_fetch_add_explicit(&t->failed, failed, memory_order_relaxed);
+  atomic_fetch_add_explicit(&t->evictions, evictions, memory_order_relaxed);
 }
 
 /* ---- resolve ----------------------------------------------------------------- */
@@ -298,36 +243,49 @@ static void blend(hush_psf_table *t, uint32_t slot, const hush_psf_resolve_param
   cell->samples = fminf(n_old + n_new, p->max_samples);
 }
 
+/* How many used cells ahead resolve prefetches: the list is in the order
+ * the cells were first filled, so their lines are scattered over the table. */
+#define RESOLVE_AHEAD 16
+
+/* Work items per chunk of resolve's loops: dynamic chunks, so that on a
+ * shared machine a thread that loses its core does not hold the other up
+ * for its whole half. */
+#define BLEND_CHUNK 4096
+#define AGE_CHUNK 65536
+
 uint64_t hush__psf_table_resolve(hush_psf_table *t, const hush_psf_resolve_params *p) {
   const int64_t used = atomic_load(&t->used_count);
-#pragma omp parallel for schedule(static) num_threads(p->threads)
-  for (int64_t k = 0; k < used; k++) {
-    if (k + PREFETCH_AHEAD < used) __builtin_prefetch(&t->cells[t->used[k + PREFETCH_AHEAD]], 1);
-    blend(t, t->used[k], p);
+  const int64_t slots = t->slots;
+  const uint32_t max_age = p->max_age < HUSH_PSF_AGE_MAX ? p->max_age : HUSH_PSF_AGE_MAX - 1;
+  /* every thread that added has returned (the API's contract), so the keys
+   * are read and written as plain integers here: the ageing loop then
+   * vectorises (atomic accesses do not), and it touches every slot */
+  _Static_assert(sizeof(_Atomic uint32_t) == sizeof(uint32_t), "atomic keys are plain words");
+  uint32_t *restrict keys = (uint32_t *)t->keys;
+  uint64_t occupied = 0, freed = 0;
+  /* blending (cells) and ageing (keys) touch different arrays: one
+   * parallel region, no barrier between them */
+#pragma omp parallel num_threads(p->threads)
+  {
+#pragma omp for schedule(dynamic, BLEND_CHUNK) nowait
+    for (int64_t k = 0; k < used; k++) {
+      if (k + RESOLVE_AHEAD < used) __builtin_prefetch(&t->cells[t->used[k + RESOLVE_AHEAD]], 1);
+      blend(t, t->used[k], p);
+    }
+    /* age every key by one frame (the cells just used go from 0 to 1) and
+     * free those unused for more than max_age frames; a freed cell's
+     * history is zeroed when its slot is claimed again (start_history) */
+#pragma omp for schedule(dynamic, AGE_CHUNK) reduction(+ : occupied, freed)
+    for (int64_t s = 0; s < slots; s++) {
+      const uint32_t key = keys[s];
+      const uint32_t age = age_of(key) + 1;
+      const uint32_t full = key != 0, keep = full & (age <= max_age);
+      keys[s] = ((key & HUSH_PSF_VMASK) | age << HUSH_PSF_AGE_SHIFT) & (0u - keep);
+      occupied += keep;
+      freed += full & !keep;
+    }
   }
   atomic_store(&t->used_count, 0u);
-
-  /* age every key by one frame (the cells just used go from 0 to 1) and
-   * free those unused for more than max_age frames */
-  const int64_t lines = t->lines;
-  const uint32_t max_age = p->max_age < HUSH_PSF_AGE_MAX ? p->max_age : HUSH_PSF_AGE_MAX - 1;
-  uint64_t occupied = 0, freed = 0;
-#pragma omp parallel for schedule(static) num_threads(p->threads) reduction(+ : occupied, freed)
-  for (int64_t l = 0; l < lines; l++)
-    for (uint32_t s = (uint32_t)l * HUSH_PSF_LINE; s < (uint32_t)(l + 1) * HUSH_PSF_LINE; s++) {
-      const uint32_t key = atomic_load_explicit(&t->keys[s], memory_order_relaxed);
-      if (!key) continue;
-      const uint32_t age = age_of(key) + 1;
-      if (age > max_age) {
-        atomic_store_explicit(&t->keys[s], 0u, memory_order_relaxed);
-        reset_cell(&t->cells[s]);
-        freed++;
-        continue;
-      }
-      atomic_store_explicit(&t->keys[s], (key & HUSH_PSF_VMASK) | age << HUSH_PSF_AGE_SHIFT,
-                            memory_order_relaxed);
-      occupied++;
-    }
   atomic_fetch_add(&t->evictions, freed);
   return occupied;
 }

@@ -18,14 +18,14 @@
  * verification hashes never share a slot within a frame.
  *
  * Contributions are summed with C11 atomics (a compare-and-swap loop on each
- * of two 64-bit words: red and green sums, blue sum and count), after write
- * combining in each thread (below). At resolve every cell used this frame
+ * of two 64-bit words: red and green sums, blue sum and count), after each
+ * thread has grouped its vertices by key (psf_batch.h). At resolve every cell used this frame
  * averages them and blends the average with its history (§3.3):
  *   mean = mean_old + n_new / (min(n_old, max_samples) + n_new) (avg - mean_old)
  * i.e. a running mean until max_samples vertices, then an exponential average
  * whose weight on new vertices never drops below n_new / (max_samples + n_new).
  * Then every occupied key ages by one frame and keys older than max_age are
- * freed.
+ * freed (their history is zeroed when the slot is claimed again).
  *
  * Ownership: the table owns its arrays (hush__psf_table_free).
  */
@@ -41,7 +41,7 @@
 #define HUSH_PSF_LINE 16u
 
 /* A slot's data, 32 bytes (two per cache line): what the vertices of this
- * frame add (two 64-bit words, so that one vertex, or one combined run,
+ * frame add (two 64-bit words, so that one group of vertices (psf_batch.h)
  * costs two compare-and-swaps rather than four atomics), and the cell's filtered
  * radiance with the vertex count behind it. Together so that resolve and
  * lookup touch one line per cell. */
@@ -76,43 +76,36 @@ void hush__psf_table_clear(hush_psf_table *t, int threads);
 /* Zeroes the per-frame statistics (not the cells). */
 void hush__psf_table_begin_frame(hush_psf_table *t);
 
-/*
- * Write combining: a thread's recent cells, direct-mapped by key, whose
- * vertices are summed locally and added to the table with one set of
- * atomics when the entry is replaced or flushed. Neighbouring pixels fall
- * into the same few cells (interleaved by the jitter), so this saves most of
- * the atomics and probes. One per thread (on its stack), not shared.
- */
-#define HUSH_PSF_COMBINE_BITS 5u
-#define HUSH_PSF_COMBINE (1u << HUSH_PSF_COMBINE_BITS)
+/* The outcome of probing for a key. */
+typedef struct hush_psf_probe_result {
+  uint32_t slot;           /* HUSH_PSF_NO_CELL if none */
+  int collided;            /* not the first slot probed */
+  int evicted;             /* replaced an older cell */
+} hush_psf_probe_result;
 
-typedef struct hush_psf_combine_entry {
-  hush_psf_key key;
-  uint32_t slot;           /* HUSH_PSF_NO_CELL when the key found none */
-  uint32_t count;
-  float sum[3];
-  int collided, used;
-} hush_psf_combine_entry;
+/* The slot for key k (steps 1-4 above): thread-safe. */
+hush_psf_probe_result hush__psf_table_probe(hush_psf_table *t, const hush_psf_probe *p,
+                                            hush_psf_key k);
 
-typedef struct hush_psf_combiner {
-  hush_psf_combine_entry entries[HUSH_PSF_COMBINE];
-  uint64_t vertices, collisions, failed, evictions;
-} hush_psf_combiner;
+/* The slot a key probes first, for prefetching its key line and cell. */
+static inline uint32_t hush__psf_table_first_slot(const hush_psf_table *t, hush_psf_key k) {
+  /* line: the top 28 bits of the primary hash scaled to [0, lines) */
+  const uint32_t line = (uint32_t)(((uint64_t)(k.i >> 4) * t->lines) >> 28);
+  return line * HUSH_PSF_LINE + (k.i & (HUSH_PSF_LINE - 1));
+}
 
-void hush__psf_combiner_init(hush_psf_combiner *c);
+/* Adds sum and count (> 0) to a slot's frame sums with atomics (thread-safe).
+ * Returns 1 when this was the slot's first contribution of the frame: the
+ * caller then puts it on the list of used cells (hush__psf_table_mark_used). */
+int hush__psf_table_accumulate(hush_psf_table *t, uint32_t slot, const float sum[3],
+                               uint32_t count);
 
-/*
- * Adds n vertices with keys keys[] and radiance radiance[3 * j] (valid[j]
- * says whether the key is usable), in order, writing each one's slot (or
- * HUSH_PSF_NO_CELL) to tickets[]. Thread-safe for different combiners; the
- * sums reach the table at hush__psf_combiner_flush at the latest.
- */
-void hush__psf_table_add(hush_psf_table *t, const hush_psf_probe *p, hush_psf_combiner *c,
-                         const hush_psf_key *keys, const float *radiance, const int *valid,
-                         uint32_t n, uint32_t *tickets);
+/* Appends n slots to the list of cells used this frame (one atomic). */
+void hush__psf_table_mark_used(hush_psf_table *t, const uint32_t *slots, uint32_t n);
 
-/* Adds c's pending sums and statistics to the table and empties c. */
-void hush__psf_combiner_flush(hush_psf_table *t, hush_psf_combiner *c);
+/* Adds a caller's per-frame statistics (thread-safe). */
+void hush__psf_table_add_stats(hush_psf_table *t, uint64_t vertices, uint64_t collisions,
+                               uint64_t failed, uint64_t evictions);
 
 typedef struct hush_psf_resolve_params {
   int temporal;            /* 0: each frame's average alone */
