@@ -234,7 +234,7 @@ typedef struct avx_row {
 static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, __m512 inv_l,
                                        __m512 zp, __m512 lp, __m512 n0p, __m512 n1p, __m512 n2p,
                                        __m512 nbias, __m512 nfloor, __mmask16 m, const int FULL,
-                                       const int VALIDITY, avx_sums *acc) {
+                                       const int VALIDITY, const int WITH_VAR, avx_sums *acc) {
 #define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
   const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(zp, LD(r->z)));
   const __m512 dl = _mm512_abs_ps(_mm512_sub_ps(lp, LD(r->l)));
@@ -245,19 +245,13 @@ static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 r
   t = _mm512_fmadd_ps(n2p, LD(r->n2), t);
   /* NaN compares false: weight 0 */
   const __mmask16 keep = _mm512_cmp_ps_mask(t, nfloor, _CMP_GT_OQ);
-  const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  const __m512 f = _mm512_sub_ps(t, n);
-  __m512 y = _mm512_fmadd_ps(f, _mm512_set1_ps(0.009570101908f), _mm512_set1_ps(0.05591786032f));
-  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.2402474483f));
-  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.6931218147f));
-  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.9999992614f));
-  __m512 w = _mm512_maskz_scalef_ps(keep, y, n);
+  __m512 w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
   if (VALIDITY) w = _mm512_mul_ps(w, LD(r->ok));
   acc->sw = _mm512_add_ps(acc->sw, w);
   acc->s0 = _mm512_fmadd_ps(w, LD(r->c0), acc->s0);
   acc->s1 = _mm512_fmadd_ps(w, LD(r->c1), acc->s1);
   acc->s2 = _mm512_fmadd_ps(w, LD(r->c2), acc->s2);
-  acc->sv = _mm512_fmadd_ps(_mm512_mul_ps(w, w), LD(r->v), acc->sv);
+  if (WITH_VAR) acc->sv = _mm512_fmadd_ps(_mm512_mul_ps(w, w), LD(r->v), acc->sv);
 #undef LD
 }
 
@@ -267,7 +261,7 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
                                           const float *zon, const float *eps,
                                           const avx_pair *pairs, int npairs, int x, int n,
                                           float *const out[SVGF_SIGNAL_CHANNELS],
-                                          const int FULL, const int VALIDITY) {
+                                          const int FULL, const int VALIDITY, const int WITH_VAR) {
   const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
 #define LDX(P, OFF) (FULL ? _mm512_loadu_ps((P) + x + (OFF)) : _mm512_maskz_loadu_ps(m, (P) + x + (OFF)))
   const __m512 q = _mm512_set1_ps(0.25f), h = _mm512_set1_ps(0.5f);
@@ -277,9 +271,16 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   const __m512 var3 = _mm512_max_ps(_mm512_fmadd_ps(h, hm, _mm512_mul_ps(q, _mm512_add_ps(hu, hd))),
                                     _mm512_setzero_ps());
   const __m512 e = eps ? LDX(eps, 0) : _mm512_set1_ps(SVGF_EPS_L);
-  const __m512 dl = _mm512_min_ps(_mm512_fmadd_ps(_mm512_set1_ps(c->sigma_l), _mm512_sqrt_ps(var3), e),
+  /* sqrt(v) = v / sqrt(v) by vrsqrt14ps and a Newton step (0 for 0: v is
+   * kept above 1e-30 inside the reciprocal only) */
+  const __m512 vs = _mm512_max_ps(var3, _mm512_set1_ps(1e-30f));
+  __m512 rs = _mm512_rsqrt14_ps(vs);
+  rs = _mm512_mul_ps(_mm512_mul_ps(_mm512_set1_ps(0.5f), rs),
+                     _mm512_fnmadd_ps(_mm512_mul_ps(vs, rs), rs, _mm512_set1_ps(3.0f)));
+  const __m512 sd = _mm512_mul_ps(var3, rs);
+  const __m512 dl = _mm512_min_ps(_mm512_fmadd_ps(_mm512_set1_ps(c->sigma_l), sd, e),
                                   _mm512_set1_ps(1e30f));
-  __m512 inv_l = _mm512_div_ps(_mm512_set1_ps(SVGF_LOG2E), dl);
+  __m512 inv_l = _mm512_mul_ps(_mm512_set1_ps(SVGF_LOG2E), svgf_avx_rcp(dl));
   if (VALIDITY) inv_l = _mm512_mul_ps(inv_l, LDX(r->ok, 0));
   const __m512 sz = _mm512_set1_ps(c->g->sigma_z);
   const __m512 sgx = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gx, 0)), _mm512_set1_ps(1e20f)),
@@ -309,8 +310,8 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
     const __m512 a = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
     const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(a), eps_z)));
     const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-    avx_tap(&rx, t->a, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, &acc);
-    avx_tap(&rx, t->b, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, &acc);
+    avx_tap(&rx, t->a, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, WITH_VAR, &acc);
+    avx_tap(&rx, t->b, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, WITH_VAR, &acc);
   }
   __m512 sw = acc.sw, sv = acc.sv;
   if (VALIDITY) {
@@ -321,13 +322,13 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
     sw = _mm512_mask_mov_ps(_mm512_set1_ps(1.0f), some, sw);
     sv = _mm512_maskz_mov_ps(some, sv);
   }
-  const __m512 inv = _mm512_div_ps(_mm512_set1_ps(1.0f), sw);
+  const __m512 inv = svgf_avx_rcp(sw);
   const __m512 rr = _mm512_mul_ps(acc.s0, inv), gg = _mm512_mul_ps(acc.s1, inv),
                bb = _mm512_mul_ps(acc.s2, inv);
   _mm512_mask_storeu_ps(out[SVGF_R] + x, m, rr);
   _mm512_mask_storeu_ps(out[SVGF_G] + x, m, gg);
   _mm512_mask_storeu_ps(out[SVGF_B] + x, m, bb);
-  if (out[SVGF_VAR])
+  if (WITH_VAR)
     _mm512_mask_storeu_ps(out[SVGF_VAR] + x, m, _mm512_mul_ps(_mm512_mul_ps(sv, inv), inv));
   if (out[SVGF_LUM]) {
     const __m512 lum = _mm512_add_ps(
@@ -338,7 +339,8 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
 #undef LDX
 }
 
-static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const int VALIDITY) {
+static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const int VALIDITY,
+                                             const int WITH_VAR) {
   const svgf_guide *g = c->g;
   const svgf_padded *in = c->in;
   const int W = g->width, H = g->height;
@@ -377,21 +379,24 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const in
     out[ch] = c->out->plane[ch] ? c->out->plane[ch] + o : NULL;
   int x = 0;
   for (; x + 16 <= W; x += 16)
-    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, 1, VALIDITY);
-  if (x < W) avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, 0, VALIDITY);
+    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, 1, VALIDITY, WITH_VAR);
+  if (x < W)
+    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, 0, VALIDITY, WITH_VAR);
   if (c->out->pad > 0)
     for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
       if (out[ch]) svgf_pad_row(out[ch], W, c->out->pad);
 }
 
-static void avx_rows(const level_ctx *c, int threads) {
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < c->g->height; y++) avx_level_row(c, y, 0);
-}
-static void avx_rows_valid(const level_ctx *c, int threads) {
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < c->g->height; y++) avx_level_row(c, y, 1);
-}
+/* the variance is carried only where the level writes it (not the last) */
+#define AVX_ROWS(NAME, VALIDITY, WITH_VAR)                                                   \
+  static void NAME(const level_ctx *c, int threads) {                                        \
+    _Pragma("omp parallel for schedule(static) num_threads(threads)")                        \
+    for (int y = 0; y < c->g->height; y++) avx_level_row(c, y, VALIDITY, WITH_VAR);          \
+  }
+AVX_ROWS(avx_rows, 0, 1)
+AVX_ROWS(avx_rows_valid, 1, 1)
+AVX_ROWS(avx_rows_novar, 0, 0)
+AVX_ROWS(avx_rows_valid_novar, 1, 0)
 #define HAVE_AVX_LEVEL 1
 #else
 #define HAVE_AVX_LEVEL 0
@@ -436,7 +441,10 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
   const int pow128 = g->np.squarings == 7, v = lp->validity;
   if (HAVE_AVX_LEVEL && exp_form && !lp->portable) {
 #if HAVE_AVX_LEVEL
-    (v ? avx_rows_valid : avx_rows)(&c, threads);
+    if (out->plane[SVGF_VAR])
+      (v ? avx_rows_valid : avx_rows)(&c, threads);
+    else
+      (v ? avx_rows_valid_novar : avx_rows_novar)(&c, threads);
 #endif
     return;
   }

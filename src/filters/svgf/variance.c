@@ -199,13 +199,7 @@ static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const f
   t = _mm512_fmadd_ps(n1p, _mm512_loadu_ps(n1 + go), t);
   t = _mm512_fmadd_ps(n2p, _mm512_loadu_ps(n2 + go), t);
   const __mmask16 keep = _mm512_cmp_ps_mask(t, _mm512_set1_ps(-20.0f * SVGF_LOG2E), _CMP_GT_OQ);
-  const __m512 n = _mm512_roundscale_ps(t, _MM_FROUND_TO_NEAREST_INT | _MM_FROUND_NO_EXC);
-  const __m512 f = _mm512_sub_ps(t, n);
-  __m512 y = _mm512_fmadd_ps(f, _mm512_set1_ps(0.009570101908f), _mm512_set1_ps(0.05591786032f));
-  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.2402474483f));
-  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.6931218147f));
-  y = _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.9999992614f));
-  const __m512 w = _mm512_maskz_scalef_ps(keep, y, n);
+  const __m512 w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
   *sw = _mm512_add_ps(*sw, w);
   *s1 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m1 + mo), *s1);
   *s2 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m2 + mo), *s2);
@@ -273,7 +267,7 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
       avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->gb, t->mb, rdd, zp, n0p, n1p, n2p,
                nbias, &sw, &s1, &s2);
     }
-    const __m512 inv = _mm512_div_ps(_mm512_set1_ps(1.0f), sw);
+    const __m512 inv = svgf_avx_rcp(sw);
     const __m512 e1 = _mm512_mul_ps(s1, inv), e2 = _mm512_mul_ps(s2, inv);
     const __m512 est = _mm512_max_ps(_mm512_fnmadd_ps(e1, e1, e2), _mm512_setzero_ps());
     _mm512_mask_storeu_ps(v + x, young, est);
