@@ -370,17 +370,12 @@ static inline int hush__reproject_window(const int32_t *origin, const uint8_t *u
   return rows;
 }
 
-#if defined(__GNUC__) && !defined(__clang__)
+/* With AVX-512 (one vpermt2ps per tap and plane); elsewhere gcc would
+ * emulate the permutes, and the gathers stay. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__AVX512F__)
 #  define HUSH_HAVE_WINDOW 1
 typedef float hush_v16f __attribute__((vector_size(64)));
 typedef int32_t hush_v16i __attribute__((vector_size(64)));
-
-/* 16 floats from p (any alignment). */
-static inline hush_v16f hush__v16_load(const float *p) {
-  hush_v16f v;
-  memcpy(&v, p, sizeof v);
-  return v;
-}
 
 /*
  * The four taps of every pixel k of a window of HUSH_WINDOW_MAX pixels
@@ -401,10 +396,14 @@ static HUSH_ALWAYS_INLINE void hush__window_taps(const float *p, int32_t base, i
   const hush_v16i second = dv != 0; /* -1 (all bits) where the top taps are in row 1 */
   for (int ty = 0; ty < 2; ty++) {
     const float *r = p + base + (size_t)ty * (size_t)W;
-    const hush_v16f lo = hush__v16_load(r), hi = hush__v16_load(r + 16);
+    hush_v16f lo, hi; /* any alignment */
+    memcpy(&lo, r, sizeof lo);
+    memcpy(&hi, r + 16, sizeof hi);
     hush_v16f t0 = __builtin_shuffle(lo, hi, i0), t1 = __builtin_shuffle(lo, hi, i1);
     if (rows == 2) {
-      const hush_v16f lo2 = hush__v16_load(r + W), hi2 = hush__v16_load(r + W + 16);
+      hush_v16f lo2, hi2;
+      memcpy(&lo2, r + W, sizeof lo2);
+      memcpy(&hi2, r + W + 16, sizeof hi2);
       const hush_v16f u0 = __builtin_shuffle(lo2, hi2, i0), u1 = __builtin_shuffle(lo2, hi2, i1);
       hush_v16i a0, a1, b0, b1;
       memcpy(&a0, &t0, sizeof a0);
