@@ -1500,7 +1500,10 @@ static void test_module_floor(void) {
  * on a plan with every footprint kind, border footprints and no-history
  * pixels; and the plan itself against thread counts and its stored
  * weights. Also for images 1 pixel wide or high (plans without blocks). */
-static void test_module_fast_paths(hush_device dev, int W, int H) {
+/* smooth: the motion of a zoom with a slight rotation (footprints drift by
+ * a pixel every few pixels and cross rows: reproject.h's windows) instead
+ * of random motion with runs of consecutive footprints. */
+static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   const size_t n = (size_t)W * H;
   gpair g;
   gpair_init(&g, W, H, 0.0f, 0.0f);
@@ -1516,6 +1519,12 @@ static void test_module_fast_paths(hush_device dev, int W, int H) {
     if (q < 0.05f) mx = floorf(mx); /* on a tap centre: tiny weights */
     else if (q < 0.07f) mx = -80.0f; /* off-screen */
     else if (q < 0.5f) mx = my = 0.3f; /* runs of consecutive footprints */
+    if (smooth) {
+      const float dx = (float)(i % (size_t)W) - 0.5f * (float)W;
+      const float dy = (float)(i / (size_t)W) - 0.5f * (float)H;
+      mx = 0.3f + 0.045f * dx - 0.03f * dy;
+      my = 0.2f + 0.045f * dy + 0.03f * dx;
+    }
     g.mot[0][i] = mx;
     g.mot[1][i] = my;
   }
@@ -1553,6 +1562,21 @@ static void test_module_fast_paths(hush_device dev, int W, int H) {
              memcmp(plan.fy, plan1.fy, n * sizeof(float)) == 0;
   for (int t = 0; t < 4; t++) same &= memcmp(plan.w[t], plan1.w[t], n * sizeof(float)) == 0;
   CHECK(same);
+  if (smooth) {
+    /* the plan has windows of one and of two rows for the blend below */
+    int rows_seen[3] = {0, 0, 0};
+    for (int y = 0; y < H; y++)
+      for (int x0 = 0; x0 + HUSH_WINDOW_MAX <= W; x0 += HUSH_WINDOW_MAX) {
+        const size_t i0 = (size_t)y * W + (size_t)x0;
+        uint8_t use[HUSH_WINDOW_MAX];
+        int32_t e[HUSH_WINDOW_MAX], dy[HUSH_WINDOW_MAX], base;
+        for (int k = 0; k < HUSH_WINDOW_MAX; k++)
+          use[k] = plan.kind[i0 + k] == HUSH_FOOTPRINT_BILINEAR;
+        rows_seen[hush__reproject_window(plan.origin + i0, use, HUSH_WINDOW_MAX, W, n, &base, e,
+                                         dy)]++;
+      }
+    CHECK(rows_seen[1] > 0 && rows_seen[2] > 0);
+  }
   size_t count[3] = {0, 0, 0};
   int weights_ok = 1;
   for (size_t i = 0; i < n; i++) {
@@ -1727,10 +1751,11 @@ int main(void) {
   test_module_accum(dev);
   test_module_holes(dev);
   test_module_floor();
-  test_module_fast_paths(dev, 53, 31);
-  test_module_fast_paths(dev, 9, 1);
-  test_module_fast_paths(dev, 1, 7);
-  test_module_fast_paths(dev, 2, 2);
+  test_module_fast_paths(dev, 53, 31, 0);
+  test_module_fast_paths(dev, 9, 1, 0);
+  test_module_fast_paths(dev, 1, 7, 0);
+  test_module_fast_paths(dev, 2, 2, 0);
+  test_module_fast_paths(dev, 160, 48, 1);
   test_convergence(dev);
   test_static_jitter(dev);
   test_camera_move(dev);

@@ -194,26 +194,24 @@ static size_t count_nonfinite(float *const *planes, int nc, uint32_t w) {
   return bad;
 }
 
-hush_status hush__view_import(hush_device device, const hush_image_view *v, const char *what,
-                              hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced) {
-  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
+size_t hush__view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst) {
   const int nc = dst->channels;
-  const uint32_t w = v->width, h = v->height;
-  const int threads = device ? device->threads : 1;
-  size_t bad = 0;
-#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad)
-  for (uint32_t y = 0; y < h; y++) {
-    float *out[4];
-    for (int c = 0; c < nc; c++) out[c] = dst->plane[c] + (size_t)y * w;
-    import_row(v, ps, rs, y, nc, out);
-    bad += count_nonfinite(out, nc, w);
-  }
-  if (replaced) *replaced = bad;
+  const uint32_t w = v->width;
+  float *out[4];
+  for (int c = 0; c < nc; c++) out[c] = dst->plane[c] + (size_t)y * w;
+  import_row(v, hush__view_pixel_stride(v), hush__view_row_stride(v), y, nc, out);
+  return count_nonfinite(out, nc, w);
+}
+
+hush_status hush__view_import_nonfinite(hush_device device, const hush_image_view *v,
+                                        const char *what, hush_planar *dst,
+                                        hush_nonfinite_policy policy, size_t bad) {
   if (!bad) return HUSH_OK;
   /* Rare path: find the first bad pixel for the message and zero them all. */
   size_t first_bad = SIZE_MAX;
-  const size_t n = (size_t)w * h;
-  for (int c = 0; c < nc; c++)
+  const uint32_t w = v->width;
+  const size_t n = (size_t)w * v->height;
+  for (int c = 0; c < dst->channels; c++)
     for (size_t i = 0; i < n; i++)
       if (!isfinite(dst->plane[c][i])) {
         if (i < first_bad) first_bad = i;
@@ -225,6 +223,17 @@ hush_status hush__view_import(hush_device device, const hush_image_view *v, cons
                       "to use 0 instead",
                       what, bad, first_bad % w, first_bad / w);
   return HUSH_OK;
+}
+
+hush_status hush__view_import(hush_device device, const hush_image_view *v, const char *what,
+                              hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced) {
+  const uint32_t h = v->height;
+  const int threads = device ? device->threads : 1;
+  size_t bad = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad)
+  for (uint32_t y = 0; y < h; y++) bad += hush__view_import_row(v, y, dst);
+  if (replaced) *replaced = bad;
+  return hush__view_import_nonfinite(device, v, what, dst, policy, bad);
 }
 
 /* nc planes into the first nc channels of w interleaved pixels of sf
@@ -244,16 +253,14 @@ static HUSH_IMAGE_INLINE void interleave_f32(const float *const *in, const size_
   }
 }
 
-static void export_row(const hush_planar *src, const hush_image_view *v, size_t ps, size_t rs,
-                       uint32_t y) {
-  char *row = (char *)v->data + v->byte_offset + (size_t)y * rs;
-  const uint32_t w = v->width;
-  const int nc = src->channels;
-  const size_t base = (size_t)y * w;
+void hush__view_export_span(const float *const *in, int nc, const hush_image_view *v,
+                            uint32_t y, uint32_t x0, uint32_t w) {
+  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
+  char *row = (char *)v->data + v->byte_offset + (size_t)y * rs + (size_t)x0 * ps;
   if (hush__format_element_size(v->format) == 2) {
     for (uint32_t x = 0; x < w; x++)
       for (int c = 0; c < nc; c++) {
-        const uint16_t hv = hush__float_to_half(src->plane[c][base + x]);
+        const uint16_t hv = hush__float_to_half(in[c][x]);
         memcpy(row + (size_t)x * ps + 2 * (size_t)c, &hv, 2);
       }
     return;
@@ -261,26 +268,28 @@ static void export_row(const hush_planar *src, const hush_image_view *v, size_t 
   if ((uintptr_t)row % sizeof(float) == 0) {
     float *rf = (float *)(void *)row;
     const size_t sf = ps / sizeof(float);
-    const float *in[4] = {NULL, NULL, NULL, NULL};
-    for (int c = 0; c < nc; c++) in[c] = src->plane[c] + base;
     /* the usual layouts with a constant stride (see import_row) */
     if (sf == 1) { memcpy(rf, in[0], (size_t)w * sizeof(float)); return; }
     if (sf == 3 && nc == 3) { interleave_f32(in, 3, 3, w, rf); return; }
     if (sf == 4 && nc == 4) { interleave_f32(in, 4, 4, w, rf); return; }
     if (sf == 4 && nc == 3) { interleave_f32(in, 4, 3, w, rf); return; }
     for (int c = 0; c < nc; c++) {
-      const float *p = src->plane[c] + base;
+      const float *p = in[c];
       for (uint32_t x = 0; x < w; x++) rf[(size_t)x * sf + (size_t)c] = p[x];
     }
     return;
   }
   for (uint32_t x = 0; x < w; x++)
-    for (int c = 0; c < nc; c++) memcpy(row + (size_t)x * ps + 4 * (size_t)c, &src->plane[c][base + x], 4);
+    for (int c = 0; c < nc; c++) memcpy(row + (size_t)x * ps + 4 * (size_t)c, &in[c][x], 4);
 }
 
 void hush__view_export(const hush_planar *src, const hush_image_view *v, int threads) {
-  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
-  const uint32_t h = v->height;
+  const uint32_t h = v->height, w = v->width;
+  const int nc = src->channels;
 #pragma omp parallel for schedule(static) num_threads(threads)
-  for (uint32_t y = 0; y < h; y++) export_row(src, v, ps, rs, y);
+  for (uint32_t y = 0; y < h; y++) {
+    const float *in[4] = {NULL, NULL, NULL, NULL};
+    for (int c = 0; c < nc; c++) in[c] = src->plane[c] + (size_t)y * w;
+    hush__view_export_span(in, nc, v, y, 0, w);
+  }
 }

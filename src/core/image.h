@@ -65,8 +65,22 @@ typedef enum hush_nonfinite_policy {
 hush_status hush__view_import(hush_device device, const hush_image_view *view, const char *what,
                               hush_planar *dst, hush_nonfinite_policy policy, size_t *replaced);
 
+/* hush__view_import in parts, for callers that fuse more work into the row
+ * pass (e.g. albedo.h's demodulating import): row y of the view into dst's
+ * planes (no threads), returning how many values are NaN/Inf; then, with
+ * the sum over the rows, the policy (zeroes them; the error names the
+ * first). */
+size_t hush__view_import_row(const hush_image_view *view, uint32_t y, hush_planar *dst);
+hush_status hush__view_import_nonfinite(hush_device device, const hush_image_view *view,
+                                        const char *what, hush_planar *dst,
+                                        hush_nonfinite_policy policy, size_t bad);
+
 /* Copies src's planes into a validated view with src->channels channels,
  * rows split over `threads` threads. */
 void hush__view_export(const hush_planar *src, const hush_image_view *view, int threads);
+/* One span of it: in[c][0 .. w-1] (nc planes' values) into pixels x0 ..
+ * x0 + w - 1 of row y of the view (no threads). */
+void hush__view_export_span(const float *const *in, int nc, const hush_image_view *view,
+                            uint32_t y, uint32_t x0, uint32_t w);
 
 #endif

@@ -1,20 +1,25 @@
 /*
- * albedo.c — albedo demodulation and remodulation (see albedo.h).
+ * albedo.c — albedo demodulation and remodulation (see albedo.h), also
+ * fused into the import of the radiance and the export of the result.
  */
 #include "filters/albedo.h"
 
+#include "core/device.h"
+
 static inline float albedo_clamped(float a) { return a > HUSH_ALBEDO_EPS ? a : HUSH_ALBEDO_EPS; }
+
+/* col[x] /= max(alb[x], eps) over one row of one channel. */
+static inline void demodulate_row(float *restrict col, const float *restrict alb, size_t n) {
+  for (size_t x = 0; x < n; x++) col[x] = col[x] / albedo_clamped(alb[x]);
+}
 
 void hush__demodulate(hush_planar *color, const hush_planar *albedo, int threads) {
   const int H = (int)color->height;
   const size_t W = color->width;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++)
-    for (int c = 0; c < 3; c++) {
-      float *col = color->plane[c] + (size_t)y * W;
-      const float *alb = albedo->plane[c] + (size_t)y * W;
-      for (size_t x = 0; x < W; x++) col[x] = col[x] / albedo_clamped(alb[x]);
-    }
+    for (int c = 0; c < 3; c++)
+      demodulate_row(color->plane[c] + (size_t)y * W, albedo->plane[c] + (size_t)y * W, W);
 }
 
 void hush__remodulate(hush_planar *albedo, const hush_planar *filtered, int threads) {
@@ -27,4 +32,55 @@ void hush__remodulate(hush_planar *albedo, const hush_planar *filtered, int thre
       const float *flt = filtered->plane[c] + (size_t)y * W;
       for (size_t x = 0; x < W; x++) alb[x] = flt[x] * albedo_clamped(alb[x]);
     }
+}
+
+hush_status hush__import_demodulated(hush_device device, const hush_image_view *view,
+                                     const char *what, hush_planar *dst,
+                                     const hush_planar *albedo, hush_nonfinite_policy policy,
+                                     size_t *replaced, int threads) {
+  const int H = (int)view->height;
+  const size_t W = view->width;
+  size_t bad = 0;
+  /* each row is divided while it is in L1, unless it has NaN/Inf */
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad)
+  for (int y = 0; y < H; y++) {
+    const size_t row_bad = hush__view_import_row(view, (uint32_t)y, dst);
+    bad += row_bad;
+    if (!row_bad)
+      for (int c = 0; c < 3; c++)
+        demodulate_row(dst->plane[c] + (size_t)y * W, albedo->plane[c] + (size_t)y * W, W);
+  }
+  if (replaced) *replaced = bad;
+  if (!bad) return HUSH_OK;
+  /* rare: as the separate passes (the values replaced first, then all
+   * divided), so the result does not depend on which rows were divided */
+  hush_status s = hush__view_import(device, view, what, dst, policy, NULL);
+  if (s) return s;
+  hush__demodulate(dst, albedo, threads);
+  return HUSH_OK;
+}
+
+/* Pixels per span of the remodulating export: 3 stack rows of this many
+ * floats (L1-resident) between the multiply and the interleave. */
+#define EXPORT_SPAN 512
+
+void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
+                              const hush_image_view *view, int threads) {
+  const int H = (int)filtered->height;
+  const size_t W = filtered->width;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) {
+    float buf[3][EXPORT_SPAN];
+    const float *const in[3] = {buf[0], buf[1], buf[2]};
+    for (size_t x0 = 0; x0 < W; x0 += EXPORT_SPAN) {
+      const size_t n = W - x0 < EXPORT_SPAN ? W - x0 : EXPORT_SPAN;
+      for (int c = 0; c < 3; c++) {
+        const float *restrict flt = filtered->plane[c] + (size_t)y * W + x0;
+        const float *restrict alb = albedo->plane[c] + (size_t)y * W + x0;
+        float *restrict o = buf[c];
+        for (size_t x = 0; x < n; x++) o[x] = flt[x] * albedo_clamped(alb[x]);
+      }
+      hush__view_export_span(in, 3, view, (uint32_t)y, (uint32_t)x0, (uint32_t)n);
+    }
+  }
 }

@@ -17,4 +17,25 @@ void hush__demodulate(hush_planar *color, const hush_planar *albedo, int threads
  * become the remodulated output (3 channels). */
 void hush__remodulate(hush_planar *albedo, const hush_planar *filtered, int threads);
 
+/*
+ * The import of a radiance view (3 channels) fused with its demodulation:
+ * dst <- view / max(albedo, eps), bit for bit hush__view_import (same
+ * policy, message and count of NaN/Inf) followed by hush__demodulate, in
+ * one pass over the rows instead of two over the frame. albedo: 3 planes
+ * of the view's size, already imported.
+ */
+hush_status hush__import_demodulated(hush_device device, const hush_image_view *view,
+                                     const char *what, hush_planar *dst,
+                                     const hush_planar *albedo, hush_nonfinite_policy policy,
+                                     size_t *replaced, int threads);
+
+/*
+ * The remodulation fused with the export: view <- filtered * max(albedo,
+ * eps) (3 channels), bit for bit hush__remodulate then hush__view_export,
+ * in one pass and without writing the albedo planes (use it when nothing
+ * else needs the remodulated planes).
+ */
+void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
+                              const hush_image_view *view, int threads);
+
 #endif

@@ -7,6 +7,7 @@
 #include "filters/filter.h"
 
 #include "core/timer.h"
+#include "filters/albedo.h"
 
 #include <errno.h>
 #include <stddef.h>
@@ -482,6 +483,47 @@ hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar 
   size_t replaced = 0;
   const hush_status s = hush__view_import(f->device, &f->views[image],
                                           f->cls->info->images[image].name, dst, policy, &replaced);
+  if (!s && replaced)
+    hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
+              f->cls->info->name, replaced, f->cls->info->images[image].name);
+  return s;
+}
+
+hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const int *images,
+                                    hush_planar *const *dst) {
+  if (count > HUSH_IMPORT_MANY_MAX) return HUSH_ERROR_UNKNOWN; /* a caller's bug */
+  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const int H = (int)f->height;
+  size_t bad[HUSH_IMPORT_MANY_MAX] = {0};
+  /* one parallel region for all the images, row by row */
+#pragma omp parallel for schedule(static) num_threads(threads) \
+    reduction(+ : bad[:HUSH_IMPORT_MANY_MAX])
+  for (int y = 0; y < H; y++)
+    for (int j = 0; j < count; j++)
+      bad[j] += hush__view_import_row(&f->views[images[j]], (uint32_t)y, dst[j]);
+  const hush_nonfinite_policy policy =
+      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
+  for (int j = 0; j < count; j++) {
+    const char *name = f->cls->info->images[images[j]].name;
+    const hush_status s =
+        hush__view_import_nonfinite(f->device, &f->views[images[j]], name, dst[j], policy, bad[j]);
+    if (s) return s;
+    if (bad[j])
+      hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
+                f->cls->info->name, bad[j], name);
+  }
+  return HUSH_OK;
+}
+
+hush_status hush__filter_import_demodulated(struct hush_filter_t *f, int image,
+                                            const hush_planar *albedo, hush_planar *dst) {
+  const hush_nonfinite_policy policy =
+      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
+  size_t replaced = 0;
+  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const hush_status s =
+      hush__import_demodulated(f->device, &f->views[image], f->cls->info->images[image].name, dst,
+                               albedo, policy, &replaced, threads);
   if (!s && replaced)
     hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
               f->cls->info->name, replaced, f->cls->info->images[image].name);

@@ -107,6 +107,20 @@ static inline const hush_image_view *hush__filter_view(const struct hush_filter_
  * "nonfinite" parameter; reports errors naming the image. */
 hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar *dst);
 
+/* hush__filter_import of `count` (<= HUSH_IMPORT_MANY_MAX) bound images
+ * images[j] into dst[j], in one parallel pass over the rows (one fork and
+ * join, not one per image); the NaN/Inf policy is then applied image by
+ * image in that order (the first failing one is reported). */
+#define HUSH_IMPORT_MANY_MAX 8
+hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const int *images,
+                                    hush_planar *const *dst);
+
+/* hush__filter_import fused with the demodulation (albedo.h): dst <- the
+ * radiance image / max(albedo, eps), albedo imported already; the same
+ * errors and messages. */
+hush_status hush__filter_import_demodulated(struct hush_filter_t *f, int image,
+                                            const hush_planar *albedo, hush_planar *dst);
+
 /* Allocates a planar image of the filter's size the first time it is
  * needed (a no-op when img already has planes). */
 hush_status hush__filter_scratch(struct hush_filter_t *f, hush_planar *img, int channels);

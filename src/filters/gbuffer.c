@@ -43,12 +43,28 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, i
   if (with_id && (s = hush__reprojector_want_id(f->device, rp))) return s;
 
   hush_gbuffer_store *g = hush__reprojector_next(rp);
-  if ((s = hush__filter_import(f, im->depth, &g->depth))) return s;
-  if (has_normal && (s = hush__filter_import(f, im->normal, &g->normal))) return s;
+  int images[5], count = 0;
+  hush_planar *dst[5];
+  images[count] = im->depth;
+  dst[count++] = &g->depth;
+  if (has_normal) {
+    images[count] = im->normal;
+    dst[count++] = &g->normal;
+  }
+  if (with_id) {
+    images[count] = im->id;
+    dst[count++] = &g->id;
+  }
+  if (in->has_position) {
+    images[count] = im->position;
+    dst[count++] = &in->position;
+  }
+  if (in->use_motion) {
+    images[count] = im->motion;
+    dst[count++] = &in->motion;
+  }
+  if ((s = hush__filter_import_many(f, count, images, dst))) return s;
   if (!has_normal) constant_normal(&g->normal);
-  if (with_id && (s = hush__filter_import(f, im->id, &g->id))) return s;
-  if (in->has_position && (s = hush__filter_import(f, im->position, &in->position))) return s;
-  if (in->use_motion && (s = hush__filter_import(f, im->motion, &in->motion))) return s;
   g->has_id = with_id;
   return HUSH_OK;
 }

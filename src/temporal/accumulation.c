@@ -44,6 +44,7 @@ void hush__accum_reset(hush_accum *acc) { acc->has_history = 0; }
 typedef struct blend_ctx {
   const hush_reproject_plan *plan; /* NULL: no history anywhere */
   size_t W;
+  size_t size; /* W * height: floats per plane */
   const float *sample[4];
   const float *pc[4], *pm1, *pm2, *pa; /* history: the previous set */
   float *oc[4], *om1, *om2, *oa;       /* this frame's set */
@@ -129,19 +130,36 @@ static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
   blend_store(b, i, &q, nc);
 }
 
+/* Pixels per chunk of a blended row: a chunk of BILINEAR pixels whose
+ * blocks follow each other (origin + 1 per pixel, as under smooth motion)
+ * loads its taps as vectors; one whose blocks form a window (reproject.h)
+ * loads the window and permutes; any other chunk gathers them. */
+#define CHUNK 16
+_Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
+
+/* How blend_pixels reads a chunk's taps: gathered one by one, as vectors
+ * (the footprints follow each other), or from a window of 1 or 2 rows
+ * (hush__reproject_window). */
+enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW };
+
 /*
  * Pixels row + x_begin .. row + x_begin + len - 1 of a plan with blocks, each
  * gathered as a block (origin and the plan's four weights; all 0 for a
  * pixel without a BILINEAR footprint, whose origin is then 0), in a loop
- * the compiler vectorises. With contiguous the block of pixel row + x
- * starts at base + x (plain vector loads), else at its origin (gathers).
+ * the compiler vectorises. MODE_CONTIGUOUS: the block of pixel row + x
+ * starts at base + x (plain vector loads); MODE_WINDOW: the taps were read
+ * from a window (tb[plane][tap][x - x_begin], planes: colour 0..3, moments
+ * 4, 5, age 6); MODE_GATHER: each block at its origin (gathers).
  * Every pointer is a plain local, so the vectoriser sees loop invariants
  * (and the omp simd: no dependence between pixels; the history read is
  * never written here).
  */
 static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int x_begin,
-                                            int len, int32_t base, const int contiguous,
+                                            int len, int32_t base, const int mode,
+                                            const float (*restrict tb)[4][CHUNK],
                                             const int nc) {
+  const int contiguous = mode == MODE_CONTIGUOUS;
+  const int window = mode == MODE_WINDOW;
   const int x_end = x_begin + len;
   const hush_reproject_plan *plan = b->plan;
   const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
@@ -168,20 +186,26 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
     const int32_t o = contiguous ? base + x
                                  : origin[x] & -(int32_t)(kind[x] == HUSH_FOOTPRINT_BILINEAR);
     const float a0 = w0[x], a1 = w1[x], a2 = w2[x], a3 = w3[x];
-#define HUSH_APPLY4(t) (a0 * (t)[o] + a1 * (t)[o + 1] + a2 * (t)[o + W] + a3 * (t)[o + W + 1])
+    const int k = x - x_begin;
+    /* tap (tx, ty) of plane t, window plane index pi */
+#define HUSH_TAP(t, pi, tx, ty) (window ? tb[pi][(ty) * 2 + (tx)][k] : (t)[o + (ty) * W + (tx)])
+#define HUSH_APPLY4(t, pi)                                                                      \
+  (a0 * HUSH_TAP(t, pi, 0, 0) + a1 * HUSH_TAP(t, pi, 1, 0) + a2 * HUSH_TAP(t, pi, 0, 1) +      \
+   a3 * HUSH_TAP(t, pi, 1, 1))
     blend_px q;
     q.s0 = s0[x];
     q.s1 = nc > 1 ? s1[x] : 0.0f;
     q.s2 = nc > 2 ? s2[x] : 0.0f;
     q.s3 = nc > 3 ? s3[x] : 0.0f;
-    q.h0 = HUSH_APPLY4(p0);
-    q.h1 = nc > 1 ? HUSH_APPLY4(p1) : 0.0f;
-    q.h2 = nc > 2 ? HUSH_APPLY4(p2) : 0.0f;
-    q.h3 = nc > 3 ? HUSH_APPLY4(p3) : 0.0f;
-    q.hm1 = HUSH_APPLY4(pm1);
-    q.hm2 = HUSH_APPLY4(pm2);
-    q.ha = HUSH_APPLY4(pa);
+    q.h0 = HUSH_APPLY4(p0, 0);
+    q.h1 = nc > 1 ? HUSH_APPLY4(p1, 1) : 0.0f;
+    q.h2 = nc > 2 ? HUSH_APPLY4(p2, 2) : 0.0f;
+    q.h3 = nc > 3 ? HUSH_APPLY4(p3, 3) : 0.0f;
+    q.hm1 = HUSH_APPLY4(pm1, 4);
+    q.hm2 = HUSH_APPLY4(pm2, 5);
+    q.ha = HUSH_APPLY4(pa, 6);
 #undef HUSH_APPLY4
+#undef HUSH_TAP
     blend_compute(&p, &q, mask[x] != 0, nc);
     o0[x] = q.c0;
     if (nc > 1) o1[x] = q.c1;
@@ -194,10 +218,8 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   }
 }
 
-/* Pixels per chunk of a blended row: a chunk of BILINEAR pixels whose
- * blocks follow each other (origin + 1 per pixel, as under smooth motion)
- * loads its taps as vectors; any other chunk gathers them. */
-#define CHUNK 16
+/* Rows per chunk of the parallel blend (see hush__accum_blend). */
+#define BLEND_ROWS 4
 
 /* One row of a plan with blocks, chunk by chunk, then the rare 3X3 pixels
  * redone through their taps. */
@@ -212,12 +234,37 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
       contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
     /* a constant length for full chunks: one vector iteration, no
      * alignment peeling or scalar epilogue */
-    if (x1 - x0 < CHUNK)
-      blend_pixels(b, row, x0, x1 - x0, 0, 0, nc);
-    else if (contiguous)
-      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, 1, nc);
-    else
-      blend_pixels(b, row, x0, CHUNK, 0, 0, nc);
+    if (x1 - x0 < CHUNK) {
+      blend_pixels(b, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc);
+      continue;
+    }
+    if (contiguous) {
+      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL, nc);
+      continue;
+    }
+#ifdef HUSH_HAVE_WINDOW
+    uint8_t use[CHUNK];
+    int32_t e[CHUNK], dy[CHUNK];
+    for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
+    int32_t base;
+    const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, b->size, &base, e, dy);
+    if (rows) {
+      /* the taps of the 7 history planes (colour, moments, age) */
+      float tb[7][4][CHUNK] __attribute__((aligned(64)));
+      const float *planes[7] = {b->pc[0], b->pc[nc > 1], b->pc[nc > 2 ? 2 : 0],
+                                b->pc[nc > 3 ? 3 : 0], b->pm1, b->pm2, b->pa};
+      for (int t = 0; t < 7; t++) {
+        if (t > 0 && t < 4 && t >= nc) continue;
+        if (rows == 1)
+          hush__window_taps(planes[t], base, W, e, dy, 1, tb[t]);
+        else
+          hush__window_taps(planes[t], base, W, e, dy, 2, tb[t]);
+      }
+      blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc);
+      continue;
+    }
+#endif
+    blend_pixels(b, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
   }
   for (size_t i = row; i < row + (size_t)W; i++)
     if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) blend_pixel(b, i, nc);
@@ -241,6 +288,7 @@ static void blend_setup(blend_ctx *b, const hush_accum *acc, const hush_reprojec
   memset(b, 0, sizeof *b);
   b->plan = acc->has_history ? plan : NULL;
   b->W = acc->width;
+  b->size = (size_t)acc->width * acc->height;
   for (int c = 0; c < acc->channels; c++) {
     b->sample[c] = sample[c];
     b->pc[c] = acc->color[src].plane[c];
@@ -268,7 +316,14 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
   blend_ctx b;
   blend_setup(&b, acc, plan, sample, params, variance);
 
-#pragma omp parallel for schedule(static) num_threads(threads)
+  /* Rows cost very different amounts (a chunk whose footprints do not
+   * follow each other gathers its taps one by one, ~3x the time of one that
+   * loads them as vectors) and such rows cluster in bands (the sky under a
+   * turning camera, an object's silhouette): a static split in halves left
+   * one thread with most of them (2 threads: 1.2x faster than 1). Rows are
+   * handed out in small chunks instead; each pixel is computed on its own,
+   * so the result does not depend on which thread blends it. */
+#pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) {
     switch (nc) {
     case 1: blend_rows(&b, y, 1); break;

@@ -307,6 +307,120 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
   return w[0] * p[o] + w[1] * p[o + 1] + w[2] * p[o + width] + w[3] * p[o + width + 1];
 }
 
+/* ---- a chunk of footprints as one window ----------------------------------
+ * Under camera motion the 2x2 footprints of neighbouring pixels rarely
+ * follow each other exactly (origin + 1 per pixel): the offset drifts by a
+ * pixel now and then, or crosses a row. A chunk of n pixels whose footprint
+ * origins all lie, relative to the diagonal base + k (k: the pixel in the
+ * chunk), within 3 columns of 1 or 2 rows ("a window") reads every tap with
+ * plain vector loads of the window and a per-pixel selection instead of a
+ * gather of scattered floats (which gcc emits as scalar loads here, ~3x the
+ * time). The value selected is the tap itself, so results are bit for bit
+ * those of a gather. */
+
+/* Most pixels a window covers (the chunk size of the callers). */
+#define HUSH_WINDOW_MAX 16
+
+/*
+ * Whether the footprint origins origin[0..n-1] (n <= HUSH_WINDOW_MAX) of
+ * the pixels with use[k] != 0 form a window of a plane of `size` floats
+ * with rows of W: returns 0 (no), 1 (one row: every footprint's top taps
+ * in the same row) or 2 (two rows). Then the top-left tap of pixel k is
+ * base + k + dy[k] * W + e[k] (e 0..2, dy 0..1), and every load of
+ * hush__window_tap lies inside the plane; pixels without use get e = dy =
+ * 0 (their loads are inside the window, their values to be ignored).
+ */
+static inline int hush__reproject_window(const int32_t *origin, const uint8_t *use, int n,
+                                         int32_t W, size_t size, int32_t *base, int32_t *e,
+                                         int32_t *dy) {
+  int first = -1;
+  for (int k = 0; k < n && first < 0; k++)
+    if (use[k]) first = k;
+  if (first < 0) return 0;
+  const int32_t rowstart = origin[first] / W * W;
+  int ymin = 1, ymax = -1, ok = 1;
+  int32_t xmin = INT32_MAX, xmax = INT32_MIN;
+  int8_t d[HUSH_WINDOW_MAX];
+  int32_t ox[HUSH_WINDOW_MAX];
+  for (int k = 0; k < n; k++) {
+    const int32_t o = origin[k];
+    const int dk = (o >= rowstart + W) - (o < rowstart); /* the row, if within one */
+    const int32_t col = o - rowstart - dk * W;
+    const int u = use[k] != 0;
+    ok &= (u == 0) | ((col >= 0) & (col < W));
+    d[k] = (int8_t)dk;
+    ox[k] = col - k;
+    if (u) {
+      ymin = dk < ymin ? dk : ymin;
+      ymax = dk > ymax ? dk : ymax;
+      xmin = ox[k] < xmin ? ox[k] : xmin;
+      xmax = ox[k] > xmax ? ox[k] : xmax;
+    }
+  }
+  if (!ok || ymax - ymin > 1 || xmax - xmin > 2) return 0;
+  const int rows = ymax > ymin ? 2 : 1;
+  const int64_t b = (int64_t)rowstart + (int64_t)ymin * W + xmin;
+  /* the loads of hush__window_taps: base + r * W + 0..31, r 0..rows */
+  if (b < 0 || b + (int64_t)rows * W + 31 >= (int64_t)size) return 0;
+  for (int k = 0; k < n; k++) {
+    e[k] = use[k] ? ox[k] - xmin : 0;
+    dy[k] = use[k] ? d[k] - ymin : 0;
+  }
+  *base = (int32_t)b;
+  return rows;
+}
+
+/* With AVX-512 (one vpermt2ps per tap and plane); elsewhere gcc would
+ * emulate the permutes, and the gathers stay. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__AVX512F__)
+#  define HUSH_HAVE_WINDOW 1
+typedef float hush_v16f __attribute__((vector_size(64)));
+typedef int32_t hush_v16i __attribute__((vector_size(64)));
+
+/*
+ * The four taps of every pixel k of a window of HUSH_WINDOW_MAX pixels
+ * (hush__reproject_window's base, e, dy; rows 1 or 2, a constant at each
+ * call) of plane p: out[ty * 2 + tx][k] = p[base + k + (dy[k] + ty) W +
+ * e[k] + tx]. Per row of the window two vector loads hold the 19 floats
+ * its pixels can need; a two-source permute (vpermt2ps with AVX-512)
+ * picks each pixel's tap.
+ */
+static HUSH_ALWAYS_INLINE void hush__window_taps(const float *p, int32_t base, int32_t W,
+                                                 const int32_t *e, const int32_t *dy,
+                                                 const int rows, float out[4][HUSH_WINDOW_MAX]) {
+  hush_v16i ev, dv;
+  memcpy(&ev, e, sizeof ev);
+  memcpy(&dv, dy, sizeof dv);
+  const hush_v16i lane = {0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15};
+  const hush_v16i i0 = lane + ev, i1 = i0 + 1;
+  const hush_v16i second = dv != 0; /* -1 (all bits) where the top taps are in row 1 */
+  for (int ty = 0; ty < 2; ty++) {
+    const float *r = p + base + (size_t)ty * (size_t)W;
+    hush_v16f lo, hi; /* any alignment */
+    memcpy(&lo, r, sizeof lo);
+    memcpy(&hi, r + 16, sizeof hi);
+    hush_v16f t0 = __builtin_shuffle(lo, hi, i0), t1 = __builtin_shuffle(lo, hi, i1);
+    if (rows == 2) {
+      hush_v16f lo2, hi2;
+      memcpy(&lo2, r + W, sizeof lo2);
+      memcpy(&hi2, r + W + 16, sizeof hi2);
+      const hush_v16f u0 = __builtin_shuffle(lo2, hi2, i0), u1 = __builtin_shuffle(lo2, hi2, i1);
+      hush_v16i a0, a1, b0, b1;
+      memcpy(&a0, &t0, sizeof a0);
+      memcpy(&a1, &t1, sizeof a1);
+      memcpy(&b0, &u0, sizeof b0);
+      memcpy(&b1, &u1, sizeof b1);
+      a0 = (a0 & ~second) | (b0 & second);
+      a1 = (a1 & ~second) | (b1 & second);
+      memcpy(&t0, &a0, sizeof t0);
+      memcpy(&t1, &a1, sizeof t1);
+    }
+    memcpy(out[ty * 2], &t0, sizeof t0);
+    memcpy(out[ty * 2 + 1], &t1, sizeof t1);
+  }
+}
+#endif
+
 /*
  * Gathers `channels` (1..8) previous-frame planes through the plan:
  * out[c][i] = sum_t w_t * prev[c][idx_t]; pixels with no history get

@@ -156,6 +156,10 @@ static hush_status accumulate_create(hush_filter f, void **state) {
   return HUSH_OK;
 }
 
+static hush_status export_result(hush_filter f, accumulate_state *st, hush_planar *result,
+                                 int demod, int emis, const hush_accum_params *ap,
+                                 int threads);
+
 static hush_status accumulate_execute(hush_filter f, void *state, const hush_frame_info *info) {
   accumulate_state *st = state;
   const int threads = f->device->threads > 0 ? f->device->threads : 1;
@@ -175,10 +179,15 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   if (hush__filter_view(f, I_VARIANCE) && (s = hush__filter_scratch(f, &st->variance, 1)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
-  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  /* the colour demodulated as it is imported (one pass less), unless the
+   * emission comes off first or holes may change the albedo */
+  const int fused = demod && !emis && !hush__filter_view(f, I_SPP);
+  if (!fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (fused && (s = hush__filter_import_demodulated(f, I_COLOR, &st->albedo, &st->color)))
+    return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   /* holes: the G-buffer, albedo and emission filled from around */
   hush_planar *const fill[2] = {demod ? &st->albedo : NULL, emis ? &st->emission : NULL};
@@ -197,7 +206,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
 
   /* ---- accumulate */
   if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
-  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
+  if (demod && !fused) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA_MIN);
   ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS_MIN);
@@ -210,6 +219,24 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
 
   /* ---- export */
   hush_planar *result = hush__accum_color(&st->acc);
+  if (demod && !st->acc.empty && !emis) {
+    /* nothing else needs the remodulated planes: one pass */
+    hush__export_remodulated(result, &st->albedo, hush__filter_view(f, I_OUTPUT), threads);
+  } else if ((s = export_result(f, st, result, demod, emis, &ap, threads))) {
+    return s;
+  }
+  if (var_view) hush__view_export(&st->variance, var_view, threads);
+  const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
+  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
+  hush__filter_timing_stage(f, "export");
+  return HUSH_OK;
+}
+
+/* The output through the remodulated planes: holes filled, emission added. */
+static hush_status export_result(hush_filter f, accumulate_state *st, hush_planar *result,
+                                 int demod, int emis, const hush_accum_params *ap,
+                                 int threads) {
+  hush_status s;
   if (demod) {
     hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
@@ -223,16 +250,12 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   }
   if (emis) {
     const hush_planar *e = hush__emission_accumulate_holes(
-        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
+        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap->alpha_min, &st->emission,
         hush__gbuffer_holes_spp(&st->gin), threads);
     hush__emission_add(&st->emission, e, result, threads);
     result = &st->emission;
   }
   hush__view_export(result, hush__filter_view(f, I_OUTPUT), threads);
-  if (var_view) hush__view_export(&st->variance, var_view, threads);
-  const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
-  if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
-  hush__filter_timing_stage(f, "export");
   return HUSH_OK;
 }
 
