@@ -239,6 +239,7 @@ typedef struct frame_ctx {
   const svgf_guide *gd;
   hush_accum_params ap;
   int demod, merge, iterations, order, threads;
+  int demod_fused; /* the colour was demodulated as it was imported */
   int holes; /* progressive: this frame has untraced pixels */
   const svgf_kernel *kernel;
   svgf_adaptive *ad; /* asvgf: the adaptive temporal stage, else NULL */
@@ -249,7 +250,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   hush_filter f = fc->f;
   svgf_state *st = fc->st;
   const int threads = fc->threads, W = (int)f->width;
-  if (fc->demod) hush__demodulate(&c->color, &st->albedo, threads);
+  if (fc->demod && !fc->demod_fused) hush__demodulate(&c->color, &st->albedo, threads);
   /* the history before the blend writes the other buffer set */
   const float *prev[6] = {NULL};
   const int had_history = c->acc.has_history;
@@ -410,12 +411,23 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
-  if ((s = hush__filter_import(f, split ? I_DIRECT : I_COLOR, &st->comp[0].color))) return s;
-  if (split && (s = hush__filter_import(f, I_INDIRECT, &st->comp[1].color))) return s;
+  /* the colour demodulated as it is imported (one pass less), unless the
+   * emission comes off first, holes may change the albedo, or asvgf's
+   * gradient samples need the radiance itself */
+  const int demod_fused = demod && !emis && !has_spp && !ad;
+  const int color_image = split ? I_DIRECT : I_COLOR;
+  if (!demod_fused && (s = hush__filter_import(f, color_image, &st->comp[0].color))) return s;
+  if (!demod_fused && split && (s = hush__filter_import(f, I_INDIRECT, &st->comp[1].color)))
+    return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
   if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (demod_fused &&
+      ((s = hush__filter_import_demodulated(f, color_image, &st->albedo, &st->comp[0].color)) ||
+       (split && (s = hush__filter_import_demodulated(f, I_INDIRECT, &st->albedo,
+                                                      &st->comp[1].color)))))
+    return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
   if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
@@ -512,6 +524,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   fc.ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS);
   fc.ap.max_age = hush__param_i(f, P_MAX_AGE);
   fc.demod = demod;
+  fc.demod_fused = demod_fused;
   /* the renderer's sample variance is of the whole radiance: not split */
   fc.merge = has_svar && !split && hush__param_i(f, P_SAMPLE_VARIANCE);
   fc.iterations = iterations;
@@ -532,6 +545,14 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
 
   /* ---- export */
   const hush_planar *result = &st->comp[0].result;
+  const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
+  if (demod && !emis && !with_taa) {
+    /* nothing else needs the remodulated planes: one pass */
+    hush__export_remodulated(result, &st->albedo, hush__filter_view(f, I_OUTPUT), threads);
+    if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
+    hush__filter_timing_stage(f, "export");
+    return HUSH_OK;
+  }
   if (demod) {
     hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
@@ -559,7 +580,6 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     rgb = *hush__taa_output(&st->taa);
   }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
-  const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
   if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
