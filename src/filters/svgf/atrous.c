@@ -134,6 +134,9 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
   float *restrict out_r = c->out->plane[SVGF_R] + o, *restrict out_g = c->out->plane[SVGF_G] + o,
                   *restrict out_b = c->out->plane[SVGF_B] + o;
   float *restrict out_v = c->out->plane[SVGF_VAR] ? c->out->plane[SVGF_VAR] + o : NULL;
+  float *restrict also_r = c->out->also[0] ? c->out->also[0] + pi : NULL;
+  float *restrict also_g = c->out->also[0] ? c->out->also[1] + pi : NULL;
+  float *restrict also_b = c->out->also[0] ? c->out->also[2] + pi : NULL;
   float *restrict out_l = c->out->plane[SVGF_LUM] ? c->out->plane[SVGF_LUM] + o : NULL;
   float *restrict out_ok =
       VALIDITY && c->out->plane[SVGF_VALID] ? c->out->plane[SVGF_VALID] + o : NULL;
@@ -190,6 +193,11 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
     out_r[x] = r;
     out_g[x] = gr;
     out_b[x] = b;
+    if (also_r) {
+      also_r[x] = r;
+      also_g[x] = gr;
+      also_b[x] = b;
+    }
     if (out_v) out_v[x] = sv * inv * inv;
     if (out_l) out_l[x] = hush_luminance(r, gr, b);
   }
@@ -261,7 +269,8 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
                                           const float *zon, const float *eps,
                                           const avx_pair *pairs, int npairs, int x, int n,
                                           float *const out[SVGF_SIGNAL_CHANNELS],
-                                          const int FULL, const int VALIDITY, const int WITH_VAR) {
+                                          float *const also[3], const int FULL,
+                                          const int VALIDITY, const int WITH_VAR) {
   const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
 #define LDX(P, OFF) (FULL ? _mm512_loadu_ps((P) + x + (OFF)) : _mm512_maskz_loadu_ps(m, (P) + x + (OFF)))
   const __m512 q = _mm512_set1_ps(0.25f), h = _mm512_set1_ps(0.5f);
@@ -328,6 +337,11 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   _mm512_mask_storeu_ps(out[SVGF_R] + x, m, rr);
   _mm512_mask_storeu_ps(out[SVGF_G] + x, m, gg);
   _mm512_mask_storeu_ps(out[SVGF_B] + x, m, bb);
+  if (also[0]) {
+    _mm512_mask_storeu_ps(also[0] + x, m, rr);
+    _mm512_mask_storeu_ps(also[1] + x, m, gg);
+    _mm512_mask_storeu_ps(also[2] + x, m, bb);
+  }
   if (WITH_VAR)
     _mm512_mask_storeu_ps(out[SVGF_VAR] + x, m, _mm512_mul_ps(_mm512_mul_ps(sv, inv), inv));
   if (out[SVGF_LUM]) {
@@ -377,11 +391,15 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const in
   float *out[SVGF_SIGNAL_CHANNELS];
   for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
     out[ch] = c->out->plane[ch] ? c->out->plane[ch] + o : NULL;
+  float *also[3];
+  for (int ch = 0; ch < 3; ch++) also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
   int x = 0;
   for (; x + 16 <= W; x += 16)
-    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, 1, VALIDITY, WITH_VAR);
+    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, also, 1, VALIDITY,
+               WITH_VAR);
   if (x < W)
-    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, 0, VALIDITY, WITH_VAR);
+    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, also, 0, VALIDITY,
+               WITH_VAR);
   if (c->out->pad > 0)
     for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
       if (out[ch]) svgf_pad_row(out[ch], W, c->out->pad);

@@ -40,6 +40,10 @@ typedef struct svgf_level_out {
   float *plane[SVGF_SIGNAL_CHANNELS];
   size_t stride;
   int pad;
+  /* optional (NULL: none): the colour also into these 3 unpadded planes
+   * of width floats a row (svgf's feedback of the first level into the
+   * colour history, without a copy pass) */
+  float *also[3];
 } svgf_level_out;
 
 static inline svgf_level_out svgf_level_out_padded(svgf_padded *p) {
@@ -47,6 +51,7 @@ static inline svgf_level_out svgf_level_out_padded(svgf_padded *p) {
   for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) o.plane[c] = p->plane[c];
   o.stride = p->stride;
   o.pad = p->pad;
+  o.also[0] = o.also[1] = o.also[2] = NULL;
   return o;
 }
 

@@ -333,25 +333,28 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = last.plane[SVGF_VALID] = NULL;
   last.stride = (size_t)W;
   last.pad = 0;
+  last.also[0] = last.also[1] = last.also[2] = NULL;
+  /* the first level's colour written straight into the colour history as
+   * well (with holes only where the age allows: copy_color_where) */
+  const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
+  const int feedback_direct = feedback && !fc->holes;
   if (fc->iterations == 0) {
     const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
     copy_color(&accumulated, &c->result, threads);
   }
   for (int i = 0; i < fc->iterations; i++) {
-    const svgf_level_out out =
+    svgf_level_out out =
         i == fc->iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
+    if (i == 0 && feedback_direct)
+      for (int k = 0; k < 3; k++) out.also[k] = hush__accum_color(&c->acc)->plane[k];
     lp.step = level_step(fc->order, i, fc->iterations);
     svgf_atrous_level(fc->gd, &lp, &st->signal[cur], &out, threads);
     cur = 1 - cur;
     /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
      * §4.1.4.6: the first level run): less noise is fed back, at the cost
      * of a little extra blur over time */
-    if (i == 0 && hush__param_i(f, P_FEEDBACK_FIRST_LEVEL)) {
-      if (fc->holes)
-        copy_color_where(&out, hush__accum_color(&c->acc), age, threads);
-      else
-        copy_color(&out, hush__accum_color(&c->acc), threads);
-    }
+    if (i == 0 && feedback && fc->holes)
+      copy_color_where(&out, hush__accum_color(&c->acc), age, threads);
   }
   hush__filter_timing_stage(f, "atrous");
 }
