@@ -1614,22 +1614,51 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   }
   CHECK(gather_ok);
 
-  /* temporal_blend */
-  for (size_t i = 0; i < n; i++) smp[0][i] = urand(&rng);
-  hush__temporal_blend(&plan, (const float *const *)v, (const float *const *)smp, 1, age, 0.1f,
-                       o, 2);
-  int tblend_ok = 1;
-  for (size_t i = 0; i < n; i++) {
-    const float inv_age = age[i] > 1.0f ? 1.0f / age[i] : 1.0f;
-    const float a = 0.1f > inv_age ? 0.1f : inv_age;
-    int32_t idx[9];
-    float w[9];
-    const int nt = hush__reproject_taps(&plan, i, idx, w);
-    const float want =
-        nt ? (1.0f - a) * hush__reproject_apply(v[0], idx, w, nt) + a * smp[0][i] : smp[0][i];
-    tblend_ok &= fbits(o[0][i]) == fbits(want);
+  /* temporal_blend, 1..4 channels in one pass and 6 (groups of 4 and 2),
+   * also with out aliasing sample, against the per-pixel definition */
+  {
+    enum { TB_MAX = 6 };
+    float *tp[TB_MAX], *ts[TB_MAX], *to[TB_MAX];
+    for (int c = 0; c < TB_MAX; c++) {
+      REQUIRE((tp[c] = malloc(n * sizeof(float))) && (ts[c] = malloc(n * sizeof(float))) &&
+              (to[c] = malloc(n * sizeof(float))));
+      for (size_t i = 0; i < n; i++) {
+        tp[c][i] = 10.0f * urand(&rng) - 3.0f;
+        ts[c][i] = urand(&rng);
+      }
+    }
+    const int chs[5] = {1, 2, 3, 4, 6};
+    int tblend_ok = 1;
+    for (int q = 0; q < 5 * 2; q++) {
+      const int nch = chs[q % 5], alias = q >= 5;
+      float *dst[TB_MAX];
+      for (int c = 0; c < nch; c++) {
+        dst[c] = to[c];
+        if (alias) memcpy(to[c], ts[c], n * sizeof(float)); /* sample and out the same */
+      }
+      hush__temporal_blend(&plan, (const float *const *)tp,
+                           alias ? (const float *const *)to : (const float *const *)ts, nch, age,
+                           0.1f, dst, 1 + q % 2);
+      for (size_t i = 0; i < n; i++) {
+        const float inv_age = age[i] > 1.0f ? 1.0f / age[i] : 1.0f;
+        const float a = 0.1f > inv_age ? 0.1f : inv_age;
+        int32_t idx[9];
+        float w[9];
+        const int nt = hush__reproject_taps(&plan, i, idx, w);
+        for (int c = 0; c < nch; c++) {
+          const float want =
+              nt ? (1.0f - a) * hush__reproject_apply(tp[c], idx, w, nt) + a * ts[c][i] : ts[c][i];
+          tblend_ok &= fbits(to[c][i]) == fbits(want);
+        }
+      }
+    }
+    CHECK(tblend_ok);
+    for (int c = 0; c < TB_MAX; c++) {
+      free(tp[c]);
+      free(ts[c]);
+      free(to[c]);
+    }
   }
-  CHECK(tblend_ok);
 
   /* accumulation: three frames against the rule of accumulation.h, per
    * pixel, from the history of the previous frame */
