@@ -385,6 +385,107 @@ static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, con
   return !(q.age > 0.0f);
 }
 
+/*
+ * blend_pixel_holes for a whole row of a plan with blocks, in a loop the
+ * compiler vectorises (has_spp, nc constants): every pixel as a block
+ * (non-BILINEAR pixels have weights 0 and origin 0, so no history, as
+ * their taps give for NONE), the weights of empty taps zeroed and the sums
+ * taken over all four taps in tap order from 0 — the masked-out taps add
+ * +-0, which leaves every sum's bits as the per-pixel loop's over the
+ * valid taps only — then the traced and the hole results selected. The
+ * rare 3X3 pixels are redone by the caller (and left out of the returned
+ * "some pixel is empty" flag here).
+ */
+static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, const float *spp,
+                                              const int has_spp, const int nc) {
+  const hush_reproject_plan *plan = b->plan;
+  const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
+  const int W = (int)b->W;
+  const int32_t *origin = plan->origin + row;
+  const uint8_t *kind = plan->kind + row;
+  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row;
+  const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
+  const float *pm1 = b->pm1, *pm2 = b->pm2, *pa = b->pa;
+  const float *sp = has_spp ? spp + row : NULL;
+  float *om1 = b->om1 + row, *om2 = b->om2 + row, *oa = b->oa + row;
+  float *var = b->variance ? b->variance + row : NULL;
+  const float *p0 = b->pc[0], *p1 = b->pc[nc > 1], *p2 = b->pc[nc > 2 ? 2 : 0];
+  const float *p3 = b->pc[nc > 3 ? 3 : 0];
+  const float *s0 = b->sample[0] + row, *s1 = b->sample[nc > 1] + row;
+  const float *s2 = b->sample[nc > 2 ? 2 : 0] + row, *s3 = b->sample[nc > 3 ? 3 : 0] + row;
+  float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
+  float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
+  int empty = 0;
+#pragma omp simd reduction(| : empty)
+  for (int x = 0; x < W; x++) {
+    const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
+    const int32_t o = origin[x] & -(int32_t)bil;
+    const int32_t t1 = o + 1, t2 = o + W, t3 = o + W + 1;
+    /* a tap of an empty pixel (age 0) takes no part */
+    const float a0 = hush__select_bits(pa[o] > 0.0f, w0[x], 0.0f);
+    const float a1 = hush__select_bits(pa[t1] > 0.0f, w1[x], 0.0f);
+    const float a2 = hush__select_bits(pa[t2] > 0.0f, w2[x], 0.0f);
+    const float a3 = hush__select_bits(pa[t3] > 0.0f, w3[x], 0.0f);
+    const float wsum = 0.0f + a0 + a1 + a2 + a3;
+    const int has = wsum > 0.0f;
+    const float inv = has ? 1.0f / (has ? wsum : 1.0f) : 0.0f;
+#define HUSH_APPLY4(t) ((0.0f + a0 * (t)[o] + a1 * (t)[t1] + a2 * (t)[t2] + a3 * (t)[t3]) * inv)
+    blend_px q;
+    q.s0 = s0[x];
+    q.s1 = nc > 1 ? s1[x] : 0.0f;
+    q.s2 = nc > 2 ? s2[x] : 0.0f;
+    q.s3 = nc > 3 ? s3[x] : 0.0f;
+    /* computed for every pixel, then selected: no load under a branch */
+    q.h0 = hush__select_bits(has, HUSH_APPLY4(p0), 0.0f);
+    q.h1 = nc > 1 ? hush__select_bits(has, HUSH_APPLY4(p1), 0.0f) : 0.0f;
+    q.h2 = nc > 2 ? hush__select_bits(has, HUSH_APPLY4(p2), 0.0f) : 0.0f;
+    q.h3 = nc > 3 ? hush__select_bits(has, HUSH_APPLY4(p3), 0.0f) : 0.0f;
+    q.hm1 = hush__select_bits(has, HUSH_APPLY4(pm1), 0.0f);
+    q.hm2 = hush__select_bits(has, HUSH_APPLY4(pm2), 0.0f);
+    q.ha = hush__select_bits(has, HUSH_APPLY4(pa), 0.0f);
+#undef HUSH_APPLY4
+    const float h0 = q.h0, h1 = q.h1, h2 = q.h2, h3 = q.h3, hm1 = q.hm1, hm2 = q.hm2;
+    /* a hole: no new sample; the history as it was, or nothing */
+    float hage = has ? hush__floorf_vec(q.ha + 0.5f) : 0.0f;
+    hage = hage > p.max_age ? p.max_age : hage;
+    hage = has && hage < 1.0f ? 1.0f : hage;
+    const float hm1sq = hm1 * hm1;
+    const float hv = hm2 - hm1sq;
+    const float hvar = hv > 0.0f ? hv : 0.0f;
+    blend_compute(&p, &q, has, nc); /* traced */
+    const int traced = has_spp ? sp[x] > 0.0f : 1;
+    const float c0 = traced ? q.c0 : h0, c1 = traced ? q.c1 : h1;
+    const float c2 = traced ? q.c2 : h2, c3 = traced ? q.c3 : h3;
+    const float m1 = traced ? q.m1 : hm1, m2 = traced ? q.m2 : hm2;
+    const float age = traced ? q.age : hage, v = traced ? q.var : hvar;
+    o0[x] = c0;
+    if (nc > 1) o1[x] = c1;
+    if (nc > 2) o2[x] = c2;
+    if (nc > 3) o3[x] = c3;
+    om1[x] = m1;
+    om2[x] = m2;
+    oa[x] = age;
+    if (var) var[x] = v;
+    empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
+  }
+  return empty;
+}
+
+/* One row of hush__accum_blend_holes with nc a constant. */
+static HUSH_ALWAYS_INLINE int blend_rows_holes(const blend_ctx *b, int y, const float *spp,
+                                               const int nc) {
+  const size_t row = (size_t)y * b->W;
+  int empty = 0;
+  if (b->plan && b->plan->blocks) {
+    empty = spp ? blend_row_holes(b, row, spp, 1, nc) : blend_row_holes(b, row, NULL, 0, nc);
+    for (size_t i = row; i < row + b->W; i++)
+      if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) empty |= blend_pixel_holes(b, i, spp, nc);
+  } else {
+    for (size_t i = row; i < row + b->W; i++) empty |= blend_pixel_holes(b, i, spp, nc);
+  }
+  return empty;
+}
+
 void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
                              const float *const *sample, const float *spp,
                              const hush_accum_params *params, float *variance, int threads) {
@@ -395,17 +496,17 @@ void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
   if (threads < 1) threads = 1;
   const int dst = 1 - acc->latest;
   const int nc = acc->channels;
-  const long long count = (long long)acc->width * acc->height;
+  const int H = (int)acc->height;
   blend_ctx b;
   blend_setup(&b, acc, plan, sample, params, variance);
   int empty = 0;
-#pragma omp parallel for reduction(| : empty) schedule(static) num_threads(threads)
-  for (long long i = 0; i < count; i++) {
+#pragma omp parallel for reduction(| : empty) schedule(dynamic, BLEND_ROWS) num_threads(threads)
+  for (int y = 0; y < H; y++) {
     switch (nc) {
-    case 1: empty |= blend_pixel_holes(&b, (size_t)i, spp, 1); break;
-    case 2: empty |= blend_pixel_holes(&b, (size_t)i, spp, 2); break;
-    case 3: empty |= blend_pixel_holes(&b, (size_t)i, spp, 3); break;
-    default: empty |= blend_pixel_holes(&b, (size_t)i, spp, 4); break;
+    case 1: empty |= blend_rows_holes(&b, y, spp, 1); break;
+    case 2: empty |= blend_rows_holes(&b, y, spp, 2); break;
+    case 3: empty |= blend_rows_holes(&b, y, spp, 3); break;
+    default: empty |= blend_rows_holes(&b, y, spp, 4); break;
     }
   }
   acc->latest = dst;
