@@ -1614,22 +1614,51 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   }
   CHECK(gather_ok);
 
-  /* temporal_blend */
-  for (size_t i = 0; i < n; i++) smp[0][i] = urand(&rng);
-  hush__temporal_blend(&plan, (const float *const *)v, (const float *const *)smp, 1, age, 0.1f,
-                       o, 2);
-  int tblend_ok = 1;
-  for (size_t i = 0; i < n; i++) {
-    const float inv_age = age[i] > 1.0f ? 1.0f / age[i] : 1.0f;
-    const float a = 0.1f > inv_age ? 0.1f : inv_age;
-    int32_t idx[9];
-    float w[9];
-    const int nt = hush__reproject_taps(&plan, i, idx, w);
-    const float want =
-        nt ? (1.0f - a) * hush__reproject_apply(v[0], idx, w, nt) + a * smp[0][i] : smp[0][i];
-    tblend_ok &= fbits(o[0][i]) == fbits(want);
+  /* temporal_blend, 1..4 channels in one pass and 6 (groups of 4 and 2),
+   * also with out aliasing sample, against the per-pixel definition */
+  {
+    enum { TB_MAX = 6 };
+    float *tp[TB_MAX], *ts[TB_MAX], *to[TB_MAX];
+    for (int c = 0; c < TB_MAX; c++) {
+      REQUIRE((tp[c] = malloc(n * sizeof(float))) && (ts[c] = malloc(n * sizeof(float))) &&
+              (to[c] = malloc(n * sizeof(float))));
+      for (size_t i = 0; i < n; i++) {
+        tp[c][i] = 10.0f * urand(&rng) - 3.0f;
+        ts[c][i] = urand(&rng);
+      }
+    }
+    const int chs[5] = {1, 2, 3, 4, 6};
+    int tblend_ok = 1;
+    for (int q = 0; q < 5 * 2; q++) {
+      const int nch = chs[q % 5], alias = q >= 5;
+      float *dst[TB_MAX];
+      for (int c = 0; c < nch; c++) {
+        dst[c] = to[c];
+        if (alias) memcpy(to[c], ts[c], n * sizeof(float)); /* sample and out the same */
+      }
+      hush__temporal_blend(&plan, (const float *const *)tp,
+                           alias ? (const float *const *)to : (const float *const *)ts, nch, age,
+                           0.1f, dst, 1 + q % 2);
+      for (size_t i = 0; i < n; i++) {
+        const float inv_age = age[i] > 1.0f ? 1.0f / age[i] : 1.0f;
+        const float a = 0.1f > inv_age ? 0.1f : inv_age;
+        int32_t idx[9];
+        float w[9];
+        const int nt = hush__reproject_taps(&plan, i, idx, w);
+        for (int c = 0; c < nch; c++) {
+          const float want =
+              nt ? (1.0f - a) * hush__reproject_apply(tp[c], idx, w, nt) + a * ts[c][i] : ts[c][i];
+          tblend_ok &= fbits(to[c][i]) == fbits(want);
+        }
+      }
+    }
+    CHECK(tblend_ok);
+    for (int c = 0; c < TB_MAX; c++) {
+      free(tp[c]);
+      free(ts[c]);
+      free(to[c]);
+    }
   }
-  CHECK(tblend_ok);
 
   /* accumulation: three frames against the rule of accumulation.h, per
    * pixel, from the history of the previous frame */
@@ -1679,6 +1708,84 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   }
   CHECK(accum_ok);
   hush__accum_free(&acc);
+
+  /* accumulation with holes (hush__accum_blend_holes, vectorised over rows
+   * of a plan with blocks): four frames, a third of the pixels without a
+   * sample each, so the history has empty pixels (age 0), against the rule
+   * of accumulation.h per pixel (empty taps out, weights renormalised; a
+   * hole keeps the history, its age not increased) */
+  REQUIRE(hush__accum_init(dev, &acc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  float *spp = malloc(n * sizeof(float));
+  REQUIRE(spp);
+  int holes_ok = 1, saw_empty = 0;
+  for (int f = 0; f < 4; f++) {
+    for (int c = 0; c < 3; c++)
+      for (size_t i = 0; i < n; i++) smp[c][i] = (float)(c + 1) * urand(&rng);
+    for (size_t i = 0; i < n; i++) spp[i] = urand(&rng) < 0.33f ? 0.0f : 1.0f;
+    const int had = acc.has_history;
+    const int src = acc.latest;
+    hush__accum_blend_holes(&acc, &plan, (const float *const *)smp, spp, &ap, var,
+                            f % 2 ? 1 : 2);
+    const hush_planar *col = hush__accum_color(&acc);
+    const hush_planar *mom = hush__accum_moments(&acc);
+    const float *ages = hush__accum_age(&acc)->plane[0];
+    int any_empty = 0;
+    for (size_t i = 0; i < n; i++) {
+      int32_t idx[9];
+      float w[9];
+      const int nt = had ? hush__reproject_taps(&plan, i, idx, w) : 0;
+      float wsum = 0.0f;
+      for (int t = 0; t < nt; t++) {
+        w[t] = acc.age[src].plane[0][idx[t]] > 0.0f ? w[t] : 0.0f;
+        wsum += w[t];
+      }
+      const int has = wsum > 0.0f;
+      const float inv = has ? 1.0f / wsum : 0.0f;
+      float h[3] = {0.0f, 0.0f, 0.0f}, hm1 = 0.0f, hm2 = 0.0f, ha = 0.0f;
+      if (has) {
+        for (int c = 0; c < 3; c++)
+          h[c] = hush__reproject_apply(acc.color[src].plane[c], idx, w, nt) * inv;
+        hm1 = hush__reproject_apply(acc.moments[src].plane[0], idx, w, nt) * inv;
+        hm2 = hush__reproject_apply(acc.moments[src].plane[1], idx, w, nt) * inv;
+        ha = hush__reproject_apply(acc.age[src].plane[0], idx, w, nt) * inv;
+      }
+      float c_want[3], m1, m2, age_want;
+      if (spp[i] > 0.0f) {
+        const float l = hush_luminance(smp[0][i], smp[1][i], smp[2][i]);
+        float a_ = floorf(ha + 0.5f) + 1.0f;
+        a_ = a_ > 6.0f ? 6.0f : a_;
+        a_ = has ? a_ : 1.0f;
+        const float inv_age = 1.0f / a_;
+        const float a = 0.05f > inv_age ? 0.05f : inv_age;
+        const float am = 0.2f > inv_age ? 0.2f : inv_age;
+        for (int c = 0; c < 3; c++)
+          c_want[c] = has ? (1.0f - a) * h[c] + a * smp[c][i] : smp[c][i];
+        m1 = has ? (1.0f - am) * hm1 + am * l : l;
+        m2 = has ? (1.0f - am) * hm2 + am * (l * l) : l * l;
+        age_want = a_;
+      } else {
+        float a_ = has ? floorf(ha + 0.5f) : 0.0f;
+        a_ = a_ > 6.0f ? 6.0f : a_;
+        age_want = has && a_ < 1.0f ? 1.0f : a_;
+        for (int c = 0; c < 3; c++) c_want[c] = h[c];
+        m1 = hm1;
+        m2 = hm2;
+      }
+      const float m1sq = m1 * m1;
+      const float vv = m2 - m1sq;
+      for (int c = 0; c < 3; c++) holes_ok &= fbits(col->plane[c][i]) == fbits(c_want[c]);
+      holes_ok &= fbits(mom->plane[0][i]) == fbits(m1) && fbits(mom->plane[1][i]) == fbits(m2);
+      holes_ok &= fbits(ages[i]) == fbits(age_want);
+      holes_ok &= fbits(var[i]) == fbits(vv > 0.0f ? vv : 0.0f);
+      any_empty |= !(age_want > 0.0f);
+    }
+    holes_ok &= acc.empty == any_empty;
+    saw_empty |= any_empty;
+  }
+  CHECK(holes_ok);
+  if (W > 20 && H > 20) CHECK(saw_empty); /* the case the renormalisation is for */
+  hush__accum_free(&acc);
+  free(spp);
   free(var);
   free(age);
   for (int k = 0; k < 4; k++) {

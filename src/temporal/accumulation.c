@@ -385,6 +385,107 @@ static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, con
   return !(q.age > 0.0f);
 }
 
+/*
+ * blend_pixel_holes for a whole row of a plan with blocks, in a loop the
+ * compiler vectorises (has_spp, nc constants): every pixel as a block
+ * (non-BILINEAR pixels have weights 0 and origin 0, so no history, as
+ * their taps give for NONE), the weights of empty taps zeroed and the sums
+ * taken over all four taps in tap order from 0 — the masked-out taps add
+ * +-0, which leaves every sum's bits as the per-pixel loop's over the
+ * valid taps only — then the traced and the hole results selected. The
+ * rare 3X3 pixels are redone by the caller (and left out of the returned
+ * "some pixel is empty" flag here).
+ */
+static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, const float *spp,
+                                              const int has_spp, const int nc) {
+  const hush_reproject_plan *plan = b->plan;
+  const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
+  const int W = (int)b->W;
+  const int32_t *origin = plan->origin + row;
+  const uint8_t *kind = plan->kind + row;
+  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row;
+  const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
+  const float *pm1 = b->pm1, *pm2 = b->pm2, *pa = b->pa;
+  const float *sp = has_spp ? spp + row : NULL;
+  float *om1 = b->om1 + row, *om2 = b->om2 + row, *oa = b->oa + row;
+  float *var = b->variance ? b->variance + row : NULL;
+  const float *p0 = b->pc[0], *p1 = b->pc[nc > 1], *p2 = b->pc[nc > 2 ? 2 : 0];
+  const float *p3 = b->pc[nc > 3 ? 3 : 0];
+  const float *s0 = b->sample[0] + row, *s1 = b->sample[nc > 1] + row;
+  const float *s2 = b->sample[nc > 2 ? 2 : 0] + row, *s3 = b->sample[nc > 3 ? 3 : 0] + row;
+  float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
+  float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
+  int empty = 0;
+#pragma omp simd reduction(| : empty)
+  for (int x = 0; x < W; x++) {
+    const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
+    const int32_t o = origin[x] & -(int32_t)bil;
+    const int32_t t1 = o + 1, t2 = o + W, t3 = o + W + 1;
+    /* a tap of an empty pixel (age 0) takes no part */
+    const float a0 = hush__select_bits(pa[o] > 0.0f, w0[x], 0.0f);
+    const float a1 = hush__select_bits(pa[t1] > 0.0f, w1[x], 0.0f);
+    const float a2 = hush__select_bits(pa[t2] > 0.0f, w2[x], 0.0f);
+    const float a3 = hush__select_bits(pa[t3] > 0.0f, w3[x], 0.0f);
+    const float wsum = 0.0f + a0 + a1 + a2 + a3;
+    const int has = wsum > 0.0f;
+    const float inv = has ? 1.0f / (has ? wsum : 1.0f) : 0.0f;
+#define HUSH_APPLY4(t) ((0.0f + a0 * (t)[o] + a1 * (t)[t1] + a2 * (t)[t2] + a3 * (t)[t3]) * inv)
+    blend_px q;
+    q.s0 = s0[x];
+    q.s1 = nc > 1 ? s1[x] : 0.0f;
+    q.s2 = nc > 2 ? s2[x] : 0.0f;
+    q.s3 = nc > 3 ? s3[x] : 0.0f;
+    /* computed for every pixel, then selected: no load under a branch */
+    q.h0 = hush__select_bits(has, HUSH_APPLY4(p0), 0.0f);
+    q.h1 = nc > 1 ? hush__select_bits(has, HUSH_APPLY4(p1), 0.0f) : 0.0f;
+    q.h2 = nc > 2 ? hush__select_bits(has, HUSH_APPLY4(p2), 0.0f) : 0.0f;
+    q.h3 = nc > 3 ? hush__select_bits(has, HUSH_APPLY4(p3), 0.0f) : 0.0f;
+    q.hm1 = hush__select_bits(has, HUSH_APPLY4(pm1), 0.0f);
+    q.hm2 = hush__select_bits(has, HUSH_APPLY4(pm2), 0.0f);
+    q.ha = hush__select_bits(has, HUSH_APPLY4(pa), 0.0f);
+#undef HUSH_APPLY4
+    const float h0 = q.h0, h1 = q.h1, h2 = q.h2, h3 = q.h3, hm1 = q.hm1, hm2 = q.hm2;
+    /* a hole: no new sample; the history as it was, or nothing */
+    float hage = has ? hush__floorf_vec(q.ha + 0.5f) : 0.0f;
+    hage = hage > p.max_age ? p.max_age : hage;
+    hage = has && hage < 1.0f ? 1.0f : hage;
+    const float hm1sq = hm1 * hm1;
+    const float hv = hm2 - hm1sq;
+    const float hvar = hv > 0.0f ? hv : 0.0f;
+    blend_compute(&p, &q, has, nc); /* traced */
+    const int traced = has_spp ? sp[x] > 0.0f : 1;
+    const float c0 = traced ? q.c0 : h0, c1 = traced ? q.c1 : h1;
+    const float c2 = traced ? q.c2 : h2, c3 = traced ? q.c3 : h3;
+    const float m1 = traced ? q.m1 : hm1, m2 = traced ? q.m2 : hm2;
+    const float age = traced ? q.age : hage, v = traced ? q.var : hvar;
+    o0[x] = c0;
+    if (nc > 1) o1[x] = c1;
+    if (nc > 2) o2[x] = c2;
+    if (nc > 3) o3[x] = c3;
+    om1[x] = m1;
+    om2[x] = m2;
+    oa[x] = age;
+    if (var) var[x] = v;
+    empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
+  }
+  return empty;
+}
+
+/* One row of hush__accum_blend_holes with nc a constant. */
+static HUSH_ALWAYS_INLINE int blend_rows_holes(const blend_ctx *b, int y, const float *spp,
+                                               const int nc) {
+  const size_t row = (size_t)y * b->W;
+  int empty = 0;
+  if (b->plan && b->plan->blocks) {
+    empty = spp ? blend_row_holes(b, row, spp, 1, nc) : blend_row_holes(b, row, NULL, 0, nc);
+    for (size_t i = row; i < row + b->W; i++)
+      if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) empty |= blend_pixel_holes(b, i, spp, nc);
+  } else {
+    for (size_t i = row; i < row + b->W; i++) empty |= blend_pixel_holes(b, i, spp, nc);
+  }
+  return empty;
+}
+
 void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
                              const float *const *sample, const float *spp,
                              const hush_accum_params *params, float *variance, int threads) {
@@ -395,17 +496,17 @@ void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
   if (threads < 1) threads = 1;
   const int dst = 1 - acc->latest;
   const int nc = acc->channels;
-  const long long count = (long long)acc->width * acc->height;
+  const int H = (int)acc->height;
   blend_ctx b;
   blend_setup(&b, acc, plan, sample, params, variance);
   int empty = 0;
-#pragma omp parallel for reduction(| : empty) schedule(static) num_threads(threads)
-  for (long long i = 0; i < count; i++) {
+#pragma omp parallel for reduction(| : empty) schedule(dynamic, BLEND_ROWS) num_threads(threads)
+  for (int y = 0; y < H; y++) {
     switch (nc) {
-    case 1: empty |= blend_pixel_holes(&b, (size_t)i, spp, 1); break;
-    case 2: empty |= blend_pixel_holes(&b, (size_t)i, spp, 2); break;
-    case 3: empty |= blend_pixel_holes(&b, (size_t)i, spp, 3); break;
-    default: empty |= blend_pixel_holes(&b, (size_t)i, spp, 4); break;
+    case 1: empty |= blend_rows_holes(&b, y, spp, 1); break;
+    case 2: empty |= blend_rows_holes(&b, y, spp, 2); break;
+    case 3: empty |= blend_rows_holes(&b, y, spp, 3); break;
+    default: empty |= blend_rows_holes(&b, y, spp, 4); break;
     }
   }
   acc->latest = dst;
@@ -422,6 +523,131 @@ static inline float blend_alpha(float age, float alpha_min) {
   return alpha_min > inv_age ? alpha_min : inv_age;
 }
 
+/* What hush__temporal_blend reads and writes, resolved once per call. */
+typedef struct tblend_ctx {
+  const hush_reproject_plan *plan;
+  size_t W, size;
+  const float *age;
+  float alpha_min;
+} tblend_ctx;
+
+/*
+ * Pixels row + x_begin .. + len - 1 of hush__temporal_blend for nc (1..4,
+ * a constant) channels in one pass: the plan's origin, weights, kind and
+ * the age are read once for all channels (the per-channel loop read them
+ * once per channel). Taps as in blend_pixels: MODE_CONTIGUOUS (base + x),
+ * MODE_WINDOW (tb[channel][tap][x - x_begin]) or MODE_GATHER. The same
+ * operations in the same order per channel as the per-pixel definition, so
+ * the same bits. out may alias sample (pixel x is read before it is
+ * written), so neither is restrict.
+ */
+static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *const *prev,
+                                             const float *const *sample, float *const *out,
+                                             size_t row, int x_begin, int len, int32_t base,
+                                             const int mode,
+                                             const float (*restrict tb)[4][CHUNK], const int nc) {
+  const int contiguous = mode == MODE_CONTIGUOUS;
+  const int window = mode == MODE_WINDOW;
+  const int x_end = x_begin + len;
+  const hush_reproject_plan *plan = t->plan;
+  const int W = (int)t->W;
+  const float alpha_min = t->alpha_min;
+  const int32_t *origin = plan->origin + row;
+  const uint8_t *kind = plan->kind + row;
+  const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row;
+  const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
+  const float *age = t->age + row;
+  /* channels as scalars (channel 0 stands in for the missing ones, never
+   * read or written): see blend_pixels */
+  const float *p0 = prev[0], *p1 = prev[nc > 1], *p2 = prev[nc > 2 ? 2 : 0];
+  const float *p3 = prev[nc > 3 ? 3 : 0];
+  const float *s0 = sample[0] + row, *s1 = sample[nc > 1] + row;
+  const float *s2 = sample[nc > 2 ? 2 : 0] + row, *s3 = sample[nc > 3 ? 3 : 0] + row;
+  float *o0 = out[0] + row, *o1 = out[nc > 1] + row;
+  float *o2 = out[nc > 2 ? 2 : 0] + row, *o3 = out[nc > 3 ? 3 : 0] + row;
+#pragma omp simd
+  for (int x = x_begin; x < x_end; x++) {
+    const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
+    const int32_t o = contiguous ? base + x : origin[x] & -(int32_t)bil;
+    const float a0 = w0[x], a1 = w1[x], a2 = w2[x], a3 = w3[x];
+    const int k = x - x_begin;
+    const float a = blend_alpha(age[x], alpha_min);
+#define HUSH_TAP(p, c, tx, ty) (window ? tb[c][(ty) * 2 + (tx)][k] : (p)[o + (ty) * W + (tx)])
+    /* computed for every pixel, then selected: no load under a branch */
+#define HUSH_BLEND(p, s, c)                                                                     \
+  hush__select_bits(bil,                                                                        \
+                    (1.0f - a) * (a0 * HUSH_TAP(p, c, 0, 0) + a1 * HUSH_TAP(p, c, 1, 0) +       \
+                                  a2 * HUSH_TAP(p, c, 0, 1) + a3 * HUSH_TAP(p, c, 1, 1)) +      \
+                        a * (s)[x],                                                             \
+                    (s)[x])
+    const float r0 = HUSH_BLEND(p0, s0, 0);
+    const float r1 = nc > 1 ? HUSH_BLEND(p1, s1, 1) : 0.0f;
+    const float r2 = nc > 2 ? HUSH_BLEND(p2, s2, 2) : 0.0f;
+    const float r3 = nc > 3 ? HUSH_BLEND(p3, s3, 3) : 0.0f;
+#undef HUSH_BLEND
+#undef HUSH_TAP
+    o0[x] = r0;
+    if (nc > 1) o1[x] = r1;
+    if (nc > 2) o2[x] = r2;
+    if (nc > 3) o3[x] = r3;
+  }
+}
+
+/* One row of hush__temporal_blend for nc (1..4) channels, chunk by chunk
+ * (the modes of blend_row), then the rare 3X3 pixels through their taps. */
+static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *const *prev,
+                                          const float *const *sample, float *const *out,
+                                          size_t row, const int nc) {
+  const int W = (int)t->W;
+  const hush_reproject_plan *plan = t->plan;
+  const int32_t *origin = plan->origin + row;
+  const uint8_t *kind = plan->kind + row;
+  for (int x0 = 0; x0 < W; x0 += CHUNK) {
+    const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
+    if (x1 - x0 < CHUNK) {
+      tblend_pixels(t, prev, sample, out, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc);
+      continue;
+    }
+    int contiguous = 1;
+    for (int x = x0; x < x1; x++)
+      contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
+    if (contiguous) {
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL,
+                    nc);
+      continue;
+    }
+#ifdef HUSH_HAVE_WINDOW
+    uint8_t use[CHUNK];
+    int32_t e[CHUNK], dy[CHUNK];
+    for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
+    int32_t base;
+    const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, t->size, &base, e, dy);
+    if (rows) {
+      float tb[4][4][CHUNK] __attribute__((aligned(64)));
+      for (int c = 0; c < nc; c++) {
+        if (rows == 1)
+          hush__window_taps(prev[c], base, W, e, dy, 1, tb[c]);
+        else
+          hush__window_taps(prev[c], base, W, e, dy, 2, tb[c]);
+      }
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_WINDOW,
+                    (const float(*)[4][CHUNK])tb, nc);
+      continue;
+    }
+#endif
+    tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
+  }
+  for (size_t i = row; i < row + (size_t)W; i++) {
+    if (plan->kind[i] != HUSH_FOOTPRINT_3X3) continue;
+    const float a = blend_alpha(t->age[i], t->alpha_min);
+    int32_t idx[9];
+    float w[9];
+    const int n = hush__reproject_taps(plan, i, idx, w);
+    for (int c = 0; c < nc; c++)
+      out[c][i] = (1.0f - a) * hush__reproject_apply(prev[c], idx, w, n) + a * sample[c][i];
+  }
+}
+
 void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *prev,
                           const float *const *sample, int channels, const float *age,
                           float alpha_min, float *const *out, int threads) {
@@ -429,8 +655,10 @@ void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *p
   if (channels > BLEND_MAX) channels = BLEND_MAX;
   const int H = (int)plan->height;
   const size_t W = plan->width;
-  const int32_t Wi = (int32_t)W;
-#pragma omp parallel for schedule(static) num_threads(threads)
+  const tblend_ctx t = {plan, W, W * plan->height, age, alpha_min};
+  /* rows in small dynamic chunks, as hush__accum_blend: gathered chunks
+   * cost ~3x contiguous ones and cluster in bands */
+#pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) {
     const size_t row = (size_t)y * W;
     if (!prev) {
@@ -451,28 +679,17 @@ void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *p
       }
       continue;
     }
-    /* blocks (NONE pixels: weights 0, and the sample), then the 3X3 pixels */
-    for (int c = 0; c < channels; c++) {
-      const float *p = prev[c], *s = sample[c];
-      float *o = out[c];
-#pragma omp simd
-      for (size_t i = row; i < row + W; i++) {
-        const int32_t j = hush__reproject_block_origin(plan, i);
-        const float h = plan->w[0][i] * p[j] + plan->w[1][i] * p[j + 1] +
-                        plan->w[2][i] * p[j + Wi] + plan->w[3][i] * p[j + Wi + 1];
-        const float a = blend_alpha(age[i], alpha_min);
-        const float blended = (1.0f - a) * h + a * s[i];
-        o[i] = plan->kind[i] == HUSH_FOOTPRINT_BILINEAR ? blended : s[i];
+    /* blocks (NONE pixels: the sample), then the 3X3 pixels; channels in
+     * groups of up to 4 per pass */
+    for (int c0 = 0; c0 < channels; c0 += 4) {
+      const float *const *p = prev + c0, *const *s = sample + c0;
+      float *const *o = out + c0;
+      switch (channels - c0) {
+      case 1: tblend_row(&t, p, s, o, row, 1); break;
+      case 2: tblend_row(&t, p, s, o, row, 2); break;
+      case 3: tblend_row(&t, p, s, o, row, 3); break;
+      default: tblend_row(&t, p, s, o, row, 4); break;
       }
-    }
-    for (size_t i = row; i < row + W; i++) {
-      if (plan->kind[i] != HUSH_FOOTPRINT_3X3) continue;
-      const float a = blend_alpha(age[i], alpha_min);
-      int32_t idx[9];
-      float w[9];
-      const int n = hush__reproject_taps(plan, i, idx, w);
-      for (int c = 0; c < channels; c++)
-        out[c][i] = (1.0f - a) * hush__reproject_apply(prev[c], idx, w, n) + a * sample[c][i];
     }
   }
 }

@@ -77,7 +77,9 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
  * Every history is gathered from the taps of non-empty pixels only, their
  * weights renormalised, so that an empty pixel never darkens a neighbour.
  * With spp NULL and no empty pixel in the history this is exactly
- * hush__accum_blend (bit for bit); otherwise per pixel (not vectorised).
+ * hush__accum_blend (bit for bit); otherwise row by row, vectorised over
+ * the plan's blocks (the rare 3X3 footprints and plans without blocks per
+ * pixel), the same bits as the per-pixel rule.
  * acc->empty tells whether any pixel is left empty.
  */
 void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,

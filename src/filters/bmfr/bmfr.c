@@ -542,10 +542,15 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
     return s;
   static const hush_gbuffer_images gimages = {I_DEPTH, I_NORMAL, I_POSITION, I_ID, I_MOTION};
-  if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  /* the colour demodulated as it is imported (one pass less), unless the
+   * emission comes off first or holes may change the albedo (as svgf) */
+  const int demod_fused = demod && !emis && !hush__filter_view(f, I_SPP);
+  if (!demod_fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  if (demod_fused && (s = hush__filter_import_demodulated(f, I_COLOR, &st->albedo, &st->color)))
+    return s;
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
   if (adaptive && (s = bmfr_adaptive_import(f, &st->ad, I_GRADIENT))) return s;
@@ -562,7 +567,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
-  if (demod) hush__demodulate(&st->color, &st->albedo, threads);
+  if (demod && !demod_fused) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA);
   ap.alpha_moments_min = ap.alpha_min;
@@ -633,7 +638,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   hush__filter_timing_stage(f, "accumulate_fitted");
 
   /* ---- remodulate, TAA, export: with TAA, the remodulation is fused into
-   * its first pass (one read of the fit and the albedo) */
+   * its first pass (one read of the fit and the albedo); without TAA or
+   * emission, into the export */
   const hush_planar *result = &st->fhist[cur];
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
@@ -666,12 +672,12 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                                 demod ? (const float *const *)st->albedo.plane : NULL, &tp,
                                 threads);
     rgb = *hush__taa_output(&st->taa);
-  } else if (demod) {
-    hush__remodulate(&st->albedo, result, threads);
-    rgb = st->albedo;
   }
   hush__filter_timing_stage(f, "taa");
-  hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
+  if (!emis && !with_taa && demod) /* nothing else needs the remodulated planes: one pass */
+    hush__export_remodulated(result, &st->albedo, hush__filter_view(f, I_OUTPUT), threads);
+  else
+    hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *fit_view = hush__filter_view(f, I_FITTED);
   if (fit_view) hush__view_export(&st->fitted, fit_view, threads);
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
