@@ -49,9 +49,7 @@ hush_status hush__reproject_plan_init(hush_device device, hush_reproject_plan *p
   plan->origin = calloc(n, sizeof *plan->origin);
   plan->mask = calloc(n, sizeof *plan->mask);
   plan->kind = calloc(n, sizeof *plan->kind);
-  plan->fx = hush__alloc_floats(n);
-  plan->fy = hush__alloc_floats(n);
-  int ok = plan->origin && plan->mask && plan->kind && plan->fx && plan->fy;
+  int ok = plan->origin && plan->mask && plan->kind;
   for (int t = 0; t < 4; t++) {
     plan->w[t] = hush__alloc_floats(n);
     ok = ok && plan->w[t];
@@ -71,8 +69,6 @@ void hush__reproject_plan_free(hush_reproject_plan *plan) {
   free(plan->origin);
   free(plan->mask);
   free(plan->kind);
-  hush__free_floats(plan->fx);
-  hush__free_floats(plan->fy);
   for (int t = 0; t < 4; t++) hush__free_floats(plan->w[t]);
   memset(plan, 0, sizeof *plan);
 }
@@ -87,8 +83,6 @@ void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads) {
     memset(plan->origin + row, 0, W * sizeof *plan->origin);
     memset(plan->mask + row, 0, W * sizeof *plan->mask);
     memset(plan->kind + row, 0, W * sizeof *plan->kind);
-    memset(plan->fx + row, 0, W * sizeof *plan->fx);
-    memset(plan->fy + row, 0, W * sizeof *plan->fy);
     for (int t = 0; t < 4; t++) memset(plan->w[t] + row, 0, W * sizeof *plan->w[t]);
   }
 }
@@ -421,14 +415,21 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
  * The full per-pixel rule, for any pixel: the bilinear footprint of the
  * back-projected point (px, py) with each tap tested by tap_ok (the depth
  * gradient computed lazily), moved inside the image when it overhangs the
- * border; else the 3x3 fallback; else NONE. Writes the pixel's origin, mask,
- * kind, fx and fy (not w). build_row sends here only the pixels its span
- * test could not settle: footprints not wholly inside the image, and those
- * with no consistent tap (3x3 fallback). have_slopes: gx, gy are tap_ok's
- * depth slopes, already computed.
+ * border; else the 3x3 fallback; else NONE. Returns the pixel's footprint.
+ * build_row sends here only the pixels its span test could not settle:
+ * footprints not wholly inside the image, and those with no consistent tap
+ * (3x3 fallback). blocks: the plan's. have_slopes: gx, gy are tap_ok's depth
+ * slopes, already computed.
  */
-static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int y, float px,
-                       float py, float ze, int have_slopes, float gx, float gy) {
+typedef struct footprint {
+  int32_t origin;
+  unsigned mask;
+  int kind;      /* hush_footprint */
+  float fx, fy;  /* BILINEAR: the fractions; else 0 */
+} footprint;
+
+static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float px, float py,
+                            float ze, int have_slopes, float gx, float gy) {
   const hush_gbuffer *cur = &c->in->cur;
   const int W = c->W, H = c->H;
   const size_t i = (size_t)y * (size_t)W + (size_t)x;
@@ -470,7 +471,7 @@ static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int
     if (mask) {
       kind = HUSH_FOOTPRINT_BILINEAR;
       int bx = x0, by = y0;
-      if (plan->blocks) {
+      if (blocks) {
         /* move an overhanging footprint inside: same taps, same weights */
         if (bx < 0) {
           bx = 0;
@@ -508,11 +509,8 @@ static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int
     }
   }
   if (kind != HUSH_FOOTPRINT_BILINEAR) fx = fy = 0.0f;
-  plan->origin[i] = origin;
-  plan->mask[i] = (uint16_t)mask;
-  plan->kind[i] = kind;
-  plan->fx[i] = fx;
-  plan->fy[i] = fy;
+  const footprint fp = {origin, mask, kind, fx, fy};
+  return fp;
 }
 
 /* Pixels per span: the back-projection and the tap tests run over spans of
@@ -622,7 +620,9 @@ typedef struct span_taps {
    * of a chunk of 16 at 128 bits (16 bytes), so 4 floats a vector */
   int32_t inside[SPAN];     /* the footprint lies wholly inside the image */
   int32_t mask[SPAN];       /* consistent taps */
-  int32_t done[SPAN];       /* 1: origin, mask, fx, fy are the pixel's final plan */
+  /* hush_footprint. The span test: BILINEAR where its origin, mask, fx, fy
+   * are final, else NONE (plan_pixel decides and overwrites all five). */
+  int32_t kind[SPAN];
 } span_taps;
 
 /* Pixels per chunk of the tap tests: a chunk whose footprints follow each
@@ -695,7 +695,7 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
         span_tap(&pv, j0 + W, bw[2], 0.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 2 |
         span_tap(&pv, j0 + W + 1, bw[3], 1.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 3;
     o->mask[k] = (int32_t)m;
-    o->done[k] = o->inside[k] & (m != 0u);
+    o->kind[k] = (o->inside[k] & (m != 0u)) ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
   }
 }
 
@@ -723,29 +723,21 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
   }
 }
 
-/* The span test's results into the plan (a vectorised copy): the settled
- * pixels, and whatever for the others, which plan_pixel overwrites. */
+/* A span's footprints into the plan, with their renormalised weights
+ * (hush__reproject_renormalised; 0 unless BILINEAR), in one vectorised pass
+ * over the span's L1-resident arrays: the fractions are not stored, so the
+ * plan costs 8 bytes a pixel less to write, and the weights need no second
+ * pass over the row. */
 static void store_span(const span_taps *restrict st, int32_t *restrict origin,
-                       uint16_t *restrict mask, uint8_t *restrict kind, float *restrict fx,
-                       float *restrict fy, int n) {
+                       uint16_t *restrict mask, uint8_t *restrict kind, float *restrict w0,
+                       float *restrict w1, float *restrict w2, float *restrict w3, int n) {
   for (int k = 0; k < n; k++) {
     origin[k] = st->origin[k];
     mask[k] = (uint16_t)st->mask[k];
-    kind[k] = st->done[k] ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
-    fx[k] = st->fx[k];
-    fy[k] = st->fy[k];
-  }
-}
-
-/* The renormalised weights of n pixels into w0..w3 (0 unless BILINEAR):
- * hush__reproject_renormalised, vectorised over a row of the plan. */
-static void row_weights(const uint16_t *restrict mask, const uint8_t *restrict kind,
-                        const float *restrict fx, const float *restrict fy, float *restrict w0,
-                        float *restrict w1, float *restrict w2, float *restrict w3, size_t n) {
-  for (size_t k = 0; k < n; k++) {
+    kind[k] = (uint8_t)st->kind[k];
     float w[4];
-    hush__reproject_renormalised(mask[k], fx[k], fy[k], w);
-    const int bil = kind[k] == HUSH_FOOTPRINT_BILINEAR;
+    hush__reproject_renormalised((unsigned)st->mask[k], st->fx[k], st->fy[k], w);
+    const int bil = st->kind[k] == HUSH_FOOTPRINT_BILINEAR;
     w0[k] = bil ? w[0] : 0.0f;
     w1[k] = bil ? w[1] : 0.0f;
     w2[k] = bil ? w[2] : 0.0f;
@@ -753,9 +745,19 @@ static void row_weights(const uint16_t *restrict mask, const uint8_t *restrict k
   }
 }
 
-/* One row of the plan: per span, the back-projection, the span test, then
- * plan_pixel for the pixels the test left open; then the weights. Plans
- * without blocks (an image 1 pixel wide or high) go through plan_pixel. */
+/* Pixel k of a span takes plan_pixel's footprint. */
+static inline void span_set(span_taps *st, int k, footprint fp) {
+  st->origin[k] = fp.origin;
+  st->mask[k] = (int32_t)fp.mask;
+  st->kind[k] = fp.kind;
+  st->fx[k] = fp.fx;
+  st->fy[k] = fp.fy;
+}
+
+/* One row of the plan, span by span: the back-projection, the span test,
+ * plan_pixel for the pixels the test left open, then the span into the
+ * plan. Plans without blocks (an image 1 pixel wide or high) go through
+ * plan_pixel. */
 static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
   const int W = c->W;
   const size_t row = (size_t)y * (size_t)W;
@@ -769,30 +771,31 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
       /* a 1-pixel-wide or -high image: no footprint lies inside it (and
        * the span test's taps at index 0 would not exist) */
       for (int k = 0; k < n; k++)
-        plan_pixel(c, plan, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f);
-      continue;
-    }
-    const int grad_test = c->grad > 0.0f;
-    if (c->use_id) {
-      if (grad_test)
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 1);
-      else
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 0);
+        span_set(&st, k,
+                 plan_pixel(c, 0, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f));
     } else {
-      if (grad_test)
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 1);
-      else
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 0);
+      const int grad_test = c->grad > 0.0f;
+      if (c->use_id) {
+        if (grad_test)
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 1);
+        else
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 0);
+      } else {
+        if (grad_test)
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 1);
+        else
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 0);
+      }
+      for (int k = 0; k < n; k++)
+        if (st.kind[k] != HUSH_FOOTPRINT_BILINEAR)
+          span_set(&st, k,
+                   plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
+                              grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f));
     }
-    store_span(&st, plan->origin + row + x0, plan->mask + row + x0, plan->kind + row + x0,
-               plan->fx + row + x0, plan->fy + row + x0, n);
-    for (int k = 0; k < n; k++)
-      if (!st.done[k])
-        plan_pixel(c, plan, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
-                   grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f);
+    const size_t i = row + (size_t)x0;
+    store_span(&st, plan->origin + i, plan->mask + i, plan->kind + i, plan->w[0] + i,
+               plan->w[1] + i, plan->w[2] + i, plan->w[3] + i, n);
   }
-  row_weights(plan->mask + row, plan->kind + row, plan->fx + row, plan->fy + row,
-              plan->w[0] + row, plan->w[1] + row, plan->w[2] + row, plan->w[3] + row, (size_t)W);
 }
 
 /* Rows per chunk of the parallel build (see hush__reproject_build). */
