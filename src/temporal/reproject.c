@@ -786,11 +786,20 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
         else
           test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 0);
       }
-      for (int k = 0; k < n; k++)
-        if (st.kind[k] != HUSH_FOOTPRINT_BILINEAR)
-          span_set(&st, k,
-                   plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
-                              grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f));
+      /* the open pixels are few and scattered: a vectorised test per
+       * chunk skips the chunks without any (a branch per pixel cost
+       * mispredictions at each one) */
+      for (int k0 = 0; k0 < n; k0 += CHUNK) {
+        const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
+        int open = 0;
+        for (int k = k0; k < k1; k++) open |= st.kind[k] != HUSH_FOOTPRINT_BILINEAR;
+        if (!open) continue;
+        for (int k = k0; k < k1; k++)
+          if (st.kind[k] != HUSH_FOOTPRINT_BILINEAR)
+            span_set(&st, k,
+                     plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
+                                grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f));
+      }
     }
     const size_t i = row + (size_t)x0;
     store_span(&st, plan->origin + i, plan->mask + i, plan->kind + i, plan->w[0] + i,
