@@ -260,6 +260,49 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
   }
 }
 
+/* span_camera with use_pos for a span without background (the common
+ * case): every pixel projects its position, so the centre-ray transform,
+ * whose result span_camera computes and then discards for surfaces, is
+ * skipped: half the arithmetic of the loop (which is bound by the two
+ * AVX-512 FP ports), the same expressions and results. */
+static void span_camera_surfaces(const build_ctx *c, int y, int x_begin, int n,
+                                 float *restrict pxo, float *restrict pyo, float *restrict zeo) {
+  const hush_reproject_input *in = c->in;
+  const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
+  const float *X = in->position[0] + row, *Y = in->position[1] + row;
+  const float *Z = in->position[2] + row;
+  const float Wf = (float)c->W, Hf = (float)c->H;
+  const float *P = c->prev_vp;
+  const float P0 = P[0], P4 = P[4], P8 = P[8], P12 = P[12];
+  const float P1 = P[1], P5 = P[5], P9 = P[9], P13 = P[13];
+  const float P3 = P[3], P7 = P[7], P11 = P[11], P15 = P[15];
+  const float V0 = c->prev_w2v[2], V1 = c->prev_w2v[6], V2 = c->prev_w2v[10];
+  const float V3 = c->prev_w2v[14];
+  const float jx = c->jx, jy = c->jy;
+  for (int k = 0; k < n; k++) {
+    const float x3 = X[k], y3 = Y[k], z3 = Z[k];
+    const float qx = P0 * x3 + P4 * y3 + P8 * z3 + P12;
+    const float qy = P1 * x3 + P5 * y3 + P9 * z3 + P13;
+    const float qw = P3 * x3 + P7 * y3 + P11 * z3 + P15;
+    const float ze = -(V0 * x3 + V1 * y3 + V2 * z3 + V3);
+    const int ok = (qw > 0.0f) & (ze > 0.0f);
+    const float iw = 1.0f / qw;
+    const float px = (qx * iw + 1.0f) * 0.5f * Wf - jx;
+    const float py = (1.0f - qy * iw) * 0.5f * Hf - jy;
+    pxo[k] = ok ? px : NO_LOCATION;
+    pyo[k] = ok ? py : NO_LOCATION;
+    zeo[k] = ze;
+  }
+}
+
+/* Whether pixels x_begin .. x_begin + n - 1 of row y are all surfaces. */
+static int span_all_surface(const build_ctx *c, int y, int x_begin, int n) {
+  const float *z = c->in->cur.depth + (size_t)y * (size_t)c->W + (size_t)x_begin;
+  int bg = 0;
+  for (int k = 0; k < n; k++) bg |= !(z[k] > 0.0f);
+  return !bg;
+}
+
 static void back_project_general(const build_ctx *c, int x, int y, size_t i, float *pxo,
                                  float *pyo, float *zeo);
 
@@ -282,7 +325,9 @@ static void back_project_span(const build_ctx *c, int y, int x_begin, int n, spa
     else
       span_vectors(c, y, x_begin, n, o.px, o.py, o.ze, 0);
   } else {
-    if (c->has_position)
+    if (c->has_position && span_all_surface(c, y, x_begin, n))
+      span_camera_surfaces(c, y, x_begin, n, o.px, o.py, o.ze);
+    else if (c->has_position)
       span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 1);
     else
       span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 0);
