@@ -464,7 +464,9 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
  * build_row sends here only the pixels its span test could not settle:
  * footprints not wholly inside the image, and those with no consistent tap
  * (3x3 fallback). blocks: the plan's. have_slopes: gx, gy are tap_ok's depth
- * slopes, already computed.
+ * slopes, already computed. bilinear_empty: the span test found no
+ * consistent tap in this footprint, wholly inside the image (its test is
+ * tap_ok's, bit for bit), so only the 3x3 fallback is left to try.
  */
 typedef struct footprint {
   int32_t origin;
@@ -474,7 +476,8 @@ typedef struct footprint {
 } footprint;
 
 static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float px, float py,
-                            float ze, int have_slopes, float gx, float gy) {
+                            float ze, int have_slopes, float gx, float gy,
+                            int bilinear_empty) {
   const hush_gbuffer *cur = &c->in->cur;
   const int W = c->W, H = c->H;
   const size_t i = (size_t)y * (size_t)W + (size_t)x;
@@ -506,7 +509,7 @@ static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float 
     fy = sy - fly;
     float bw[4];
     hush__reproject_bilinear(fx, fy, bw);
-    for (int t = 0; t < 4; t++) {
+    for (int t = 0; t < 4 && !bilinear_empty; t++) {
       const int xt = x0 + (t & 1), yt = y0 + (t >> 1);
       if (xt < 0 || xt >= W || yt < 0 || yt >= H || !(bw[t] >= HUSH_REPROJECT_MIN_WEIGHT))
         continue;
@@ -817,7 +820,8 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
        * the span test's taps at index 0 would not exist) */
       for (int k = 0; k < n; k++)
         span_set(&st, k,
-                 plan_pixel(c, 0, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f));
+                 plan_pixel(c, 0, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f,
+                            0));
     } else {
       const int grad_test = c->grad > 0.0f;
       if (c->use_id) {
@@ -843,7 +847,8 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
           if (st.kind[k] != HUSH_FOOTPRINT_BILINEAR)
             span_set(&st, k,
                      plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
-                                grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f));
+                                grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f,
+                                st.inside[k]));
       }
     }
     const size_t i = row + (size_t)x0;
