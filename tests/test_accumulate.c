@@ -1171,7 +1171,8 @@ static void test_module_plan(hush_device dev) {
   {
     const size_t i = (size_t)2 * W + (W - 1);
     CHECK(plan.kind[i] == HUSH_FOOTPRINT_BILINEAR && plan.mask[i] == 0xa);
-    CHECK(plan.origin[i] == 2 * W + (W - 2) && plan.fx[i] == 1.0f);
+    /* fx = 1: the left column's weights are 0 */
+    CHECK(plan.origin[i] == 2 * W + (W - 2) && plan.w[0][i] == 0.0f && plan.w[2][i] == 0.0f);
     CHECK_NEAR(out[i], (float)(W - 1) + 25.0f, 1e-4f);
     int32_t idx[9];
     float w[9];
@@ -1557,9 +1558,7 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   }
   int same = memcmp(plan.origin, plan1.origin, n * sizeof *plan.origin) == 0 &&
              memcmp(plan.mask, plan1.mask, n * sizeof *plan.mask) == 0 &&
-             memcmp(plan.kind, plan1.kind, n) == 0 &&
-             memcmp(plan.fx, plan1.fx, n * sizeof(float)) == 0 &&
-             memcmp(plan.fy, plan1.fy, n * sizeof(float)) == 0;
+             memcmp(plan.kind, plan1.kind, n) == 0;
   for (int t = 0; t < 4; t++) same &= memcmp(plan.w[t], plan1.w[t], n * sizeof(float)) == 0;
   CHECK(same);
   if (smooth) {
@@ -1581,10 +1580,22 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   int weights_ok = 1;
   for (size_t i = 0; i < n; i++) {
     count[plan.kind[i]]++;
-    float w[4] = {0.0f, 0.0f, 0.0f, 0.0f};
-    if (plan.kind[i] == HUSH_FOOTPRINT_BILINEAR)
-      hush__reproject_renormalised(plan.mask[i], plan.fx[i], plan.fy[i], w);
-    for (int t = 0; t < 4; t++) weights_ok &= fbits(plan.w[t][i]) == fbits(w[t]);
+    /* BILINEAR: renormalised bilinear weights of the masked taps (with all
+     * four taps the fractions are fx = w1 + w3, fy = w2 + w3); else 0 */
+    const int bil = plan.kind[i] == HUSH_FOOTPRINT_BILINEAR;
+    float sum = 0.0f;
+    for (int t = 0; t < 4; t++) {
+      const float wt = plan.w[t][i];
+      weights_ok &= wt >= 0.0f && (wt == 0.0f || (bil && (plan.mask[i] >> t & 1u)));
+      sum += wt;
+    }
+    weights_ok &= bil ? fabsf(sum - 1.0f) < 1e-5f : sum == 0.0f;
+    if (bil && plan.mask[i] == 15u) {
+      float w[4];
+      hush__reproject_renormalised(15u, plan.w[1][i] + plan.w[3][i],
+                                   plan.w[2][i] + plan.w[3][i], w);
+      for (int t = 0; t < 4; t++) weights_ok &= fabsf(plan.w[t][i] - w[t]) < 1e-5f;
+    }
   }
   CHECK(weights_ok);
   if (W > 20 && H > 20)

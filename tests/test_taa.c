@@ -107,16 +107,15 @@ static void random_plan(hush_reproject_plan *plan, int W, int H) {
   for (size_t i = 0; i < (size_t)W * H; i++) {
     const float u = frand();
     plan->w[0][i] = plan->w[1][i] = plan->w[2][i] = plan->w[3][i] = 0.0f;
-    plan->fx[i] = plan->fy[i] = 0.0f;
     if (u < 0.7f) {
       const int ox = (int)(frand() * (float)(W - 1)), oy = (int)(frand() * (float)(H - 1));
       plan->kind[i] = HUSH_FOOTPRINT_BILINEAR;
       plan->origin[i] = oy * W + ox;
       plan->mask[i] = (uint16_t)(1 + (int)(frand() * 15.0f));
-      plan->fx[i] = 0.05f + 0.9f * frand();
-      plan->fy[i] = 0.05f + 0.9f * frand();
+      const float fx = 0.05f + 0.9f * frand();
+      const float fy = 0.05f + 0.9f * frand();
       float w[4];
-      hush__reproject_renormalised(plan->mask[i], plan->fx[i], plan->fy[i], w);
+      hush__reproject_renormalised(plan->mask[i], fx, fy, w);
       for (int t = 0; t < 4; t++) plan->w[t][i] = w[t];
     } else if (u < 0.85f) {
       const int ox = (int)(frand() * (float)(W - 2)), oy = (int)(frand() * (float)(H - 2));
@@ -245,7 +244,6 @@ static void test_resolve_smooth(hush_device dev, int H) {
       const int dx = y % 3 == 0 ? (x < W / 3 ? 1 : 2) : 1, dy = y % 2; /* steps on rows 0 mod 3 */
       const int ox = x + dx < W - 1 ? x + dx : W - 2, oy = y + dy < H - 1 ? y + dy : H - 2;
       plan.w[0][i] = plan.w[1][i] = plan.w[2][i] = plan.w[3][i] = 0.0f;
-      plan.fx[i] = plan.fy[i] = 0.0f;
       if (y == H / 2 && x % 7 == 3) {
         plan.kind[i] = x % 2 ? HUSH_FOOTPRINT_3X3 : HUSH_FOOTPRINT_NONE;
         plan.origin[i] = oy > 0 ? (oy - 1) * W + (ox > 0 ? ox - 1 : 0) : 0;
@@ -255,10 +253,10 @@ static void test_resolve_smooth(hush_device dev, int H) {
       plan.kind[i] = HUSH_FOOTPRINT_BILINEAR;
       plan.origin[i] = oy * W + ox;
       plan.mask[i] = frand() < 0.9f ? 15 : (uint16_t)(1 + (int)(frand() * 14.0f));
-      plan.fx[i] = 0.05f + 0.9f * frand();
-      plan.fy[i] = 0.05f + 0.9f * frand();
+      const float fx = 0.05f + 0.9f * frand();
+      const float fy = 0.05f + 0.9f * frand();
       float w[4];
-      hush__reproject_renormalised(plan.mask[i], plan.fx[i], plan.fy[i], w);
+      hush__reproject_renormalised(plan.mask[i], fx, fy, w);
       for (int t = 0; t < 4; t++) plan.w[t][i] = w[t];
       runs += ox == x + 1 && plan.kind[i] == HUSH_FOOTPRINT_BILINEAR;
     }

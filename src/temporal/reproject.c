@@ -9,6 +9,14 @@
  * accepted taps) and Dundr 2018 §4.1.3 (motion vectors or camera matrices,
  * disocclusion by depth). See reproject.h for the conventions.
  */
+/* With AVX-512, tuned for a core whose gathers are fast (vgatherdps: ~9
+ * cycles per 16 floats here): under the default -mtune=generic gcc emulates
+ * the tap loads of chunks whose footprints do not follow each other with
+ * scalar loads and inserts at 4 lanes (most of the build's time under camera
+ * motion). Tuning changes no result (no -ffast-math; contraction as before). */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__AVX512F__)
+#  pragma GCC target("tune=cooperlake", "prefer-vector-width=512")
+#endif
 #include "temporal/reproject.h"
 
 #include "core/device.h"
@@ -41,9 +49,7 @@ hush_status hush__reproject_plan_init(hush_device device, hush_reproject_plan *p
   plan->origin = calloc(n, sizeof *plan->origin);
   plan->mask = calloc(n, sizeof *plan->mask);
   plan->kind = calloc(n, sizeof *plan->kind);
-  plan->fx = hush__alloc_floats(n);
-  plan->fy = hush__alloc_floats(n);
-  int ok = plan->origin && plan->mask && plan->kind && plan->fx && plan->fy;
+  int ok = plan->origin && plan->mask && plan->kind;
   for (int t = 0; t < 4; t++) {
     plan->w[t] = hush__alloc_floats(n);
     ok = ok && plan->w[t];
@@ -63,8 +69,6 @@ void hush__reproject_plan_free(hush_reproject_plan *plan) {
   free(plan->origin);
   free(plan->mask);
   free(plan->kind);
-  hush__free_floats(plan->fx);
-  hush__free_floats(plan->fy);
   for (int t = 0; t < 4; t++) hush__free_floats(plan->w[t]);
   memset(plan, 0, sizeof *plan);
 }
@@ -79,8 +83,6 @@ void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads) {
     memset(plan->origin + row, 0, W * sizeof *plan->origin);
     memset(plan->mask + row, 0, W * sizeof *plan->mask);
     memset(plan->kind + row, 0, W * sizeof *plan->kind);
-    memset(plan->fx + row, 0, W * sizeof *plan->fx);
-    memset(plan->fy + row, 0, W * sizeof *plan->fy);
     for (int t = 0; t < 4; t++) memset(plan->w[t] + row, 0, W * sizeof *plan->w[t]);
   }
 }
@@ -258,6 +260,49 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
   }
 }
 
+/* span_camera with use_pos for a span without background (the common
+ * case): every pixel projects its position, so the centre-ray transform,
+ * whose result span_camera computes and then discards for surfaces, is
+ * skipped: half the arithmetic of the loop (which is bound by the two
+ * AVX-512 FP ports), the same expressions and results. */
+static void span_camera_surfaces(const build_ctx *c, int y, int x_begin, int n,
+                                 float *restrict pxo, float *restrict pyo, float *restrict zeo) {
+  const hush_reproject_input *in = c->in;
+  const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
+  const float *X = in->position[0] + row, *Y = in->position[1] + row;
+  const float *Z = in->position[2] + row;
+  const float Wf = (float)c->W, Hf = (float)c->H;
+  const float *P = c->prev_vp;
+  const float P0 = P[0], P4 = P[4], P8 = P[8], P12 = P[12];
+  const float P1 = P[1], P5 = P[5], P9 = P[9], P13 = P[13];
+  const float P3 = P[3], P7 = P[7], P11 = P[11], P15 = P[15];
+  const float V0 = c->prev_w2v[2], V1 = c->prev_w2v[6], V2 = c->prev_w2v[10];
+  const float V3 = c->prev_w2v[14];
+  const float jx = c->jx, jy = c->jy;
+  for (int k = 0; k < n; k++) {
+    const float x3 = X[k], y3 = Y[k], z3 = Z[k];
+    const float qx = P0 * x3 + P4 * y3 + P8 * z3 + P12;
+    const float qy = P1 * x3 + P5 * y3 + P9 * z3 + P13;
+    const float qw = P3 * x3 + P7 * y3 + P11 * z3 + P15;
+    const float ze = -(V0 * x3 + V1 * y3 + V2 * z3 + V3);
+    const int ok = (qw > 0.0f) & (ze > 0.0f);
+    const float iw = 1.0f / qw;
+    const float px = (qx * iw + 1.0f) * 0.5f * Wf - jx;
+    const float py = (1.0f - qy * iw) * 0.5f * Hf - jy;
+    pxo[k] = ok ? px : NO_LOCATION;
+    pyo[k] = ok ? py : NO_LOCATION;
+    zeo[k] = ze;
+  }
+}
+
+/* Whether pixels x_begin .. x_begin + n - 1 of row y are all surfaces. */
+static int span_all_surface(const build_ctx *c, int y, int x_begin, int n) {
+  const float *z = c->in->cur.depth + (size_t)y * (size_t)c->W + (size_t)x_begin;
+  int bg = 0;
+  for (int k = 0; k < n; k++) bg |= !(z[k] > 0.0f);
+  return !bg;
+}
+
 static void back_project_general(const build_ctx *c, int x, int y, size_t i, float *pxo,
                                  float *pyo, float *zeo);
 
@@ -280,7 +325,9 @@ static void back_project_span(const build_ctx *c, int y, int x_begin, int n, spa
     else
       span_vectors(c, y, x_begin, n, o.px, o.py, o.ze, 0);
   } else {
-    if (c->has_position)
+    if (c->has_position && span_all_surface(c, y, x_begin, n))
+      span_camera_surfaces(c, y, x_begin, n, o.px, o.py, o.ze);
+    else if (c->has_position)
       span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 1);
     else
       span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 0);
@@ -413,14 +460,24 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
  * The full per-pixel rule, for any pixel: the bilinear footprint of the
  * back-projected point (px, py) with each tap tested by tap_ok (the depth
  * gradient computed lazily), moved inside the image when it overhangs the
- * border; else the 3x3 fallback; else NONE. Writes the pixel's origin, mask,
- * kind, fx and fy (not w). build_row sends here only the pixels its span
- * test could not settle: footprints not wholly inside the image, and those
- * with no consistent tap (3x3 fallback). have_slopes: gx, gy are tap_ok's
- * depth slopes, already computed.
+ * border; else the 3x3 fallback; else NONE. Returns the pixel's footprint.
+ * build_row sends here only the pixels its span test could not settle:
+ * footprints not wholly inside the image, and those with no consistent tap
+ * (3x3 fallback). blocks: the plan's. have_slopes: gx, gy are tap_ok's depth
+ * slopes, already computed. bilinear_empty: the span test found no
+ * consistent tap in this footprint, wholly inside the image (its test is
+ * tap_ok's, bit for bit), so only the 3x3 fallback is left to try.
  */
-static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int y, float px,
-                       float py, float ze, int have_slopes, float gx, float gy) {
+typedef struct footprint {
+  int32_t origin;
+  unsigned mask;
+  int kind;      /* hush_footprint */
+  float fx, fy;  /* BILINEAR: the fractions; else 0 */
+} footprint;
+
+static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float px, float py,
+                            float ze, int have_slopes, float gx, float gy,
+                            int bilinear_empty) {
   const hush_gbuffer *cur = &c->in->cur;
   const int W = c->W, H = c->H;
   const size_t i = (size_t)y * (size_t)W + (size_t)x;
@@ -452,7 +509,7 @@ static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int
     fy = sy - fly;
     float bw[4];
     hush__reproject_bilinear(fx, fy, bw);
-    for (int t = 0; t < 4; t++) {
+    for (int t = 0; t < 4 && !bilinear_empty; t++) {
       const int xt = x0 + (t & 1), yt = y0 + (t >> 1);
       if (xt < 0 || xt >= W || yt < 0 || yt >= H || !(bw[t] >= HUSH_REPROJECT_MIN_WEIGHT))
         continue;
@@ -462,7 +519,7 @@ static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int
     if (mask) {
       kind = HUSH_FOOTPRINT_BILINEAR;
       int bx = x0, by = y0;
-      if (plan->blocks) {
+      if (blocks) {
         /* move an overhanging footprint inside: same taps, same weights */
         if (bx < 0) {
           bx = 0;
@@ -500,11 +557,8 @@ static void plan_pixel(const build_ctx *c, hush_reproject_plan *plan, int x, int
     }
   }
   if (kind != HUSH_FOOTPRINT_BILINEAR) fx = fy = 0.0f;
-  plan->origin[i] = origin;
-  plan->mask[i] = (uint16_t)mask;
-  plan->kind[i] = kind;
-  plan->fx[i] = fx;
-  plan->fy[i] = fy;
+  const footprint fp = {origin, mask, kind, fx, fy};
+  return fp;
 }
 
 /* Pixels per span: the back-projection and the tap tests run over spans of
@@ -610,9 +664,13 @@ typedef struct span_taps {
   int32_t origin[SPAN]; /* the footprint's top-left tap (0 when not inside) */
   float fx[SPAN], fy[SPAN];
   float gx[SPAN], gy[SPAN]; /* tap_ok's depth slopes (grad_test) */
-  uint8_t inside[SPAN];     /* the footprint lies wholly inside the image */
-  uint8_t mask[SPAN];       /* consistent taps */
-  uint8_t done[SPAN];       /* 1: origin, mask, fx, fy are the pixel's final plan */
+  /* 32-bit flags: with bytes among its types gcc vectorised the tap tests
+   * of a chunk of 16 at 128 bits (16 bytes), so 4 floats a vector */
+  int32_t inside[SPAN];     /* the footprint lies wholly inside the image */
+  int32_t mask[SPAN];       /* consistent taps */
+  /* hush_footprint. The span test: BILINEAR where its origin, mask, fx, fy
+   * are final, else NONE (plan_pixel decides and overwrites all five). */
+  int32_t kind[SPAN];
 } span_taps;
 
 /* Pixels per chunk of the tap tests: a chunk whose footprints follow each
@@ -636,7 +694,7 @@ static void span_footprints(int W, int H, const float *restrict spx, const float
     /* no out-of-range float is converted */
     o->origin[k] = (int32_t)hush__select_bits(inside, fly, 0.0f) * W +
                    (int32_t)hush__select_bits(inside, flx, 0.0f);
-    o->inside[k] = (uint8_t)inside;
+    o->inside[k] = inside;
   }
 }
 
@@ -684,8 +742,8 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
         span_tap(&pv, j0 + 1, bw[1], 1.0f - fx, 0.0f - fy, &r, use_id, grad_test) << 1 |
         span_tap(&pv, j0 + W, bw[2], 0.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 2 |
         span_tap(&pv, j0 + W + 1, bw[3], 1.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 3;
-    o->mask[k] = (uint8_t)m;
-    o->done[k] = (uint8_t)(o->inside[k] & (m != 0u));
+    o->mask[k] = (int32_t)m;
+    o->kind[k] = (o->inside[k] & (m != 0u)) ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
   }
 }
 
@@ -713,29 +771,21 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
   }
 }
 
-/* The span test's results into the plan (a vectorised copy): the settled
- * pixels, and whatever for the others, which plan_pixel overwrites. */
+/* A span's footprints into the plan, with their renormalised weights
+ * (hush__reproject_renormalised; 0 unless BILINEAR), in one vectorised pass
+ * over the span's L1-resident arrays: the fractions are not stored, so the
+ * plan costs 8 bytes a pixel less to write, and the weights need no second
+ * pass over the row. */
 static void store_span(const span_taps *restrict st, int32_t *restrict origin,
-                       uint16_t *restrict mask, uint8_t *restrict kind, float *restrict fx,
-                       float *restrict fy, int n) {
+                       uint16_t *restrict mask, uint8_t *restrict kind, float *restrict w0,
+                       float *restrict w1, float *restrict w2, float *restrict w3, int n) {
   for (int k = 0; k < n; k++) {
     origin[k] = st->origin[k];
-    mask[k] = st->mask[k];
-    kind[k] = st->done[k] ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
-    fx[k] = st->fx[k];
-    fy[k] = st->fy[k];
-  }
-}
-
-/* The renormalised weights of n pixels into w0..w3 (0 unless BILINEAR):
- * hush__reproject_renormalised, vectorised over a row of the plan. */
-static void row_weights(const uint16_t *restrict mask, const uint8_t *restrict kind,
-                        const float *restrict fx, const float *restrict fy, float *restrict w0,
-                        float *restrict w1, float *restrict w2, float *restrict w3, size_t n) {
-  for (size_t k = 0; k < n; k++) {
+    mask[k] = (uint16_t)st->mask[k];
+    kind[k] = (uint8_t)st->kind[k];
     float w[4];
-    hush__reproject_renormalised(mask[k], fx[k], fy[k], w);
-    const int bil = kind[k] == HUSH_FOOTPRINT_BILINEAR;
+    hush__reproject_renormalised((unsigned)st->mask[k], st->fx[k], st->fy[k], w);
+    const int bil = st->kind[k] == HUSH_FOOTPRINT_BILINEAR;
     w0[k] = bil ? w[0] : 0.0f;
     w1[k] = bil ? w[1] : 0.0f;
     w2[k] = bil ? w[2] : 0.0f;
@@ -743,9 +793,19 @@ static void row_weights(const uint16_t *restrict mask, const uint8_t *restrict k
   }
 }
 
-/* One row of the plan: per span, the back-projection, the span test, then
- * plan_pixel for the pixels the test left open; then the weights. Plans
- * without blocks (an image 1 pixel wide or high) go through plan_pixel. */
+/* Pixel k of a span takes plan_pixel's footprint. */
+static inline void span_set(span_taps *st, int k, footprint fp) {
+  st->origin[k] = fp.origin;
+  st->mask[k] = (int32_t)fp.mask;
+  st->kind[k] = fp.kind;
+  st->fx[k] = fp.fx;
+  st->fy[k] = fp.fy;
+}
+
+/* One row of the plan, span by span: the back-projection, the span test,
+ * plan_pixel for the pixels the test left open, then the span into the
+ * plan. Plans without blocks (an image 1 pixel wide or high) go through
+ * plan_pixel. */
 static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
   const int W = c->W;
   const size_t row = (size_t)y * (size_t)W;
@@ -759,30 +819,42 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
       /* a 1-pixel-wide or -high image: no footprint lies inside it (and
        * the span test's taps at index 0 would not exist) */
       for (int k = 0; k < n; k++)
-        plan_pixel(c, plan, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f);
-      continue;
-    }
-    const int grad_test = c->grad > 0.0f;
-    if (c->use_id) {
-      if (grad_test)
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 1);
-      else
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 0);
+        span_set(&st, k,
+                 plan_pixel(c, 0, x0 + k, y, span_px[k], span_py[k], span_ze[k], 0, 0.0f, 0.0f,
+                            0));
     } else {
-      if (grad_test)
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 1);
-      else
-        test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 0);
+      const int grad_test = c->grad > 0.0f;
+      if (c->use_id) {
+        if (grad_test)
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 1);
+        else
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 1, 0);
+      } else {
+        if (grad_test)
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 1);
+        else
+          test_span(c, y, x0, n, span_px, span_py, span_ze, &st, 0, 0);
+      }
+      /* the open pixels are few and scattered: a vectorised test per
+       * chunk skips the chunks without any (a branch per pixel cost
+       * mispredictions at each one) */
+      for (int k0 = 0; k0 < n; k0 += CHUNK) {
+        const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
+        int open = 0;
+        for (int k = k0; k < k1; k++) open |= st.kind[k] != HUSH_FOOTPRINT_BILINEAR;
+        if (!open) continue;
+        for (int k = k0; k < k1; k++)
+          if (st.kind[k] != HUSH_FOOTPRINT_BILINEAR)
+            span_set(&st, k,
+                     plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
+                                grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f,
+                                st.inside[k]));
+      }
     }
-    store_span(&st, plan->origin + row + x0, plan->mask + row + x0, plan->kind + row + x0,
-               plan->fx + row + x0, plan->fy + row + x0, n);
-    for (int k = 0; k < n; k++)
-      if (!st.done[k])
-        plan_pixel(c, plan, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
-                   grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f);
+    const size_t i = row + (size_t)x0;
+    store_span(&st, plan->origin + i, plan->mask + i, plan->kind + i, plan->w[0] + i,
+               plan->w[1] + i, plan->w[2] + i, plan->w[3] + i, n);
   }
-  row_weights(plan->mask + row, plan->kind + row, plan->fx + row, plan->fy + row,
-              plan->w[0] + row, plan->w[1] + row, plan->w[2] + row, plan->w[3] + row, (size_t)W);
 }
 
 /* Rows per chunk of the parallel build (see hush__reproject_build). */

@@ -115,20 +115,21 @@ extern const float hush__reproject_k3x3[9];
  *             origin + 1, origin + width, origin + width + 1 always lies
  *             inside the image: a footprint that overhangs the border is
  *             moved inside, with its mask bits and fractions (fx = 0 or 1,
- *             fy likewise), so the taps and weights stay the same. 3X3 (and
+ *             fy likewise, see w), so the taps and weights stay the same. 3X3 (and
  *             BILINEAR in a 1-pixel-wide or -high image): the top-left tap
  *             may lie outside the image and the index even be negative;
  *             only masked taps are ever read;
- *   fx[i], fy[i] the bilinear fractions (BILINEAR only): the weights are
- *             (1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx fy; a tap is in the mask
- *             only if it is on-screen, consistent and its weight is at least
- *             HUSH_REPROJECT_MIN_WEIGHT.
  *   w[t][i]   BILINEAR: the renormalised weight of tap t = 0..3 (the
- *             bilinear weight if t is in the mask, else 0, divided by the
- *             sum of the four), exactly hush__reproject_weights4's; 0 for
- *             every other kind. Computed once at build time, so a block
- *             gather is origin + four weights, with no branch or divide,
- *             and a NONE pixel gathers 0.
+ *             bilinear weight (1-fx)(1-fy), fx(1-fy), (1-fx)fy or fx fy of
+ *             the footprint's fractions fx, fy if t is in the mask, else 0,
+ *             divided by the sum of the four: hush__reproject_renormalised),
+ *             exactly hush__reproject_weights4's; 0 for every other kind. A
+ *             tap is in the mask only if it is on-screen, consistent and its
+ *             bilinear weight is at least HUSH_REPROJECT_MIN_WEIGHT.
+ *             Computed once at build time, so a block gather is origin +
+ *             four weights, with no branch or divide, and a NONE pixel
+ *             gathers 0. (The fractions themselves are not stored: 8 bytes
+ *             a pixel less to write per frame.)
  *   blocks    width >= 2 && height >= 2: BILINEAR pixels may be gathered as
  *             blocks (hush__reproject_weights4).
  * Built by hush__reproject_build; read with hush__reproject_taps /
@@ -145,7 +146,6 @@ typedef struct hush_reproject_plan {
   int32_t *origin;
   uint16_t *mask;
   uint8_t *kind;
-  float *fx, *fy;
   float *w[4];
 } hush_reproject_plan;
 
