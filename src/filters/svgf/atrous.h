@@ -7,11 +7,12 @@
  * luminance weight's variance is the 3x3 Gaussian of the input variance
  * (fused into the level; Dundr §4.1.3.1).
  *
- * One pass per level: per row, blocks of pixels; per tap pair (q and its
- * mirror share the depth-gradient denominator) a branch-free vector loop
- * over the block, borders handled by the input's row padding (x) and one
- * row clamp per tap row (y). Every pixel is computed on its own: the result
- * does not depend on the thread count.
+ * One pass per level: per row, per vector of pixels, every tap with the
+ * sums in registers (mirrored tap pairs share the depth-gradient
+ * denominator); borders handled by the input's row padding (x) and one row
+ * clamp per tap row (y). AVX-512 intrinsics where the build has them, else
+ * a portable loop the compiler vectorises (docs/svgf-speed.md). Every pixel
+ * is computed on its own: the result does not depend on the thread count.
  */
 #ifndef HUSH_FILTERS_SVGF_ATROUS_H
 #define HUSH_FILTERS_SVGF_ATROUS_H

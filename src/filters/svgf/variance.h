@@ -5,9 +5,10 @@
  * temporal moments are averaged over a 7x7 window with the depth and normal
  * weights (weights.h; no luminance weight) and var = max(0, m2 - m1^2).
  *
- * Vectorised like the a-trous (atrous.h): blocks of pixels, mirrored tap
- * pairs sharing the depth-gradient denominator, padding for the columns;
- * a block with no short-history pixel is skipped. Progressive frames
+ * Vectorised like the a-trous (atrous.h): mirrored tap pairs sharing the
+ * depth-gradient denominator, padding for the columns; a block (a vector
+ * of 16 pixels in the AVX-512 loop) with no short-history pixel is
+ * skipped. Progressive frames
  * (Dundr §4.2): a pixel without data (age 0, a hole nothing reached) is
  * no sample of the window, the centre included; such blocks go through a
  * per-pixel path, and a window without data gives variance 0.
