@@ -867,6 +867,21 @@ static void level_reference(const svgf_guide *g, const svgf_padded *in, const sv
 #undef AT
 }
 
+/* The guide of the level tests: zn and the gradient planes of the test. */
+static svgf_guide test_guide(const svgf_padded *zn, const float *gx, const float *gy,
+                             const float *zon) {
+  svgf_guide g;
+  g.width = LW;
+  g.height = LH;
+  g.zn = zn;
+  g.gx = gx;
+  g.gy = gy;
+  g.zon = zon;
+  g.sigma_z = 1.0f;
+  g.np = svgf_normal_power_of(128.0f);
+  return g;
+}
+
 /* Every variant of svgf_atrous_level (the AVX-512 loop where built, the
  * portable loop, exp and pow normal weights, with and without validity,
  * both kernels, with tap steps past the frame) computes the formula within
@@ -910,15 +925,7 @@ static void test_level_formula(hush_device dev) {
       for (int nexp = 0; nexp <= 1; nexp++)
         for (int valid = 0; valid <= 1; valid++)
           for (int portable = 0; portable <= 1; portable++) {
-            svgf_guide g;
-            g.width = LW;
-            g.height = LH;
-            g.zn = &zn;
-            g.gx = gx;
-            g.gy = gy;
-            g.zon = zon;
-            g.sigma_z = 1.0f;
-            g.np = svgf_normal_power_of(128.0f);
+            const svgf_guide g = test_guide(&zn, gx, gy, zon);
             svgf_level_params lp;
             lp.kernel = kernels[kk];
             lp.step = step;
@@ -974,15 +981,7 @@ static void test_level_formula(hush_device dev) {
         }
         for (int c = 0; c < 2; c++) svgf_pad_row(svgf_padded_row(&mom, c, y), LW, mom.pad);
       }
-      svgf_guide g;
-      g.width = LW;
-      g.height = LH;
-      g.zn = &zn;
-      g.gx = gx;
-      g.gy = gy;
-      g.zon = zon;
-      g.sigma_z = 1.0f;
-      g.np = svgf_normal_power_of(128.0f);
+      const svgf_guide g = test_guide(&zn, gx, gy, zon);
       svgf_spatial_variance(&g, &mom, age, 4.0f, var, nexp, 2);
       double worst = 0.0;
       int kept = 1;

@@ -80,25 +80,11 @@ static HUSH_ALWAYS_INLINE float svgf_log_pos(float d) {
 }
 
 /* 1/x for x in [1e-30, 1e30] (the callers clamp): the bit-level first
- * guess (relative error <= 12 %) and three Newton steps with fmaf, within
- * 6e-8 relative of 1/x. vdivps costs 10-16 cycles per vector; this is 7
- * arithmetic instructions that pipeline (a-trous: 12 divisions per pixel
- * and level before). */
-static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
-  uint32_t bits;
-  memcpy(&bits, &x, sizeof bits);
-  bits = 0x7EF311C3u - bits;
-  float y;
-  memcpy(&y, &bits, sizeof y);
-  y = fmaf(y, fmaf(-x, y, 1.0f), y);
-  y = fmaf(y, fmaf(-x, y, 1.0f), y);
-  return fmaf(y, fmaf(-x, y, 1.0f), y);
-}
-
-/* 1/x for x in [1e-30, 1e30] with two Newton steps (relative error within
- * 2e-4): for the a-trous depth denominators, where a 1e-4 error in an
- * exponent changes nothing visible and each step costs two operations per
- * tap pair. */
+ * guess (relative error <= 12 %) and two Newton steps with fmaf (relative
+ * error within 2e-4): for the a-trous depth denominators, where a 1e-4
+ * error in an exponent changes nothing visible and each step costs two
+ * operations per tap pair. vdivps costs 10-16 cycles per vector; this is
+ * 5 arithmetic instructions that pipeline. */
 static HUSH_ALWAYS_INLINE float svgf_rcp2_pos(float x) {
   uint32_t bits;
   memcpy(&bits, &x, sizeof bits);
@@ -106,6 +92,12 @@ static HUSH_ALWAYS_INLINE float svgf_rcp2_pos(float x) {
   float y;
   memcpy(&y, &bits, sizeof y);
   y = fmaf(y, fmaf(-x, y, 1.0f), y);
+  return fmaf(y, fmaf(-x, y, 1.0f), y);
+}
+
+/* svgf_rcp2_pos and a third Newton step: within 6e-8 relative of 1/x. */
+static HUSH_ALWAYS_INLINE float svgf_rcp_pos(float x) {
+  const float y = svgf_rcp2_pos(x);
   return fmaf(y, fmaf(-x, y, 1.0f), y);
 }
 
