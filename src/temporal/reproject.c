@@ -194,6 +194,13 @@ static HUSH_ALWAYS_INLINE void span_vectors(const build_ctx *c, int y, int x_beg
   }
 }
 
+/* span_camera's use_pos: the centre ray only, positions for surfaces, or
+ * a span without background (the common case), where every pixel projects
+ * its position and the centre-ray transform (whose result the mixed mode
+ * computes and then discards for surfaces) is skipped: half the arithmetic
+ * of the loop, the same expressions and results. */
+enum { POS_NONE = 0, POS_SURFACES = 1, POS_ALL = 2 };
+
 /* HUSH_MOTION_CAMERA, std_proj: the pixel's homogeneous clip vector (the
  * point at depth z on the centre ray, or for background the direction at
  * infinity) taken to the previous clip space by one matrix; with use_pos,
@@ -225,70 +232,46 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
   const float V3 = c->prev_w2v[14];
   const float jx = c->jx, jy = c->jy;
   for (int k = 0; k < n; k++) {
-    const float z = zr[k];
-    const int bg = !(z > 0.0f);
-    const float nx = ((float)(x_begin + k) + 0.5f) * sxf - 1.0f;
-    const float w = bg ? -p11 : p15 - p11 * z;
-    const float c0 = nx * w, c1 = ny * w, c2 = bg ? -p10 : p14 - p10 * z;
-    float qx = M[0] * c0 + M[4] * c1 + M[8] * c2 + M[12] * w;
-    float qy = M[1] * c0 + M[5] * c1 + M[9] * c2 + M[13] * w;
-    float qw = M[3] * c0 + M[7] * c1 + M[11] * c2 + M[15] * w;
-    float ze = -(R[0] * c0 + R[1] * c1 + R[2] * c2 + R[3] * w);
-    int ok = (w > 0.0f) | (bg & (w == 0.0f));
-    float sjx = 0.0f, sjy = 0.0f;
-    if (use_pos) {
-      /* a surface's "position" is its jittered sample's hit point: its
-       * previous coordinate minus this frame's jitter estimates the
-       * centre's (first order) */
-      const int sp = !bg;
-      const float x3 = X[k], y3 = Y[k], z3 = Z[k];
-      qx = sp ? P0 * x3 + P4 * y3 + P8 * z3 + P12 : qx;
-      qy = sp ? P1 * x3 + P5 * y3 + P9 * z3 + P13 : qy;
-      qw = sp ? P3 * x3 + P7 * y3 + P11 * z3 + P15 : qw;
-      ze = sp ? -(V0 * x3 + V1 * y3 + V2 * z3 + V3) : ze;
-      ok = sp | ok;
-      sjx = sp ? jx : 0.0f;
-      sjy = sp ? jy : 0.0f;
+    float qx, qy, qw, ze, sjx = 0.0f, sjy = 0.0f;
+    int ok, bg = 0;
+    /* a surface's "position" is its jittered sample's hit point: its
+     * previous coordinate minus this frame's jitter estimates the centre's
+     * (first order) */
+    const float x3 = X[k], y3 = Y[k], z3 = Z[k];
+    if (use_pos == POS_ALL) {
+      qx = P0 * x3 + P4 * y3 + P8 * z3 + P12;
+      qy = P1 * x3 + P5 * y3 + P9 * z3 + P13;
+      qw = P3 * x3 + P7 * y3 + P11 * z3 + P15;
+      ze = -(V0 * x3 + V1 * y3 + V2 * z3 + V3);
+      ok = 1;
+      sjx = jx;
+      sjy = jy;
+    } else {
+      const float z = zr[k];
+      bg = !(z > 0.0f);
+      const float nx = ((float)(x_begin + k) + 0.5f) * sxf - 1.0f;
+      const float w = bg ? -p11 : p15 - p11 * z;
+      const float c0 = nx * w, c1 = ny * w, c2 = bg ? -p10 : p14 - p10 * z;
+      qx = M[0] * c0 + M[4] * c1 + M[8] * c2 + M[12] * w;
+      qy = M[1] * c0 + M[5] * c1 + M[9] * c2 + M[13] * w;
+      qw = M[3] * c0 + M[7] * c1 + M[11] * c2 + M[15] * w;
+      ze = -(R[0] * c0 + R[1] * c1 + R[2] * c2 + R[3] * w);
+      ok = (w > 0.0f) | (bg & (w == 0.0f));
+      if (use_pos == POS_SURFACES) {
+        const int sp = !bg;
+        qx = sp ? P0 * x3 + P4 * y3 + P8 * z3 + P12 : qx;
+        qy = sp ? P1 * x3 + P5 * y3 + P9 * z3 + P13 : qy;
+        qw = sp ? P3 * x3 + P7 * y3 + P11 * z3 + P15 : qw;
+        ze = sp ? -(V0 * x3 + V1 * y3 + V2 * z3 + V3) : ze;
+        ok = sp | ok;
+        sjx = sp ? jx : 0.0f;
+        sjy = sp ? jy : 0.0f;
+      }
     }
     ok &= (qw > 0.0f) & (bg | (ze > 0.0f));
     const float iw = 1.0f / qw;
     const float px = (qx * iw + 1.0f) * 0.5f * Wf - sjx;
     const float py = (1.0f - qy * iw) * 0.5f * Hf - sjy;
-    pxo[k] = ok ? px : NO_LOCATION;
-    pyo[k] = ok ? py : NO_LOCATION;
-    zeo[k] = ze;
-  }
-}
-
-/* span_camera with use_pos for a span without background (the common
- * case): every pixel projects its position, so the centre-ray transform,
- * whose result span_camera computes and then discards for surfaces, is
- * skipped: half the arithmetic of the loop (which is bound by the two
- * AVX-512 FP ports), the same expressions and results. */
-static void span_camera_surfaces(const build_ctx *c, int y, int x_begin, int n,
-                                 float *restrict pxo, float *restrict pyo, float *restrict zeo) {
-  const hush_reproject_input *in = c->in;
-  const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
-  const float *X = in->position[0] + row, *Y = in->position[1] + row;
-  const float *Z = in->position[2] + row;
-  const float Wf = (float)c->W, Hf = (float)c->H;
-  const float *P = c->prev_vp;
-  const float P0 = P[0], P4 = P[4], P8 = P[8], P12 = P[12];
-  const float P1 = P[1], P5 = P[5], P9 = P[9], P13 = P[13];
-  const float P3 = P[3], P7 = P[7], P11 = P[11], P15 = P[15];
-  const float V0 = c->prev_w2v[2], V1 = c->prev_w2v[6], V2 = c->prev_w2v[10];
-  const float V3 = c->prev_w2v[14];
-  const float jx = c->jx, jy = c->jy;
-  for (int k = 0; k < n; k++) {
-    const float x3 = X[k], y3 = Y[k], z3 = Z[k];
-    const float qx = P0 * x3 + P4 * y3 + P8 * z3 + P12;
-    const float qy = P1 * x3 + P5 * y3 + P9 * z3 + P13;
-    const float qw = P3 * x3 + P7 * y3 + P11 * z3 + P15;
-    const float ze = -(V0 * x3 + V1 * y3 + V2 * z3 + V3);
-    const int ok = (qw > 0.0f) & (ze > 0.0f);
-    const float iw = 1.0f / qw;
-    const float px = (qx * iw + 1.0f) * 0.5f * Wf - jx;
-    const float py = (1.0f - qy * iw) * 0.5f * Hf - jy;
     pxo[k] = ok ? px : NO_LOCATION;
     pyo[k] = ok ? py : NO_LOCATION;
     zeo[k] = ze;
@@ -326,11 +309,11 @@ static void back_project_span(const build_ctx *c, int y, int x_begin, int n, spa
       span_vectors(c, y, x_begin, n, o.px, o.py, o.ze, 0);
   } else {
     if (c->has_position && span_all_surface(c, y, x_begin, n))
-      span_camera_surfaces(c, y, x_begin, n, o.px, o.py, o.ze);
+      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, POS_ALL);
     else if (c->has_position)
-      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 1);
+      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, POS_SURFACES);
     else
-      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, 0);
+      span_camera(c, y, x_begin, n, o.px, o.py, o.ze, POS_NONE);
   }
 }
 
