@@ -86,18 +86,26 @@ static void test_gradient_check(void) {
   sample_data d;
   sample_make(&d, 9, 7);
   /* MSE alone is smooth: every parameter must match */
-  const hush_nca_loss_weights mse = {1.0, 0.0};
+  const hush_nca_loss_weights mse = {1.0, 0.0, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR};
   CHECK_MSG(gradient_mismatches(&d.s, 2, &mse, 1e-5) == 0, "MSE, 2 iterations");
   CHECK_MSG(gradient_mismatches(&d.s, 3, &mse, 1e-5) == 0, "MSE, 3 iterations");
   /* with the L1 gradient term a +-1e-7 step may cross a kink of |.| for a
    * rare parameter; allow two of 360 */
-  const hush_nca_loss_weights both = {1.0, 0.5};
+  const hush_nca_loss_weights both = {1.0, 0.5, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR};
   const int bad = gradient_mismatches(&d.s, 3, &both, 1e-5);
   CHECK_MSG(bad <= 2, "MSE + gradient loss, 3 iterations: %d mismatches", bad);
   /* gradient loss alone, so its derivative is really exercised */
-  const hush_nca_loss_weights grad_only = {0.0, 1.0};
+  const hush_nca_loss_weights grad_only = {0.0, 1.0, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR};
   const int bad2 = gradient_mismatches(&d.s, 2, &grad_only, 1e-5);
   CHECK_MSG(bad2 <= 2, "gradient loss, 2 iterations: %d mismatches", bad2);
+  /* the MSE term in radiance (the colour leaves log space through expm1),
+   * plain and relative to the reference */
+  const hush_nca_loss_weights linear = {1.0, 0.0, HUSH_NCA_MSE_LINEAR, HUSH_NCA_LOG1P};
+  CHECK_MSG(gradient_mismatches(&d.s, 2, &linear, 1e-5) == 0, "linear MSE, 2 iterations");
+  const hush_nca_loss_weights relative = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE, HUSH_NCA_LOG1P};
+  CHECK_MSG(gradient_mismatches(&d.s, 2, &relative, 1e-5) == 0, "relative MSE, 2 iterations");
+  const hush_nca_loss_weights rel_lin = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE, HUSH_NCA_LINEAR};
+  CHECK_MSG(gradient_mismatches(&d.s, 2, &rel_lin, 1e-5) == 0, "relative MSE, linear colour");
   free(d.planes);
 }
 

@@ -48,6 +48,9 @@ static const char *const help_text =
     "  --lr X               Adam learning rate (default 0.003)\n"
     "  --w-mse X            weight of the MSE term (default 1)\n"
     "  --w-grad X           weight of the gradient term L_g (default 0.5)\n"
+    "  --mse-space S        where the MSE term compares: relative (radiance,\n"
+    "                       errors over reference^2 + 0.01, default), linear\n"
+    "                       (radiance) or log (the log1p state; darkens)\n"
     "  --holdout-every N    every N-th view (sorted by name) is validation, not\n"
     "                       training (default 4; 0: none)\n"
     "  --seed S             random seed (default 1)\n"
@@ -69,6 +72,7 @@ typedef struct options {
   int iterations, kmin, kmax;
   uint32_t steps, batch, crop, holdout_every, seed, threads, log_every;
   double time_limit, lr, w_mse, w_grad;
+  hush_nca_mse_space mse_space;
 } options;
 
 static int compare_names(const void *a, const void *b) {
@@ -190,7 +194,7 @@ static int is_holdout(const options *o, int index) {
  * (K = 0: the noisy input itself). */
 static double validation_loss(const options *o, const view_data *views, int count,
                               const double *params, int k, float *buf, int *used) {
-  const hush_nca_loss_weights lw = {o->w_mse, o->w_grad};
+  const hush_nca_loss_weights lw = {o->w_mse, o->w_grad, o->mse_space, HUSH_NCA_LOG1P};
   double sum = 0.0;
   int n = 0;
   for (int i = 0; i < count; i++) {
@@ -249,6 +253,7 @@ static void parse(int argc, char **argv, options *o) {
   o->lr = 0.003;
   o->w_mse = 1.0;
   o->w_grad = 0.5;
+  o->mse_space = HUSH_NCA_MSE_RELATIVE;
   cli_args args;
   cli_args_init(&args, cmd, argc, argv);
   const char *arg, *val;
@@ -285,6 +290,11 @@ static void parse(int argc, char **argv, options *o) {
       o->w_mse = cli_parse_float(cmd, "--w-mse", val, 0.0f, 1e6f);
     } else if (cli_option(&args, arg, "--w-grad", &val)) {
       o->w_grad = cli_parse_float(cmd, "--w-grad", val, 0.0f, 1e6f);
+    } else if (cli_option(&args, arg, "--mse-space", &val)) {
+      if (!strcmp(val, "relative")) o->mse_space = HUSH_NCA_MSE_RELATIVE;
+      else if (!strcmp(val, "linear")) o->mse_space = HUSH_NCA_MSE_LINEAR;
+      else if (!strcmp(val, "log")) o->mse_space = HUSH_NCA_MSE_STATE;
+      else cli_usage_error(cmd, "--mse-space: unknown space '%s' (relative, linear or log)", val);
     } else if (cli_option(&args, arg, "--holdout-every", &val)) {
       o->holdout_every = cli_parse_uint(cmd, "--holdout-every", val, 0, 1000);
     } else if (cli_option(&args, arg, "--seed", &val)) {
@@ -355,7 +365,7 @@ int cmd_train_nca(int argc, char **argv) {
   }
   hush_nca_adam adam;
   hush__nca_adam_init(&adam, o.lr);
-  const hush_nca_loss_weights lw = {o.w_mse, o.w_grad};
+  const hush_nca_loss_weights lw = {o.w_mse, o.w_grad, o.mse_space, HUSH_NCA_LOG1P};
   const double t0 = hush__now_ms();
   double running = 0.0;
   int running_n = 0;

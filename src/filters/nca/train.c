@@ -9,8 +9,11 @@
  *   dL/dW   += p^T dz,   dL/dbias += sum over pixels of g
  * where perception^T applies the adjoint of each clamp-to-edge 3x3 filter
  * (a scatter to the clamped taps).
- * L_g compares forward differences of the Gaussian-blurred prediction and
- * reference with an L1 norm; its derivative uses sign(), 0 at 0.
+ * The MSE term compares in the space the loss weights name (the state's
+ * colour, radiance, or radiance relative to the reference, as hush eval's
+ * relMSE). L_g compares forward differences of the Gaussian-blurred
+ * prediction and reference colour of the state with an L1 norm; its
+ * derivative uses sign(), 0 at 0.
  */
 #include "filters/nca/train.h"
 
@@ -168,10 +171,24 @@ static double loss_and_grad(const hush_nca_sample *sample, pass *ps,
   for (int c = 0; c < 3; c++) {
     double *bp = ps->blur[0], *bt = ps->blur[1];
     for (long i = 0; i < d.n; i++) {
-      const double e = pred[c][i] - (double)sample->target[c][i];
-      mse += e * e;
-      if (dpred) dpred[c][i] = lw->mse * 2.0 * e / n_mse;
-      bt[i] = (double)sample->target[c][i];
+      const double t = (double)sample->target[c][i];
+      bt[i] = t;
+      if (lw->space == HUSH_NCA_MSE_STATE) {
+        const double e = pred[c][i] - t;
+        mse += e * e;
+        if (dpred) dpred[c][i] = lw->mse * 2.0 * e / n_mse;
+        continue;
+      }
+      const int log1p_colour = lw->transform == HUSH_NCA_LOG1P;
+      /* radiance of prediction and reference; dr the derivative of the
+       * prediction's radiance by its state */
+      const double dr = log1p_colour ? exp(pred[c][i]) : 1.0;
+      const double rp = log1p_colour ? dr - 1.0 : pred[c][i];
+      const double rt = log1p_colour ? expm1(t) : t;
+      const double wgt = lw->space == HUSH_NCA_MSE_RELATIVE ? 1.0 / (rt * rt + 0.01) : 1.0;
+      const double e = rp - rt;
+      mse += wgt * e * e;
+      if (dpred) dpred[c][i] = lw->mse * 2.0 * wgt * e * dr / n_mse;
     }
     conv3x3(hush__nca_kernel_gauss, pred[c], bp, d);
     conv3x3(hush__nca_kernel_gauss, bt, ps->dp, d); /* dp as scratch */

@@ -22,9 +22,19 @@ typedef struct hush_nca_sample {
   const float *target[3];                /* reference colour, same transform */
 } hush_nca_sample;
 
+/* Where the MSE term compares prediction and reference. The gradient term
+ * always works on the state's colour (log space for log1p weights). */
+typedef enum hush_nca_mse_space {
+  HUSH_NCA_MSE_STATE = 0,   /* the state's colour as is (log1p: log space; darkens, see docs/nca.md) */
+  HUSH_NCA_MSE_LINEAR = 1,  /* radiance: unbiased, dominated by the brightest pixels */
+  HUSH_NCA_MSE_RELATIVE = 2 /* radiance, each error over (reference^2 + 0.01): relMSE of hush eval */
+} hush_nca_mse_space;
+
 typedef struct hush_nca_loss_weights {
   double mse;      /* w1 */
   double gradient; /* w2 */
+  hush_nca_mse_space space;
+  hush_nca_transform transform;      /* of the sample's state and target colour */
 } hush_nca_loss_weights;
 
 /*
