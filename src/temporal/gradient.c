@@ -78,23 +78,8 @@ static HUSH_ALWAYS_INLINE float exp2_neg(float t) {
   return p * scale;
 }
 
-/* log2(d) for d > 0 (d <= 1e-30 taken as 1e-30): d = m 2^e, m in
- * [sqrt(1/2), sqrt(2)), ln m = 2 atanh((m-1)/(m+1)) by its series. */
-static HUSH_ALWAYS_INLINE float log2_pos(float d) {
-  d = hush__select_bits(d > 1e-30f, d, 1e-30f);
-  int32_t bits;
-  memcpy(&bits, &d, sizeof bits);
-  float e = (float)((bits >> 23) - 127);
-  const int32_t mbits = (bits & 0x007fffff) | 0x3f800000;
-  float m;
-  memcpy(&m, &mbits, sizeof m);
-  const int big = m > 1.41421356f;
-  m = hush__select_bits(big, 0.5f * m, m);
-  e = hush__select_bits(big, e + 1.0f, e);
-  const float s = (m - 1.0f) / (m + 1.0f), s2 = s * s;
-  const float series = 1.0f + s2 * (1.0f / 3 + s2 * (1.0f / 5 + s2 * (1.0f / 7 + s2 * (1.0f / 9))));
-  return e + 2.0f * s * series * 1.44269504f;
-}
+/* log2(d) for d > 0 (d <= 1e-30 taken as 1e-30). */
+static HUSH_ALWAYS_INLINE float log2_pos(float d) { return hush__ln_pos(d) * 1.44269504f; }
 
 /* ---- 1. gather ---------------------------------------------------------- */
 

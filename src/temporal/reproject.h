@@ -47,6 +47,7 @@
 
 #include "hush.h"
 #include "core/image.h"
+#include "core/vecmath.h" /* HUSH_ALWAYS_INLINE, hush__select_bits, hush__floorf_vec */
 
 #include <math.h>
 #include <stddef.h>
@@ -167,43 +168,6 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
                                   const hush_reproject_input *in, const hush_gbuffer *prev,
                                   const hush_frame_info *info, const hush_reproject_params *params,
                                   int threads);
-
-/* ---- helpers for loops the compiler must vectorise ------------------------
- * The build is -O3 without -ffast-math (results must not depend on the
- * vector width). Under the default -ftrapping-math gcc vectorises floorf
- * only with -fno-trapping-math, and through a select with a constant arm
- * (c ? x : 0.0f) it may move a later comparison, conversion or load (which
- * may trap) under a branch, which stops the vectorisation of the loop.
- * These do the same work without either. */
-
-#if defined(__GNUC__)
-#  define HUSH_ALWAYS_INLINE inline __attribute__((always_inline))
-#else
-#  define HUSH_ALWAYS_INLINE inline
-#endif
-
-/* cond ? x : y for cond 0 or 1, by masking the bits. */
-static inline float hush__select_bits(int cond, float x, float y) {
-  uint32_t bx, by;
-  memcpy(&bx, &x, sizeof bx);
-  memcpy(&by, &y, sizeof by);
-  const uint32_t m = (uint32_t)-cond;
-  bx = (bx & m) | (by & ~m);
-  memcpy(&x, &bx, sizeof x);
-  return x;
-}
-
-/* floorf(s), bit for bit (also -0, infinities and NaN): a truncating
- * conversion of s where |s| < 2^23 (else s is an integer, inf or NaN), one
- * less when that rounded up, and the sign of s kept on a zero. */
-static inline float hush__floorf_vec(float s) {
-  const int small = fabsf(s) < 8388608.0f; /* 2^23 */
-  const float c = hush__select_bits(small, s, 0.0f);
-  const float t = (float)(int32_t)c;
-  float f = t > c ? t - 1.0f : t;
-  f = f == 0.0f ? s * 0.0f : f; /* floorf(-0) = -0 */
-  return hush__select_bits(small, f, s);
-}
 
 /* The four bilinear weights (1-fx)(1-fy), fx(1-fy), (1-fx)fy, fx fy. */
 static inline void hush__reproject_bilinear(float fx, float fy, float w[4]) {

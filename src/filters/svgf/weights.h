@@ -30,7 +30,7 @@
 #ifndef HUSH_FILTERS_SVGF_WEIGHTS_H
 #define HUSH_FILTERS_SVGF_WEIGHTS_H
 
-#include "temporal/reproject.h" /* HUSH_ALWAYS_INLINE, hush__select_bits */
+#include "core/vecmath.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -58,25 +58,6 @@ static HUSH_ALWAYS_INLINE float svgf_sqrt_pos(float x) {
   y = y * fmaf(-hx * y, y, 1.5f);
   const float s = x * y;
   return fmaf(0.5f * y, fmaf(-s, s, x), s);
-}
-
-/* ln(d) for d > 0 (d <= 0 is taken as 1e-30): d = m 2^e with m in
- * [sqrt(1/2), sqrt(2)), ln m = 2 atanh(s), s = (m-1)/(m+1), |s| < 0.172, by
- * its series to s^9 (absolute error below 1e-9). */
-static HUSH_ALWAYS_INLINE float svgf_log_pos(float d) {
-  d = hush__select_bits(d > 1e-30f, d, 1e-30f);
-  int32_t bits;
-  memcpy(&bits, &d, sizeof bits);
-  float e = (float)((bits >> 23) - 127);
-  const int32_t mbits = (bits & 0x007fffff) | 0x3f800000;
-  float m;
-  memcpy(&m, &mbits, sizeof m);
-  const int big = m > 1.41421356f;
-  m = hush__select_bits(big, 0.5f * m, m);
-  e = hush__select_bits(big, e + 1.0f, e);
-  const float sv = (m - 1.0f) / (m + 1.0f), s2 = sv * sv;
-  const float series = 1.0f + s2 * (1.0f / 3 + s2 * (1.0f / 5 + s2 * (1.0f / 7 + s2 * (1.0f / 9))));
-  return e * 0.693147181f + 2.0f * sv * series;
 }
 
 /* 1/x for x in [1e-30, 1e30] (the callers clamp): the bit-level first
@@ -190,7 +171,7 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
     return w > p->floor ? w : 0.0f;
   }
   if (squarings < 0) {
-    w = svgf_exp2_neg_h(fmaf(-sigma_n_log2e, svgf_log_pos(dot), s_zl), SVGF_S_MAX, p);
+    w = svgf_exp2_neg_h(fmaf(-sigma_n_log2e, hush__ln_pos(dot), s_zl), SVGF_S_MAX, p);
     return w > p->floor ? w : 0.0f;
   }
   float d = dot > dot_floor ? dot : dot_floor; /* a max */
