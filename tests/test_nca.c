@@ -86,26 +86,74 @@ static void test_gradient_check(void) {
   sample_data d;
   sample_make(&d, 9, 7);
   /* MSE alone is smooth: every parameter must match */
-  const hush_nca_loss_weights mse = {1.0, 0.0, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR};
+  const hush_nca_loss_weights mse = {1.0, 0.0, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR, NULL};
   CHECK_MSG(gradient_mismatches(&d.s, 2, &mse, 1e-5) == 0, "MSE, 2 iterations");
   CHECK_MSG(gradient_mismatches(&d.s, 3, &mse, 1e-5) == 0, "MSE, 3 iterations");
   /* with the L1 gradient term a +-1e-7 step may cross a kink of |.| for a
    * rare parameter; allow two of 360 */
-  const hush_nca_loss_weights both = {1.0, 0.5, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR};
+  const hush_nca_loss_weights both = {1.0, 0.5, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR, NULL};
   const int bad = gradient_mismatches(&d.s, 3, &both, 1e-5);
   CHECK_MSG(bad <= 2, "MSE + gradient loss, 3 iterations: %d mismatches", bad);
   /* gradient loss alone, so its derivative is really exercised */
-  const hush_nca_loss_weights grad_only = {0.0, 1.0, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR};
+  const hush_nca_loss_weights grad_only = {0.0, 1.0, HUSH_NCA_MSE_STATE, HUSH_NCA_LINEAR, NULL};
   const int bad2 = gradient_mismatches(&d.s, 2, &grad_only, 1e-5);
   CHECK_MSG(bad2 <= 2, "gradient loss, 2 iterations: %d mismatches", bad2);
   /* the MSE term in radiance (the colour leaves log space through expm1),
    * plain and relative to the reference */
-  const hush_nca_loss_weights linear = {1.0, 0.0, HUSH_NCA_MSE_LINEAR, HUSH_NCA_LOG1P};
+  const hush_nca_loss_weights linear = {1.0, 0.0, HUSH_NCA_MSE_LINEAR, HUSH_NCA_LOG1P, NULL};
   CHECK_MSG(gradient_mismatches(&d.s, 2, &linear, 1e-5) == 0, "linear MSE, 2 iterations");
-  const hush_nca_loss_weights relative = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE, HUSH_NCA_LOG1P};
+  const hush_nca_loss_weights relative = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE, HUSH_NCA_LOG1P, NULL};
   CHECK_MSG(gradient_mismatches(&d.s, 2, &relative, 1e-5) == 0, "relative MSE, 2 iterations");
-  const hush_nca_loss_weights rel_lin = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE, HUSH_NCA_LINEAR};
+  const hush_nca_loss_weights rel_lin = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE, HUSH_NCA_LINEAR, NULL};
   CHECK_MSG(gradient_mismatches(&d.s, 2, &rel_lin, 1e-5) == 0, "relative MSE, linear colour");
+  free(d.planes);
+}
+
+/* The loss relative to the prediction holds its weights constant in the
+ * derivative: its gradient is the finite-difference gradient of the
+ * weighted MSE with the weights frozen at the prediction of the same
+ * parameters. */
+static void test_gradient_relative_predicted(void) {
+  sample_data d;
+  sample_make(&d, 9, 7);
+  const size_t n = 9 * 7;
+  double p[HUSH_NCA_PARAM_COUNT], g[HUSH_NCA_PARAM_COUNT] = {0};
+  random_params(p, 0.4);
+  double *planes = malloc(HUSH_NCA_CHANNELS * n * sizeof(double));
+  double *wplanes = malloc(3 * n * sizeof(double));
+  REQUIRE(planes && wplanes);
+  double *out[HUSH_NCA_CHANNELS];
+  for (int c = 0; c < HUSH_NCA_CHANNELS; c++) out[c] = planes + c * n;
+  REQUIRE(hush__nca_forward_double(p, 2, &d.s, out) == 0);
+  const double *wp[3] = {wplanes, wplanes + n, wplanes + 2 * n};
+  for (int c = 0; c < 3; c++)
+    for (size_t i = 0; i < n; i++) {
+      const double r = expm1(out[c][i]) > 0.0 ? expm1(out[c][i]) : 0.0;
+      wplanes[c * n + i] = 1.0 / (r * r + 0.01);
+    }
+  const hush_nca_loss_weights pred = {1.0, 0.0, HUSH_NCA_MSE_RELATIVE_PREDICTED, HUSH_NCA_LOG1P,
+                                      NULL};
+  const hush_nca_loss_weights frozen = {1.0, 0.0, HUSH_NCA_MSE_WEIGHTED, HUSH_NCA_LOG1P, wp};
+  const double l_pred = hush__nca_loss(p, 2, &d.s, &pred, g);
+  CHECK_MSG(fabs(l_pred - hush__nca_loss(p, 2, &d.s, &frozen, NULL)) <= 1e-12 * (1.0 + l_pred),
+            "the same loss value at the prediction");
+  int bad = 0, nonzero = 0;
+  const double eps = 1e-7;
+  for (int i = 0; i < HUSH_NCA_PARAM_COUNT; i++) {
+    const double keep = p[i];
+    p[i] = keep + eps;
+    const double lp = hush__nca_loss(p, 2, &d.s, &frozen, NULL);
+    p[i] = keep - eps;
+    const double lm = hush__nca_loss(p, 2, &d.s, &frozen, NULL);
+    p[i] = keep;
+    const double fd = (lp - lm) / (2.0 * eps);
+    bad += fabs(fd - g[i]) > 1e-5 * (1.0 + fabs(fd));
+    nonzero += fabs(g[i]) > 1e-6;
+  }
+  CHECK_MSG(bad == 0, "relative-to-prediction gradient vs frozen weights: %d mismatches", bad);
+  CHECK(nonzero > HUSH_NCA_WEIGHT_COUNT / 2);
+  free(planes);
+  free(wplanes);
   free(d.planes);
 }
 
@@ -518,6 +566,7 @@ int main(void) {
   test_zero_weights_step();
   test_float_matches_double();
   test_gradient_check();
+  test_gradient_relative_predicted();
   test_filter_deterministic();
   test_filter_extreme_input();
   test_weights_file();

@@ -49,8 +49,10 @@ static const char *const help_text =
     "  --w-mse X            weight of the MSE term (default 1)\n"
     "  --w-grad X           weight of the gradient term L_g (default 0.5)\n"
     "  --mse-space S        where the MSE term compares: relative (radiance,\n"
-    "                       errors over reference^2 + 0.01, default), linear\n"
-    "                       (radiance) or log (the log1p state; darkens)\n"
+    "                       errors over prediction^2 + 0.01, the weight held\n"
+    "                       constant: default), relative-ref (over reference^2\n"
+    "                       + 0.01; darkens), linear (radiance) or log (the\n"
+    "                       log1p state; darkens)\n"
     "  --holdout-every N    every N-th view (sorted by name) is validation, not\n"
     "                       training (default 4; 0: none)\n"
     "  --seed S             random seed (default 1)\n"
@@ -194,7 +196,7 @@ static int is_holdout(const options *o, int index) {
  * (K = 0: the noisy input itself). */
 static double validation_loss(const options *o, const view_data *views, int count,
                               const double *params, int k, float *buf, int *used) {
-  const hush_nca_loss_weights lw = {o->w_mse, o->w_grad, o->mse_space, HUSH_NCA_LOG1P};
+  const hush_nca_loss_weights lw = {o->w_mse, o->w_grad, o->mse_space, HUSH_NCA_LOG1P, NULL};
   double sum = 0.0;
   int n = 0;
   for (int i = 0; i < count; i++) {
@@ -253,7 +255,7 @@ static void parse(int argc, char **argv, options *o) {
   o->lr = 0.003;
   o->w_mse = 1.0;
   o->w_grad = 0.5;
-  o->mse_space = HUSH_NCA_MSE_RELATIVE;
+  o->mse_space = HUSH_NCA_MSE_RELATIVE_PREDICTED;
   cli_args args;
   cli_args_init(&args, cmd, argc, argv);
   const char *arg, *val;
@@ -291,10 +293,11 @@ static void parse(int argc, char **argv, options *o) {
     } else if (cli_option(&args, arg, "--w-grad", &val)) {
       o->w_grad = cli_parse_float(cmd, "--w-grad", val, 0.0f, 1e6f);
     } else if (cli_option(&args, arg, "--mse-space", &val)) {
-      if (!strcmp(val, "relative")) o->mse_space = HUSH_NCA_MSE_RELATIVE;
+      if (!strcmp(val, "relative")) o->mse_space = HUSH_NCA_MSE_RELATIVE_PREDICTED;
+      else if (!strcmp(val, "relative-ref")) o->mse_space = HUSH_NCA_MSE_RELATIVE;
       else if (!strcmp(val, "linear")) o->mse_space = HUSH_NCA_MSE_LINEAR;
       else if (!strcmp(val, "log")) o->mse_space = HUSH_NCA_MSE_STATE;
-      else cli_usage_error(cmd, "--mse-space: unknown space '%s' (relative, linear or log)", val);
+      else cli_usage_error(cmd, "--mse-space: unknown space '%s' (relative, relative-ref, linear or log)", val);
     } else if (cli_option(&args, arg, "--holdout-every", &val)) {
       o->holdout_every = cli_parse_uint(cmd, "--holdout-every", val, 0, 1000);
     } else if (cli_option(&args, arg, "--seed", &val)) {
@@ -365,7 +368,7 @@ int cmd_train_nca(int argc, char **argv) {
   }
   hush_nca_adam adam;
   hush__nca_adam_init(&adam, o.lr);
-  const hush_nca_loss_weights lw = {o.w_mse, o.w_grad, o.mse_space, HUSH_NCA_LOG1P};
+  const hush_nca_loss_weights lw = {o.w_mse, o.w_grad, o.mse_space, HUSH_NCA_LOG1P, NULL};
   const double t0 = hush__now_ms();
   double running = 0.0;
   int running_n = 0;

@@ -10,8 +10,9 @@
  * where perception^T applies the adjoint of each clamp-to-edge 3x3 filter
  * (a scatter to the clamped taps).
  * The MSE term compares in the space the loss weights name (the state's
- * colour, radiance, or radiance relative to the reference, as hush eval's
- * relMSE). L_g compares forward differences of the Gaussian-blurred
+ * colour, radiance, or radiance relative to the reference or to the
+ * prediction; the last holds its weight constant in the derivative, so its
+ * "gradient" is that of the weighted MSE frozen at the current prediction). L_g compares forward differences of the Gaussian-blurred
  * prediction and reference colour of the state with an L1 norm; its
  * derivative uses sign(), 0 at 0.
  */
@@ -185,7 +186,11 @@ static double loss_and_grad(const hush_nca_sample *sample, pass *ps,
       const double dr = log1p_colour ? exp(pred[c][i]) : 1.0;
       const double rp = log1p_colour ? dr - 1.0 : pred[c][i];
       const double rt = log1p_colour ? expm1(t) : t;
-      const double wgt = lw->space == HUSH_NCA_MSE_RELATIVE ? 1.0 / (rt * rt + 0.01) : 1.0;
+      const double rp0 = rp > 0.0 ? rp : 0.0;
+      const double wgt = lw->space == HUSH_NCA_MSE_RELATIVE             ? 1.0 / (rt * rt + 0.01)
+                         : lw->space == HUSH_NCA_MSE_RELATIVE_PREDICTED ? 1.0 / (rp0 * rp0 + 0.01)
+                         : lw->space == HUSH_NCA_MSE_WEIGHTED           ? lw->weight[c][i]
+                                                                        : 1.0;
       const double e = rp - rt;
       mse += wgt * e * e;
       if (dpred) dpred[c][i] = lw->mse * 2.0 * wgt * e * dr / n_mse;

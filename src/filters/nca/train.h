@@ -25,16 +25,24 @@ typedef struct hush_nca_sample {
 /* Where the MSE term compares prediction and reference. The gradient term
  * always works on the state's colour (log space for log1p weights). */
 typedef enum hush_nca_mse_space {
-  HUSH_NCA_MSE_STATE = 0,   /* the state's colour as is (log1p: log space; darkens, see docs/nca.md) */
-  HUSH_NCA_MSE_LINEAR = 1,  /* radiance: unbiased, dominated by the brightest pixels */
-  HUSH_NCA_MSE_RELATIVE = 2 /* radiance, each error over (reference^2 + 0.01): relMSE of hush eval */
+  HUSH_NCA_MSE_STATE = 0,    /* the state's colour as is (log1p: log space; darkens, docs/nca.md) */
+  HUSH_NCA_MSE_LINEAR = 1,   /* radiance: unbiased, dominated by the brightest pixels */
+  HUSH_NCA_MSE_RELATIVE = 2, /* radiance, each error over reference^2 + 0.01 (hush eval's relMSE;
+                                its minimiser is biased dark, docs/nca.md) */
+  HUSH_NCA_MSE_RELATIVE_PREDICTED = 3, /* radiance, each error over prediction^2 + 0.01 with
+                                          that weight held constant in the derivative (Lehtinen
+                                          2018's HDR loss): as balanced over brightness as
+                                          relMSE, and its fixed point is the mean */
+  HUSH_NCA_MSE_WEIGHTED = 4  /* radiance, each error times weight[c][i] (the frozen form of
+                                RELATIVE_PREDICTED, for its gradient check) */
 } hush_nca_mse_space;
 
 typedef struct hush_nca_loss_weights {
   double mse;      /* w1 */
   double gradient; /* w2 */
   hush_nca_mse_space space;
-  hush_nca_transform transform;      /* of the sample's state and target colour */
+  hush_nca_transform transform;     /* of the sample's state and target colour */
+  const double *const *weight;      /* HUSH_NCA_MSE_WEIGHTED: 3 planes; not owned */
 } hush_nca_loss_weights;
 
 /*
