@@ -48,11 +48,11 @@ static const char *const help_text =
     "  --lr X               Adam learning rate (default 0.003)\n"
     "  --w-mse X            weight of the MSE term (default 1)\n"
     "  --w-grad X           weight of the gradient term L_g (default 0.5)\n"
-    "  --mse-space S        where the MSE term compares: relative (radiance,\n"
-    "                       errors over prediction^2 + 0.01, the weight held\n"
-    "                       constant: default), relative-ref (over reference^2\n"
-    "                       + 0.01; darkens), linear (radiance) or log (the\n"
-    "                       log1p state; darkens)\n"
+    "  --mse-space S        where the MSE term compares: log (the log1p state:\n"
+    "                       default, the committed weights), relative (radiance\n"
+    "                       over prediction^2 + 0.01, the weight held constant),\n"
+    "                       relative-ref (over reference^2 + 0.01) or linear\n"
+    "                       (radiance); docs/nca.md compares them\n"
     "  --holdout-every N    every N-th view (sorted by name) is validation, not\n"
     "                       training (default 4; 0: none)\n"
     "  --seed S             random seed (default 1)\n"
@@ -255,7 +255,7 @@ static void parse(int argc, char **argv, options *o) {
   o->lr = 0.003;
   o->w_mse = 1.0;
   o->w_grad = 0.5;
-  o->mse_space = HUSH_NCA_MSE_RELATIVE_PREDICTED;
+  o->mse_space = HUSH_NCA_MSE_STATE;
   cli_args args;
   cli_args_init(&args, cmd, argc, argv);
   const char *arg, *val;
@@ -297,7 +297,7 @@ static void parse(int argc, char **argv, options *o) {
       else if (!strcmp(val, "relative-ref")) o->mse_space = HUSH_NCA_MSE_RELATIVE;
       else if (!strcmp(val, "linear")) o->mse_space = HUSH_NCA_MSE_LINEAR;
       else if (!strcmp(val, "log")) o->mse_space = HUSH_NCA_MSE_STATE;
-      else cli_usage_error(cmd, "--mse-space: unknown space '%s' (relative, relative-ref, linear or log)", val);
+      else cli_usage_error(cmd, "--mse-space: unknown space '%s' (log, relative, relative-ref or linear)", val);
     } else if (cli_option(&args, arg, "--holdout-every", &val)) {
       o->holdout_every = cli_parse_uint(cmd, "--holdout-every", val, 0, 1000);
     } else if (cli_option(&args, arg, "--seed", &val)) {
