@@ -540,6 +540,9 @@ static void test_train_cli(void) {
   CHECK(run_cli("train-nca --data '" TWORK "/data' --out '" TWORK "/w.bin' "
                 "--min-iterations 5 --max-iterations 2",
                 err, sizeof err) == 2);
+  CHECK(run_cli("train-nca --data '" TWORK "/data' --out '" TWORK "/w.bin' --mse-space cubic", err,
+                sizeof err) == 2 &&
+        strstr(err, "cubic"));
   /* a short run learns: the held-out loss falls below the noisy input's */
   const int rc = run_cli("train-nca --data '" TWORK "/data' --out '" TWORK "/w.bin' --c-out '" TWORK
                          "/w.c' --iterations 3 --steps 60 --crop 32 --batch 2 --lr 0.01 "
