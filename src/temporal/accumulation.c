@@ -143,47 +143,6 @@ _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
 enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW };
 
 /*
- * How the full chunk x0 .. x0 + CHUNK - 1 of a row reads its history taps.
- * MODE_CONTIGUOUS: *shift is the offset of the blocks from the pixels;
- * MODE_WINDOW: the taps of every non-NULL plane of planes[np] are in
- * tb[plane] (hush__reproject_window); else MODE_GATHER. Shared by the
- * accumulation and the plain temporal blend.
- */
-static HUSH_ALWAYS_INLINE int chunk_mode(const hush_reproject_plan *plan, size_t row, int x0,
-                                         int W, size_t size, const float *const *planes, int np,
-                                         float (*tb)[4][CHUNK], int32_t *shift) {
-  const int32_t *origin = plan->origin + row;
-  const uint8_t *kind = plan->kind + row;
-  int contiguous = 1;
-  for (int x = x0; x < x0 + CHUNK; x++)
-    contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
-  if (contiguous) {
-    *shift = origin[x0] - x0;
-    return MODE_CONTIGUOUS;
-  }
-#ifdef HUSH_HAVE_WINDOW
-  uint8_t use[CHUNK];
-  int32_t e[CHUNK], dy[CHUNK];
-  for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
-  int32_t base;
-  const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, size, &base, e, dy);
-  if (rows) {
-    for (int t = 0; t < np; t++) {
-      if (!planes[t]) continue;
-      if (rows == 1)
-        hush__window_taps(planes[t], base, W, e, dy, 1, tb[t]);
-      else
-        hush__window_taps(planes[t], base, W, e, dy, 2, tb[t]);
-    }
-    return MODE_WINDOW;
-  }
-#else
-  (void)W, (void)size, (void)planes, (void)np, (void)tb;
-#endif
-  return MODE_GATHER;
-}
-
-/*
  * Pixels row + x_begin .. row + x_begin + len - 1 of a plan with blocks, each
  * gathered as a block (origin and the plan's four weights; all 0 for a
  * pixel without a BILINEAR footprint, whose origin is then 0), in a loop
@@ -266,28 +225,46 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
  * redone through their taps. */
 static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const int nc) {
   const int W = (int)b->W;
-  /* the 7 history planes (colour, moments, age); colour beyond nc unused */
-  const float *const planes[7] = {b->pc[0], nc > 1 ? b->pc[1] : NULL, nc > 2 ? b->pc[2] : NULL,
-                                  nc > 3 ? b->pc[3] : NULL, b->pm1, b->pm2, b->pa};
+  const int32_t *origin = b->plan->origin + row;
+  const uint8_t *kind = b->plan->kind + row;
   for (int x0 = 0; x0 < W; x0 += CHUNK) {
+    const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
+    int contiguous = 1;
+    for (int x = x0; x < x1; x++)
+      contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
     /* a constant length for full chunks: one vector iteration, no
      * alignment peeling or scalar epilogue */
-    if (W - x0 < CHUNK) {
-      blend_pixels(b, row, x0, W - x0, 0, MODE_GATHER, NULL, nc);
+    if (x1 - x0 < CHUNK) {
+      blend_pixels(b, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc);
       continue;
     }
-    float tb[7][4][CHUNK] __attribute__((aligned(64)));
-    int32_t shift = 0;
-    switch (chunk_mode(b->plan, row, x0, W, b->size, planes, 7, tb, &shift)) {
-    case MODE_CONTIGUOUS:
-      blend_pixels(b, row, x0, CHUNK, shift, MODE_CONTIGUOUS, NULL, nc);
-      break;
-    case MODE_WINDOW:
-      blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc);
-      break;
-    default:
-      blend_pixels(b, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
+    if (contiguous) {
+      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL, nc);
+      continue;
     }
+#ifdef HUSH_HAVE_WINDOW
+    uint8_t use[CHUNK];
+    int32_t e[CHUNK], dy[CHUNK];
+    for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
+    int32_t base;
+    const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, b->size, &base, e, dy);
+    if (rows) {
+      /* the taps of the 7 history planes (colour, moments, age) */
+      float tb[7][4][CHUNK] __attribute__((aligned(64)));
+      const float *planes[7] = {b->pc[0], b->pc[nc > 1], b->pc[nc > 2 ? 2 : 0],
+                                b->pc[nc > 3 ? 3 : 0], b->pm1, b->pm2, b->pa};
+      for (int t = 0; t < 7; t++) {
+        if (t > 0 && t < 4 && t >= nc) continue;
+        if (rows == 1)
+          hush__window_taps(planes[t], base, W, e, dy, 1, tb[t]);
+        else
+          hush__window_taps(planes[t], base, W, e, dy, 2, tb[t]);
+      }
+      blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc);
+      continue;
+    }
+#endif
+    blend_pixels(b, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
   }
   for (size_t i = row; i < row + (size_t)W; i++)
     if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) blend_pixel(b, i, nc);
@@ -623,24 +600,42 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
                                           size_t row, const int nc) {
   const int W = (int)t->W;
   const hush_reproject_plan *plan = t->plan;
+  const int32_t *origin = plan->origin + row;
+  const uint8_t *kind = plan->kind + row;
   for (int x0 = 0; x0 < W; x0 += CHUNK) {
-    if (W - x0 < CHUNK) {
-      tblend_pixels(t, prev, sample, out, row, x0, W - x0, 0, MODE_GATHER, NULL, nc);
+    const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
+    if (x1 - x0 < CHUNK) {
+      tblend_pixels(t, prev, sample, out, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc);
       continue;
     }
-    float tb[4][4][CHUNK] __attribute__((aligned(64)));
-    int32_t shift = 0;
-    switch (chunk_mode(plan, row, x0, W, t->size, prev, nc, tb, &shift)) {
-    case MODE_CONTIGUOUS:
-      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, shift, MODE_CONTIGUOUS, NULL, nc);
-      break;
-    case MODE_WINDOW:
+    int contiguous = 1;
+    for (int x = x0; x < x1; x++)
+      contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
+    if (contiguous) {
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL,
+                    nc);
+      continue;
+    }
+#ifdef HUSH_HAVE_WINDOW
+    uint8_t use[CHUNK];
+    int32_t e[CHUNK], dy[CHUNK];
+    for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
+    int32_t base;
+    const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, t->size, &base, e, dy);
+    if (rows) {
+      float tb[4][4][CHUNK] __attribute__((aligned(64)));
+      for (int c = 0; c < nc; c++) {
+        if (rows == 1)
+          hush__window_taps(prev[c], base, W, e, dy, 1, tb[c]);
+        else
+          hush__window_taps(prev[c], base, W, e, dy, 2, tb[c]);
+      }
       tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_WINDOW,
                     (const float(*)[4][CHUNK])tb, nc);
-      break;
-    default:
-      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
+      continue;
     }
+#endif
+    tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
   }
   for (size_t i = row; i < row + (size_t)W; i++) {
     if (plan->kind[i] != HUSH_FOOTPRINT_3X3) continue;
