@@ -354,6 +354,60 @@ static void test_filter_extreme_input(void) {
   hush_device_release(dev);
 }
 
+/* With 'emission' bound the automaton sees color - emission and the
+ * emission is added back: the output is exactly that of the same filter
+ * run on max(color - emission, 0) plus the emission, and a lamp keeps its
+ * radiance. emission_bypass=false ignores the bound image. */
+static void test_filter_emission_bypass(void) {
+  static frame_data lit, off, plain;
+  static float emission[FN * 3], lit_color[FN * 3];
+  frame_random(&lit);
+  memset(emission, 0, sizeof emission);
+  for (int y = 10; y < 13; y++) /* a 3x3 lamp of radiance 50 */
+    for (int x = 20; x < 23; x++)
+      for (int c = 0; c < 3; c++) {
+        emission[3 * (y * FW + x) + c] = 50.0f;
+        lit.color[3 * (y * FW + x) + c] = 50.0f + 0.25f * (float)c;
+      }
+  emission[3 * 40 + 1] = 2.0f * lit.color[3 * 40 + 1]; /* more than the colour: clamped at 0 */
+  memcpy(lit_color, lit.color, sizeof lit_color);
+  off = lit;
+  for (int i = 0; i < FN * 3; i++) {
+    const float r = lit.color[i] - emission[i];
+    off.color[i] = r > 0.0f ? r : 0.0f;
+  }
+  plain = lit;
+  hush_device dev = hush_device_new("threads=2");
+  REQUIRE(dev);
+  hush_filter a = make_nca(dev, &lit), b = make_nca(dev, &off), c = make_nca(dev, &plain);
+  hush_image_view v = view3(emission);
+  CHECK(hush_filter_set_image(a, "emission", &v) == HUSH_OK);
+  CHECK(hush_filter_commit(a) == HUSH_OK);
+  CHECK(run_frame(a) == HUSH_OK);
+  CHECK(run_frame(b) == HUSH_OK);
+  CHECK(run_frame(c) == HUSH_OK);
+  int same = 1, lamp = 1, input_kept = 1;
+  for (int i = 0; i < FN * 3; i++) {
+    same &= lit.output[i] == off.output[i] + emission[i];
+    input_kept &= lit.color[i] == lit_color[i];
+  }
+  for (int y = 10; y < 13; y++)
+    for (int x = 20; x < 23; x++)
+      for (int k = 0; k < 3; k++) lamp &= lit.output[3 * (y * FW + x) + k] >= 50.0f;
+  CHECK_MSG(same, "output is not nca(color - emission) + emission");
+  CHECK_MSG(lamp, "the lamp lost radiance");
+  CHECK_MSG(input_kept, "the caller's color image was written");
+  /* the bypass off: the emission image is bound but not used */
+  CHECK(hush_filter_set_bool(a, "emission_bypass", 0) == HUSH_OK);
+  CHECK(run_frame(a) == HUSH_OK);
+  CHECK_MSG(memcmp(lit.output, plain.output, sizeof plain.output) == 0,
+            "emission_bypass=false still uses the emission");
+  hush_filter_release(a);
+  hush_filter_release(b);
+  hush_filter_release(c);
+  hush_device_release(dev);
+}
+
 /* ---- weights file -------------------------------------------------------- */
 
 static void write_bytes(const char *path, const unsigned char *buf, size_t n) {
@@ -492,9 +546,12 @@ static int run_cli(const char *args, char *err, size_t err_size) {
 
 /* Writes view v: a smooth reference and a noisy input with fireflies, with
  * normals and albedo, in the layout `hush render` gives train-nca. */
-static void write_view(hush_device dev, int v) {
+/* A training view DATA/v<v>; emission 1: the input also has an 'emission'
+ * layer equal to its colour (all lamp), 2: the reference too. */
+static void write_view_in(hush_device dev, const char *data, int v, int emission) {
   char path[1024];
-  snprintf(path, sizeof path, "mkdir -p '%s/data/v%d/noisy' '%s/data/v%d/ref'", TWORK, v, TWORK, v);
+  snprintf(path, sizeof path, "mkdir -p '%s/%s/v%d/noisy' '%s/%s/v%d/ref'", TWORK, data, v, TWORK,
+           data, v);
   REQUIRE(system(path) == 0);
   hush_frame noisy = hush_frame_new(dev, TS, TS), ref = hush_frame_new(dev, TS, TS);
   REQUIRE(noisy && ref);
@@ -516,12 +573,55 @@ static void write_view(hush_device dev, int v) {
       ap[3 * i + k] = 0.3f + 0.5f * left;
     }
   }
-  snprintf(path, sizeof path, "%s/data/v%d/noisy/frame_0000.exr", TWORK, v);
+  hush_image_view e;
+  if (emission >= 1) {
+    REQUIRE(hush_frame_add_layer(noisy, "emission", 3, &e) == HUSH_OK);
+    memcpy(e.data, cp, sizeof(float) * 3 * TS * TS);
+  }
+  if (emission >= 2) {
+    REQUIRE(hush_frame_add_layer(ref, "emission", 3, &e) == HUSH_OK);
+    memcpy(e.data, rp, sizeof(float) * 3 * TS * TS);
+  }
+  snprintf(path, sizeof path, "%s/%s/v%d/noisy/frame_0000.exr", TWORK, data, v);
   CHECK(hush_frame_write_exr(noisy, path, HUSH_EXR_FLOAT) == HUSH_OK);
-  snprintf(path, sizeof path, "%s/data/v%d/ref/frame_0000.exr", TWORK, v);
+  snprintf(path, sizeof path, "%s/%s/v%d/ref/frame_0000.exr", TWORK, data, v);
   CHECK(hush_frame_write_exr(ref, path, HUSH_EXR_FLOAT) == HUSH_OK);
   hush_frame_release(noisy);
   hush_frame_release(ref);
+}
+
+static void write_view(hush_device dev, int v) { write_view_in(dev, "data", v, 0); }
+
+/* The noisy input's validation loss that train-nca prints (-1: none). */
+static double noisy_loss(const char *err) {
+  const char *a = strstr(err, "noisy input: ");
+  double loss = -1.0;
+  if (a) sscanf(a + strlen("noisy input: "), "%lf", &loss);
+  return loss;
+}
+
+/* With 'emission' layers train-nca takes them off both colours, as the
+ * filter's emission_bypass does: views that are all lamp leave nothing to
+ * learn (loss 0); --keep-emission trains on the colour as it is; an
+ * emission layer in only one of the two frames is an error. */
+static void test_train_emission(void) {
+  hush_device dev = hush_device_new("threads=1");
+  REQUIRE(dev);
+  for (int v = 0; v < 4; v++) write_view_in(dev, "lamps", v, 2);
+  write_view_in(dev, "half", 0, 1);
+  char err[8192];
+  const char *common = "--iterations 3 --steps 0 --crop 32 --threads 1";
+  char cmd[2048];
+  snprintf(cmd, sizeof cmd, "train-nca --data '%s/lamps' --out '%s/l.bin' %s", TWORK, TWORK, common);
+  int rc = run_cli(cmd, err, sizeof err);
+  CHECK_MSG(rc == 0 && noisy_loss(err) == 0.0, "exit %d, loss %g: %s", rc, noisy_loss(err), err);
+  snprintf(cmd, sizeof cmd, "train-nca --data '%s/lamps' --out '%s/l.bin' %s --keep-emission",
+           TWORK, TWORK, common);
+  rc = run_cli(cmd, err, sizeof err);
+  CHECK_MSG(rc == 0 && noisy_loss(err) > 0.0, "exit %d, loss %g: %s", rc, noisy_loss(err), err);
+  snprintf(cmd, sizeof cmd, "train-nca --data '%s/half' --out '%s/h.bin' %s", TWORK, TWORK, common);
+  CHECK(run_cli(cmd, err, sizeof err) == 1 && strstr(err, "only the input has an 'emission'"));
+  hush_device_release(dev);
 }
 
 static void test_train_cli(void) {
@@ -572,8 +672,10 @@ int main(void) {
   test_gradient_relative_predicted();
   test_filter_deterministic();
   test_filter_extreme_input();
+  test_filter_emission_bypass();
   test_weights_file();
   test_default_weights_match_file();
   test_train_cli();
+  test_train_emission();
   return check_summary();
 }

@@ -53,6 +53,9 @@ static const char *const help_text =
     "                       over prediction^2 + 0.01, the weight held constant),\n"
     "                       relative-ref (over reference^2 + 0.01) or linear\n"
     "                       (radiance); docs/nca.md compares them\n"
+    "  --keep-emission      train on the colour as it is; by default, as the\n"
+    "                       filter's emission_bypass, a frame's 'emission' layer\n"
+    "                       (lamps seen directly) is taken off its colour first\n"
     "  --holdout-every N    every N-th view (sorted by name) is validation, not\n"
     "                       training (default 4; 0: none)\n"
     "  --seed S             random seed (default 1)\n"
@@ -75,38 +78,56 @@ typedef struct options {
   uint32_t steps, batch, crop, holdout_every, seed, threads, log_every;
   double time_limit, lr, w_mse, w_grad;
   hush_nca_mse_space mse_space;
+  int keep_emission;
 } options;
 
 static int compare_names(const void *a, const void *b) {
   return strcmp(*(const char *const *)a, *(const char *const *)b);
 }
 
-/* Imports the first 3 channels of a layer into planes (log1p for colour). */
-static int import_layer(const char *cmd, hush_device dev, hush_frame frame, const char *layer,
-                        const char *path, float *planes, int log_color) {
+/* The first 3 channels of a layer as planes (p initialised by the caller). */
+static int read_layer(const char *cmd, hush_device dev, hush_frame frame, const char *layer,
+                      const char *path, hush_planar *p) {
   hush_image_view v;
   hush_status s = hush_frame_get_layer(frame, layer, &v);
   if (s) return cli_error(cmd, "%s: no layer '%s'", path, layer);
-  hush_planar p;
-  memset(&p, 0, sizeof p);
-  s = hush__planar_init(dev, &p, 3, v.width, v.height);
   size_t replaced = 0;
-  if (!s) s = hush__view_import(dev, &v, layer, &p, HUSH_NONFINITE_REPLACE, &replaced);
-  if (s) {
-    hush__planar_free(&p);
-    return cli_device_error(cmd, dev, s, path);
-  }
-  const size_t n = (size_t)v.width * v.height;
-  for (int c = 0; c < 3; c++)
-    for (size_t i = 0; i < n; i++) {
-      const float x = p.plane[c][i];
-      planes[(size_t)c * n + i] = log_color ? log1pf(x > 0.0f ? x : 0.0f) : x;
-    }
-  hush__planar_free(&p);
-  return 0;
+  s = hush__planar_init(dev, p, 3, v.width, v.height);
+  if (!s) s = hush__view_import(dev, &v, layer, p, HUSH_NONFINITE_REPLACE, &replaced);
+  return s ? cli_device_error(cmd, dev, s, path) : 0;
 }
 
-static int load_view(const char *cmd, hush_device dev, const char *dir, view_data *v) {
+/* Imports the first 3 channels of a layer into planes; colour (log_color)
+ * as log1p, less the frame's 'emission' layer when it has one and
+ * minus_emission is set (what the filter's emission_bypass feeds it). */
+static int import_layer(const char *cmd, hush_device dev, hush_frame frame, const char *layer,
+                        const char *path, float *planes, int log_color, int minus_emission) {
+  hush_planar p, e;
+  memset(&p, 0, sizeof p);
+  memset(&e, 0, sizeof e);
+  hush_image_view ev;
+  const int emis = log_color && minus_emission && hush_frame_get_layer(frame, "emission", &ev) == HUSH_OK;
+  int rc = read_layer(cmd, dev, frame, layer, path, &p);
+  if (!rc && emis) rc = read_layer(cmd, dev, frame, "emission", path, &e);
+  if (!rc) {
+    const size_t n = (size_t)p.width * p.height;
+    for (int c = 0; c < 3; c++)
+      for (size_t i = 0; i < n; i++) {
+        const float x = p.plane[c][i] - (emis ? e.plane[c][i] : 0.0f);
+        planes[(size_t)c * n + i] = log_color ? log1pf(x > 0.0f ? x : 0.0f) : x;
+      }
+  }
+  hush__planar_free(&p);
+  hush__planar_free(&e);
+  return rc;
+}
+
+/* The reference's colour loses its own (converged) emission, not the noisy
+ * frame's: where a 1 spp sample missed a lamp's edge the target is still
+ * the light off the surfaces, and the filter adds the frame's emission
+ * back, whose mean is the reference's. */
+static int load_view(const char *cmd, hush_device dev, const char *dir, int minus_emission,
+                     view_data *v) {
   char noisy[4096], ref[4096];
   snprintf(noisy, sizeof noisy, "%s/noisy/frame_0000.exr", dir);
   snprintf(ref, sizeof ref, "%s/ref/frame_0000.exr", dir);
@@ -123,13 +144,19 @@ static int load_view(const char *cmd, hush_device dev, const char *dir, view_dat
   v->height = hush_frame_height(fn);
   if (hush_frame_width(fr) != v->width || hush_frame_height(fr) != v->height)
     rc = cli_error(cmd, "%s: input and reference sizes differ", dir);
+  hush_image_view ev;
+  const int en = hush_frame_get_layer(fn, "emission", &ev) == HUSH_OK,
+            er = hush_frame_get_layer(fr, "emission", &ev) == HUSH_OK;
+  if (!rc && minus_emission && en != er)
+    rc = cli_error(cmd, "%s: only the %s has an 'emission' layer (both or neither; or "
+                   "--keep-emission)", dir, en ? "input" : "reference");
   const size_t n = (size_t)v->width * v->height;
   v->planes = rc ? NULL : malloc(12 * n * sizeof(float));
   if (!rc && !v->planes) rc = cli_error(cmd, "out of memory");
-  if (!rc) rc = import_layer(cmd, dev, fn, "color", noisy, v->planes, 1);
-  if (!rc) rc = import_layer(cmd, dev, fn, "normal", noisy, v->planes + 3 * n, 0);
-  if (!rc) rc = import_layer(cmd, dev, fn, "albedo", noisy, v->planes + 6 * n, 0);
-  if (!rc) rc = import_layer(cmd, dev, fr, "color", ref, v->planes + 9 * n, 1);
+  if (!rc) rc = import_layer(cmd, dev, fn, "color", noisy, v->planes, 1, minus_emission);
+  if (!rc) rc = import_layer(cmd, dev, fn, "normal", noisy, v->planes + 3 * n, 0, 0);
+  if (!rc) rc = import_layer(cmd, dev, fn, "albedo", noisy, v->planes + 6 * n, 0, 0);
+  if (!rc) rc = import_layer(cmd, dev, fr, "color", ref, v->planes + 9 * n, 1, minus_emission);
   hush_frame_release(fn);
   hush_frame_release(fr);
   return rc;
@@ -164,7 +191,7 @@ static int load_views(const char *cmd, hush_device dev, const options *o, view_d
   int rc = *views ? 0 : cli_error(cmd, "out of memory");
   for (int i = 0; i < n && !rc; i++) {
     snprintf((*views)[i].name, sizeof (*views)[i].name, "%s", cli_basename(names[i]));
-    rc = load_view(cmd, dev, names[i], &(*views)[i]);
+    rc = load_view(cmd, dev, names[i], !o->keep_emission, &(*views)[i]);
     if (!rc && ((*views)[i].width < o->crop || (*views)[i].height < o->crop))
       rc = cli_error(cmd, "%s: %ux%u is smaller than the crop %u", names[i], (*views)[i].width,
                      (*views)[i].height, o->crop);
@@ -298,6 +325,8 @@ static void parse(int argc, char **argv, options *o) {
       else if (!strcmp(val, "linear")) o->mse_space = HUSH_NCA_MSE_LINEAR;
       else if (!strcmp(val, "log")) o->mse_space = HUSH_NCA_MSE_STATE;
       else cli_usage_error(cmd, "--mse-space: unknown space '%s' (log, relative, relative-ref or linear)", val);
+    } else if (!strcmp(arg, "--keep-emission")) {
+      o->keep_emission = 1;
     } else if (cli_option(&args, arg, "--holdout-every", &val)) {
       o->holdout_every = cli_parse_uint(cmd, "--holdout-every", val, 0, 1000);
     } else if (cli_option(&args, arg, "--seed", &val)) {

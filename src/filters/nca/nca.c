@@ -8,6 +8,7 @@
  * ones (default_weights.c, trained by `hush train-nca`) unless a file was
  * loaded with hush_nca_load_weights (weights.c checks it).
  */
+#include "filters/emission.h"
 #include "filters/filter.h"
 #include "filters/nca/model.h"
 #include "filters/nca/weights.h"
@@ -20,20 +21,27 @@
  * in float and is far above any real pixel. */
 #define NCA_LOG_MAX 30.0f
 
-enum { P_NONFINITE = 0, P_ITERATIONS, P_COUNT };
+enum { P_NONFINITE = 0, P_ITERATIONS, P_EMISSION_BYPASS, P_COUNT };
 
 static const hush_param_info nca_params[P_COUNT] = {
     HUSH_PARAM_NONFINITE_ENTRY,
     {"iterations", HUSH_PARAM_INT, 0, 0, HUSH_NCA_MAX_ITERATIONS,
      "cellular automaton iterations K (0: the count the weights were trained for)", NULL},
+    {"emission_bypass", HUSH_PARAM_BOOL, 1, 0, 1,
+     "with 'emission' bound: the automaton sees color minus emission, which is added back to "
+     "its output (lamps seen directly keep their radiance and do not bloom)",
+     NULL},
 };
 
-enum { I_COLOR = 0, I_NORMAL, I_ALBEDO, I_OUTPUT, I_COUNT };
+enum { I_COLOR = 0, I_NORMAL, I_ALBEDO, I_EMISSION, I_OUTPUT, I_COUNT };
 
 static const hush_image_info nca_images[I_COUNT] = {
     HUSH_IMAGE_COLOR_ENTRY,
     HUSH_IMAGE_NORMAL_ENTRY,
     {"albedo", HUSH_IMAGE_INPUT, 1, 3, "first-hit albedo"},
+    {"emission", HUSH_IMAGE_INPUT, 0, 3,
+     "radiance the camera sees directly at the first hit (lights, sky): kept out of the "
+     "automaton (color - emission), added back to the output"},
     {"output", HUSH_IMAGE_OUTPUT, 1, 3, "denoised radiance"},
 };
 
@@ -49,6 +57,7 @@ static const hush_filter_class_info nca_info = {
 
 typedef struct nca_state {
   hush_planar color, normal, albedo; /* imported inputs: the state at even steps */
+  hush_planar emission;              /* imported with emission_bypass (emission.h) */
   float *odd[HUSH_NCA_CHANNELS];     /* the state at odd steps, one block */
   float *scratch;                    /* hush__nca_scratch_floats */
   int scratch_threads;
@@ -60,6 +69,7 @@ static void nca_destroy(void *state) {
   hush__planar_free(&st->color);
   hush__planar_free(&st->normal);
   hush__planar_free(&st->albedo);
+  hush__planar_free(&st->emission);
   hush__free_floats(st->odd[0]);
   hush__free_floats(st->scratch);
   free(st);
@@ -136,6 +146,11 @@ static hush_status nca_execute(hush_filter f, void *state, const hush_frame_info
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__filter_import(f, I_NORMAL, &st->normal))) return s;
   if ((s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
+  const int emis = hush__filter_view(f, I_EMISSION) != NULL && hush__param_i(f, P_EMISSION_BYPASS);
+  if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
+               (s = hush__filter_import(f, I_EMISSION, &st->emission))))
+    return s;
+  if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
   color_to_state(&st->color, wt->color_transform, threads);
   hush__filter_timing_stage(f, "import");
 
@@ -157,6 +172,7 @@ static hush_status nca_execute(hush_filter f, void *state, const hush_frame_info
   float *const *last = (iterations & 1) ? st->odd : even;
   float *result[3] = {last[0], last[1], last[2]};
   state_to_color(result, &st->normal, wt->color_transform, threads);
+  if (emis) hush__emission_add(&st->normal, &st->emission, &st->normal, threads);
   hush__view_export(&st->normal, hush__filter_view(f, I_OUTPUT), threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
