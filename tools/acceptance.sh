@@ -12,7 +12,8 @@
 #
 # The input (ACCEPT_DIR/NAME/seq) carries asvgf's gradient samples (--gradients).
 # Environment: HUSH (build/hush), ACCEPT_DIR (../acceptance), ACCEPT_FRAMES (60; the living room
-# takes 8 unless it is set), ACCEPT_SPP (1024), ACCEPT_SIZE (640x360). Per scene NAME: ACCEPT_DIR/NAME/seq (the 1 spp input, seed 1),
+# takes 8 unless it is set), ACCEPT_SPP (1024), ACCEPT_SIZE (640x360), ACCEPT_REEVAL (1: evaluate
+# again scenes whose evaluation is newer than their references and the hush binary). Per scene NAME: ACCEPT_DIR/NAME/seq (the 1 spp input, seed 1),
 # ref (the reference sequence, seed 2: its cameras, and its frames once all are rendered; ref/DONE
 # marks it complete), ref-frames (the rendered frames so far), eval (the hush eval report).
 # Writes docs/results/acceptance.md from the complete scenes. Needs ../shared/scenes for the
@@ -67,6 +68,11 @@ render_scene() { # name scene path frames
 eval_scene() { # name
   local d=$dir/$1
   [ -f "$d/ref/DONE" ] || { echo "acceptance: $1: references incomplete, not evaluated" >&2; return 0; }
+  # an evaluation newer than the references and the hush binary stands (ACCEPT_REEVAL=1: redo)
+  if [ "${ACCEPT_REEVAL:-0}" != 1 ] && [ "$d/eval/summary.md" -nt "$d/ref/DONE" ] &&
+    [ "$d/eval/summary.md" -nt "$hush" ]; then
+    return 0
+  fi
   "$hush" eval --seq "$d/seq" --ref "$d/ref" --filters "$("$hush" filters --names | paste -sd, -)" \
     --no-video --quiet --out "$d/eval" >/dev/null
 }
