@@ -612,7 +612,8 @@ static void test_train_emission(void) {
   char err[8192];
   const char *common = "--iterations 3 --steps 0 --crop 32 --threads 1";
   char cmd[2048];
-  snprintf(cmd, sizeof cmd, "train-nca --data '%s/lamps' --out '%s/l.bin' %s", TWORK, TWORK, common);
+  snprintf(cmd, sizeof cmd, "train-nca --data '%s/lamps' --out '%s/l.bin' %s", TWORK, TWORK,
+           common);
   int rc = run_cli(cmd, err, sizeof err);
   CHECK_MSG(rc == 0 && noisy_loss(err) == 0.0, "exit %d, loss %g: %s", rc, noisy_loss(err), err);
   snprintf(cmd, sizeof cmd, "train-nca --data '%s/lamps' --out '%s/l.bin' %s --keep-emission",

@@ -106,7 +106,8 @@ static int import_layer(const char *cmd, hush_device dev, hush_frame frame, cons
   memset(&p, 0, sizeof p);
   memset(&e, 0, sizeof e);
   hush_image_view ev;
-  const int emis = log_color && minus_emission && hush_frame_get_layer(frame, "emission", &ev) == HUSH_OK;
+  const int emis =
+      log_color && minus_emission && hush_frame_get_layer(frame, "emission", &ev) == HUSH_OK;
   int rc = read_layer(cmd, dev, frame, layer, path, &p);
   if (!rc && emis) rc = read_layer(cmd, dev, frame, "emission", path, &e);
   if (!rc) {
