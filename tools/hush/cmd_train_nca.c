@@ -98,23 +98,20 @@ static int read_layer(const char *cmd, hush_device dev, hush_frame frame, const 
 }
 
 /* Imports the first 3 channels of a layer into planes; colour (log_color)
- * as log1p, less the frame's 'emission' layer when it has one and
- * minus_emission is set (what the filter's emission_bypass feeds it). */
+ * as log1p; minus_emission: less the frame's 'emission' layer (what the
+ * filter's emission_bypass feeds it). */
 static int import_layer(const char *cmd, hush_device dev, hush_frame frame, const char *layer,
                         const char *path, float *planes, int log_color, int minus_emission) {
   hush_planar p, e;
   memset(&p, 0, sizeof p);
   memset(&e, 0, sizeof e);
-  hush_image_view ev;
-  const int emis =
-      log_color && minus_emission && hush_frame_get_layer(frame, "emission", &ev) == HUSH_OK;
   int rc = read_layer(cmd, dev, frame, layer, path, &p);
-  if (!rc && emis) rc = read_layer(cmd, dev, frame, "emission", path, &e);
+  if (!rc && minus_emission) rc = read_layer(cmd, dev, frame, "emission", path, &e);
   if (!rc) {
     const size_t n = (size_t)p.width * p.height;
     for (int c = 0; c < 3; c++)
       for (size_t i = 0; i < n; i++) {
-        const float x = p.plane[c][i] - (emis ? e.plane[c][i] : 0.0f);
+        const float x = p.plane[c][i] - (minus_emission ? e.plane[c][i] : 0.0f);
         planes[(size_t)c * n + i] = log_color ? log1pf(x > 0.0f ? x : 0.0f) : x;
       }
   }
@@ -148,16 +145,17 @@ static int load_view(const char *cmd, hush_device dev, const char *dir, int minu
   hush_image_view ev;
   const int en = hush_frame_get_layer(fn, "emission", &ev) == HUSH_OK,
             er = hush_frame_get_layer(fr, "emission", &ev) == HUSH_OK;
+  const int minus = minus_emission && en; /* en == er past the check */
   if (!rc && minus_emission && en != er)
     rc = cli_error(cmd, "%s: only the %s has an 'emission' layer (both or neither; or "
                    "--keep-emission)", dir, en ? "input" : "reference");
   const size_t n = (size_t)v->width * v->height;
   v->planes = rc ? NULL : malloc(12 * n * sizeof(float));
   if (!rc && !v->planes) rc = cli_error(cmd, "out of memory");
-  if (!rc) rc = import_layer(cmd, dev, fn, "color", noisy, v->planes, 1, minus_emission);
+  if (!rc) rc = import_layer(cmd, dev, fn, "color", noisy, v->planes, 1, minus);
   if (!rc) rc = import_layer(cmd, dev, fn, "normal", noisy, v->planes + 3 * n, 0, 0);
   if (!rc) rc = import_layer(cmd, dev, fn, "albedo", noisy, v->planes + 6 * n, 0, 0);
-  if (!rc) rc = import_layer(cmd, dev, fr, "color", ref, v->planes + 9 * n, 1, minus_emission);
+  if (!rc) rc = import_layer(cmd, dev, fr, "color", ref, v->planes + 9 * n, 1, minus);
   hush_frame_release(fn);
   hush_frame_release(fr);
   return rc;
