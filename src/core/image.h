@@ -15,7 +15,8 @@
 #define HUSH_ALIGN 64
 
 /* 64-byte aligned allocation of n floats (zeroed); NULL on failure or n == 0.
- * Free with hush__free_floats(). */
+ * Free with hush__free_floats() only: the pointer is not the start of the
+ * underlying allocation (image.c staggers the page offsets of buffers). */
 float *hush__alloc_floats(size_t n);
 void hush__free_floats(float *p);
 
