@@ -953,7 +953,9 @@ static void test_level_formula(hush_device dev) {
                 if (valid && !(out.plane[SVGF_VALID][i] == 1.0f || ref[4 * pi] == 0.0))
                   holes_ok = 0;
               }
-            CHECK_MSG(worst < 1e-4, "level %s step %d %s%s%s: worst difference %g",
+            /* the AVX-512 loop's 2^t is within 7.5e-5 relative (weights.h), and
+             * the variance sums squared weights: up to twice that */
+            CHECK_MSG(worst < 2.5e-4, "level %s step %d %s%s%s: worst difference %g",
                       kk ? "3x3" : "5x5", step, nexp ? "exp" : "pow",
                       valid ? " validity" : "", portable ? " portable" : "", worst);
             CHECK(holes_ok);

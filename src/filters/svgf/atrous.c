@@ -213,11 +213,11 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
  * tap addresses on the stack and reloads one per vector load, and each
  * select costs two operations. Here the pair loop stays a loop (9 plane
  * bases in registers, one offset per tap), the weight floor is the zero
- * mask of the last operation of the exp, 2^x is vrndscaleps + a degree-4
- * polynomial + vscalefps, and the depth denominators use vrcp14ps (relative
- * error 2^-14 in an exponent). The exponent is carried negated, t = -s.
- * Same weights as the portable loop within 1e-4 relative (tests/test_svgf.c
- * compares the two).
+ * mask of the last operation of the exp, 2^x is vreduceps + a degree-3
+ * polynomial + vscalefps (weights.h), and the depth denominators use
+ * vrcp14ps (relative error 2^-14 in an exponent). The exponent is carried
+ * negated, t = -s. Same weights as the portable loop within 1e-4 relative
+ * (tests/test_svgf.c compares both with the formulas).
  */
 #include <immintrin.h>
 
