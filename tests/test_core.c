@@ -11,7 +11,9 @@
 #include "core/image.h"
 #include "core/rng.h"
 
+#include <math.h>
 #include <stdint.h>
+#include <stdlib.h>
 #include <string.h>
 
 static void test_device_config(void) {
@@ -206,6 +208,80 @@ static void test_views(void) {
   hush_device_release(d);
 }
 
+/* Rows of whole vectors (the streamed import path where the build has one):
+ * every value lands in its plane, every NaN/Inf is counted (in each lane
+ * and channel), and the cached variant agrees. Also a width that is not a
+ * multiple of 16, which takes the plain path. */
+static void streamed_rows(hush_format format, uint32_t W) {
+  const uint32_t H = 3;
+  const int nc = hush_format_channels(format);
+  float *buf = malloc(sizeof(float) * W * H * (size_t)nc);
+  REQUIRE(buf != NULL);
+  for (size_t i = 0; i < (size_t)W * H * (size_t)nc; i++) buf[i] = (float)i * 0.25f - 7.0f;
+  /* non-finite values in lanes 0, 5, 11, 15 of the first vector and in the
+   * last pixel, in different channels */
+  const size_t at[] = {0, 5, 11, 15, (size_t)W * H - 1};
+  for (size_t k = 0; k < sizeof at / sizeof at[0]; k++)
+    buf[at[k] * (size_t)nc + k % (size_t)nc] = k % 2 ? INFINITY : NAN;
+  hush_image_view v = {buf, format, W, H, 0, 0, 0};
+  hush_planar a, b;
+  REQUIRE(hush__planar_init(NULL, &a, nc, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &b, nc, W, H) == HUSH_OK);
+  size_t bad_a = 0, bad_b = 0;
+  for (uint32_t y = 0; y < H; y++) {
+    bad_a += hush__view_import_row(&v, y, &a);
+    bad_b += hush__view_import_row_cached(&v, y, &b);
+  }
+  CHECK_MSG(bad_a == 5 && bad_b == 5, "format %d width %u: %zu and %zu non-finite, want 5",
+            (int)format, W, bad_a, bad_b);
+  int same = 1;
+  for (size_t i = 0; i < (size_t)W * H; i++)
+    for (int c = 0; c < nc; c++) {
+      const float want = buf[i * (size_t)nc + (size_t)c];
+      const float got = a.plane[c][i], got_b = b.plane[c][i];
+      if (memcmp(&want, &got, sizeof got) != 0 || memcmp(&want, &got_b, sizeof got) != 0)
+        same = 0;
+    }
+  CHECK_MSG(same, "format %d width %u: planes differ from the view", (int)format, W);
+  hush__planar_free(&a);
+  hush__planar_free(&b);
+  free(buf);
+}
+
+/* The export of three planes into an interleaved float row, at every
+ * start alignment of the output (the streamed path has a head, 64-byte
+ * groups and a tail): every pixel of the span lands, nothing around it is
+ * touched. */
+static void export_spans(void) {
+  enum { W = 101 };
+  float p0[W], p1[W], p2[W];
+  for (int x = 0; x < W; x++) {
+    p0[x] = (float)x;
+    p1[x] = 1000.0f + (float)x;
+    p2[x] = -(float)x - 0.5f;
+  }
+  const float *const in[3] = {p0, p1, p2};
+  enum { N = 3 * W + 64 };
+  float *buf = aligned_alloc(64, (sizeof(float) * N + 63) / 64 * 64);
+  REQUIRE(buf != NULL);
+  int ok = 1;
+  for (uint32_t shift = 0; shift < 16; shift++)
+    for (uint32_t x0 = 0; x0 < 3; x0++) {
+      const uint32_t w = W - 2 * x0 - 1;
+      for (int i = 0; i < N; i++) buf[i] = 7.0f;
+      const hush_image_view v = {buf + shift, HUSH_FORMAT_FLOAT3, W, 1, 0, 0, 0};
+      hush__view_export_span(in, 3, &v, 0, x0, w);
+      for (int i = 0; i < N; i++) {
+        const int e = i - (int)shift, x = e / 3;
+        const int inside = e >= 0 && x >= (int)x0 && x < (int)(x0 + w);
+        const float want = inside ? in[e % 3][x - (int)x0] : 7.0f;
+        if (buf[i] != want) ok = 0;
+      }
+    }
+  CHECK_MSG(ok, "export of three planes into an interleaved row");
+  free(buf);
+}
+
 static void test_math(void) {
   float v[16], pr[16], m[16], inv[16], id[16];
   hush_m4_look_at(v, hush_v3(1, 2, 3), hush_v3(0, 0, -4), hush_v3(0, 1, 0));
@@ -257,6 +333,10 @@ int main(void) {
   test_first_error_kept();
   test_half();
   test_views();
+  streamed_rows(HUSH_FORMAT_FLOAT3, 48);
+  streamed_rows(HUSH_FORMAT_FLOAT, 32);
+  streamed_rows(HUSH_FORMAT_FLOAT3, 37);
+  export_spans();
   test_math();
   test_rng();
   CHECK(callback_calls == 2);

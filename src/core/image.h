@@ -70,8 +70,12 @@ hush_status hush__view_import(hush_device device, const hush_image_view *view, c
  * pass (e.g. albedo.h's demodulating import): row y of the view into dst's
  * planes (no threads), returning how many values are NaN/Inf; then, with
  * the sum over the rows, the policy (zeroes them; the error names the
- * first). */
+ * first). hush__view_import_row may write with streaming stores, which
+ * leave the row out of the cache (a frame's planes outgrow it anyway, and
+ * no line is read for ownership); a caller that works on the row right
+ * away takes hush__view_import_row_cached. */
 size_t hush__view_import_row(const hush_image_view *view, uint32_t y, hush_planar *dst);
+size_t hush__view_import_row_cached(const hush_image_view *view, uint32_t y, hush_planar *dst);
 hush_status hush__view_import_nonfinite(hush_device device, const hush_image_view *view,
                                         const char *what, hush_planar *dst,
                                         hush_nonfinite_policy policy, size_t bad);
