@@ -10,6 +10,7 @@
 #include "core/hmath.h"
 #include "core/image.h"
 #include "core/rng.h"
+#include "filters/albedo.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -282,6 +283,43 @@ static void export_spans(void) {
   free(buf);
 }
 
+/* The demodulating import (filters/albedo.c, streamed and divided in one
+ * pass where it can) gives the bits of an import followed by the division,
+ * also with NaN/Inf replaced, at widths with and without that pass. */
+static void demodulated_import(uint32_t W, int with_bad) {
+  const uint32_t H = 4;
+  float *buf = malloc(sizeof(float) * W * H * 3);
+  REQUIRE(buf != NULL);
+  for (size_t i = 0; i < (size_t)W * H * 3; i++) buf[i] = (float)(i % 97) * 0.37f - 3.0f;
+  if (with_bad) {
+    buf[3 * (size_t)(W + 5) + 1] = NAN;
+    buf[3 * (size_t)(2 * W + 15) + 2] = INFINITY;
+  }
+  hush_planar alb, a, b;
+  REQUIRE(hush__planar_init(NULL, &alb, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &a, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &b, 3, W, H) == HUSH_OK);
+  const float values[] = {0.0f, 1e-4f, HUSH_ALBEDO_EPS, 0.002f, 0.5f, 1.0f, 3.0f};
+  for (int c = 0; c < 3; c++)
+    for (size_t i = 0; i < (size_t)W * H; i++) alb.plane[c][i] = values[(i + (size_t)c) % 7];
+  const hush_image_view v = {buf, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
+  size_t ra = 0, rb = 0;
+  CHECK(hush__import_demodulated(NULL, &v, "color", &a, &alb, HUSH_NONFINITE_REPLACE, &ra, 2) ==
+        HUSH_OK);
+  CHECK(hush__view_import(NULL, &v, "color", &b, HUSH_NONFINITE_REPLACE, &rb) == HUSH_OK);
+  hush__demodulate(&b, &alb, 1);
+  CHECK_MSG(ra == rb && ra == (with_bad ? 2u : 0u), "width %u: replaced %zu and %zu", W, ra, rb);
+  int same = 1;
+  for (int c = 0; c < 3; c++)
+    same &= memcmp(a.plane[c], b.plane[c], sizeof(float) * W * H) == 0;
+  CHECK_MSG(same, "width %u%s: demodulated import differs from import + division", W,
+            with_bad ? " with NaN/Inf" : "");
+  hush__planar_free(&alb);
+  hush__planar_free(&a);
+  hush__planar_free(&b);
+  free(buf);
+}
+
 static void test_math(void) {
   float v[16], pr[16], m[16], inv[16], id[16];
   hush_m4_look_at(v, hush_v3(1, 2, 3), hush_v3(0, 0, -4), hush_v3(0, 1, 0));
@@ -335,8 +373,13 @@ int main(void) {
   test_views();
   streamed_rows(HUSH_FORMAT_FLOAT3, 48);
   streamed_rows(HUSH_FORMAT_FLOAT, 32);
+  streamed_rows(HUSH_FORMAT_FLOAT2, 64);
   streamed_rows(HUSH_FORMAT_FLOAT3, 37);
   export_spans();
+  for (int bad = 0; bad < 2; bad++) {
+    demodulated_import(48, bad);
+    demodulated_import(37, bad);
+  }
   test_math();
   test_rng();
   CHECK(callback_calls == 2);

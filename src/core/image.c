@@ -236,7 +236,7 @@ static HUSH_IMAGE_INLINE size_t count_nonfinite16(__m512 v) {
 }
 
 /*
- * A row of w floats (w a multiple of 16) of one or three interleaved
+ * A row of w floats (w a multiple of 16) of one, two or three interleaved
  * channels into 64-byte aligned planes with streaming stores: the import
  * writes 4 bytes per channel and pixel, and ordinary stores would first
  * read each line for ownership (a third more memory traffic) only to push
@@ -252,6 +252,20 @@ static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *co
       const __m512 a = _mm512_loadu_ps(rf + x);
       bad += count_nonfinite16(a);
       _mm512_stream_ps(out[0] + x, a);
+    }
+    return bad;
+  }
+  if (nc == 2) {
+    /* lane j of channel k is element 2 j + k of the 32 in a|b */
+    const __m512i e0 = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+    const __m512i e1 = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
+    for (uint32_t x = 0; x < w; x += 16) {
+      const float *p = rf + 2 * (size_t)x;
+      const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16);
+      const __m512 r0 = _mm512_permutex2var_ps(a, e0, b), r1 = _mm512_permutex2var_ps(a, e1, b);
+      bad += count_nonfinite16(r0) + count_nonfinite16(r1);
+      _mm512_stream_ps(out[0] + x, r0);
+      _mm512_stream_ps(out[1] + x, r1);
     }
     return bad;
   }
@@ -277,12 +291,12 @@ static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *co
   return bad;
 }
 
-/* Whether stream_row takes row y of v into out: float32, 1 channel packed
- * or 3 channels of 3, aligned planes, a width of whole vectors. */
+/* Whether stream_row takes row y of v into out: float32, 1 to 3 channels
+ * packed, aligned planes, a width of whole vectors. */
 static int streamable(const hush_image_view *v, int nc, const float *row, float *const *out) {
   const size_t ps = hush__view_pixel_stride(v);
   if (hush__format_element_size(v->format) != 4 || (uintptr_t)row % sizeof(float) != 0 ||
-      v->width % 16 != 0 || !((ps == 4 && nc == 1) || (ps == 12 && nc == 3)))
+      v->width % 16 != 0 || ps != (size_t)nc * sizeof(float) || nc > 3)
     return 0;
   for (int c = 0; c < nc; c++)
     if ((uintptr_t)out[c] % 64 != 0) return 0;
@@ -312,6 +326,54 @@ static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar 
 
 size_t hush__view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst) {
   return view_import_row(v, y, dst, 1);
+}
+
+int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_planar *dst,
+                                  const hush_planar *divisor, float floor, size_t *bad) {
+#if defined(__AVX512F__) && defined(__x86_64__)
+  const uint32_t w = v->width;
+  float *out[3];
+  const float *div[3];
+  if (dst->channels != 3) return 0;
+  for (int c = 0; c < 3; c++) {
+    out[c] = dst->plane[c] + (size_t)y * w;
+    div[c] = divisor->plane[c] + (size_t)y * w;
+  }
+  const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
+  const float *rf = (const float *)(const void *)row;
+  if (!streamable(v, 3, rf, out)) return 0;
+  /* as stream_row's three channels, each divided by max(divisor, floor) */
+  const __m512i ia0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+  const __m512i ic0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+  const __m512i ia1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+  const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+  const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+  const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+  const __m512 fl = _mm512_set1_ps(floor);
+  size_t n = 0;
+  for (uint32_t x = 0; x < w; x += 16) {
+    const float *p = rf + 3 * (size_t)x;
+    const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
+    const __m512 r0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia0, b), ic0, c);
+    const __m512 r1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
+    const __m512 r2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
+    n += count_nonfinite16(r0) + count_nonfinite16(r1) + count_nonfinite16(r2);
+    /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
+     * albedo.c's scalar clamp */
+    const __m512 d0 = _mm512_max_ps(_mm512_loadu_ps(div[0] + x), fl);
+    const __m512 d1 = _mm512_max_ps(_mm512_loadu_ps(div[1] + x), fl);
+    const __m512 d2 = _mm512_max_ps(_mm512_loadu_ps(div[2] + x), fl);
+    _mm512_stream_ps(out[0] + x, _mm512_div_ps(r0, d0));
+    _mm512_stream_ps(out[1] + x, _mm512_div_ps(r1, d1));
+    _mm512_stream_ps(out[2] + x, _mm512_div_ps(r2, d2));
+  }
+  _mm_sfence();
+  *bad = n;
+  return 1;
+#else
+  (void)v, (void)y, (void)dst, (void)divisor, (void)floor, (void)bad;
+  return 0;
+#endif
 }
 
 size_t hush__view_import_row_cached(const hush_image_view *v, uint32_t y, hush_planar *dst) {

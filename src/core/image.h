@@ -76,6 +76,15 @@ hush_status hush__view_import(hush_device device, const hush_image_view *view, c
  * away takes hush__view_import_row_cached. */
 size_t hush__view_import_row(const hush_image_view *view, uint32_t y, hush_planar *dst);
 size_t hush__view_import_row_cached(const hush_image_view *view, uint32_t y, hush_planar *dst);
+/* Row y of a 3-channel view into dst (3 planes), each channel divided by
+ * max(divisor's plane, floor) (albedo demodulation, albedo.h), in one
+ * streamed pass, with *bad the count of NaN/Inf values read (the row is
+ * then to be redone: the quotients of those are not the policy's). Returns
+ * 0, doing nothing, where that path does not apply (a view that is not
+ * packed float32, a width not a multiple of 16, a build without AVX-512):
+ * the caller imports, then divides. */
+int hush__view_import_row_divided(const hush_image_view *view, uint32_t y, hush_planar *dst,
+                                  const hush_planar *divisor, float floor, size_t *bad);
 hush_status hush__view_import_nonfinite(hush_device device, const hush_image_view *view,
                                         const char *what, hush_planar *dst,
                                         hush_nonfinite_policy policy, size_t bad);

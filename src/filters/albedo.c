@@ -44,7 +44,12 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
   /* each row is divided while it is in L1, unless it has NaN/Inf */
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad)
   for (int y = 0; y < H; y++) {
-    const size_t row_bad = hush__view_import_row_cached(view, (uint32_t)y, dst);
+    size_t row_bad = 0;
+    if (hush__view_import_row_divided(view, (uint32_t)y, dst, albedo, HUSH_ALBEDO_EPS, &row_bad)) {
+      bad += row_bad;
+      continue;
+    }
+    row_bad = hush__view_import_row_cached(view, (uint32_t)y, dst);
     bad += row_bad;
     if (!row_bad)
       for (int c = 0; c < 3; c++)
