@@ -1504,6 +1504,22 @@ static void test_module_floor(void) {
 /* smooth: the motion of a zoom with a slight rotation (footprints drift by
  * a pixel every few pixels and cross rows: reproject.h's windows) instead
  * of random motion with runs of consecutive footprints. */
+/* Whether an accumulation without moments (hush__accum_init_color) holds
+ * the same colour and age bits as one with them, and left `variance`
+ * (filled with -7) alone. */
+static int color_only_same(hush_accum *with, hush_accum *without, const float *variance) {
+  const size_t n = (size_t)with->width * with->height;
+  int same = without->has_history == with->has_history && without->empty == with->empty;
+  for (int c = 0; c < with->channels; c++)
+    same &= memcmp(hush__accum_color(with)->plane[c], hush__accum_color(without)->plane[c],
+                   n * sizeof(float)) == 0;
+  same &= memcmp(hush__accum_age(with)->plane[0], hush__accum_age(without)->plane[0],
+                 n * sizeof(float)) == 0;
+  same &= hush__accum_moments(without)->plane[0] == NULL;
+  for (size_t i = 0; i < n; i++) same &= variance[i] == -7.0f;
+  return same;
+}
+
 static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   const size_t n = (size_t)W * H;
   gpair g;
@@ -1673,18 +1689,22 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
 
   /* accumulation: three frames against the rule of accumulation.h, per
    * pixel, from the history of the previous frame */
-  hush_accum acc;
+  hush_accum acc, cacc; /* cacc: without moments, the same colour and age */
   REQUIRE(hush__accum_init(dev, &acc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__accum_init_color(dev, &cacc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
   const hush_accum_params ap = {0.05f, 0.2f, 6};
-  float *var = malloc(n * sizeof(float));
-  REQUIRE(var);
-  int accum_ok = 1;
+  float *var = malloc(n * sizeof(float)), *cvar = malloc(n * sizeof(float));
+  REQUIRE(var && cvar);
+  for (size_t i = 0; i < n; i++) cvar[i] = -7.0f;
+  int accum_ok = 1, color_ok = 1;
   for (int f = 0; f < 4; f++) {
     for (int c = 0; c < 3; c++)
       for (size_t i = 0; i < n; i++) smp[c][i] = (float)(c + 1) * urand(&rng);
     const int had = acc.has_history;
     const int src = acc.latest;
     hush__accum_blend(&acc, &plan, (const float *const *)smp, &ap, var, f % 2 ? 1 : 2);
+    hush__accum_blend(&cacc, &plan, (const float *const *)smp, &ap, cvar, f % 2 ? 2 : 1);
+    color_ok &= color_only_same(&acc, &cacc, cvar);
     const hush_planar *col = hush__accum_color(&acc);
     const hush_planar *mom = hush__accum_moments(&acc);
     const float *ages = hush__accum_age(&acc)->plane[0];
@@ -1718,7 +1738,9 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
     }
   }
   CHECK(accum_ok);
+  CHECK_MSG(color_ok, "the accumulation without moments differs in colour or age");
   hush__accum_free(&acc);
+  hush__accum_free(&cacc);
 
   /* accumulation with holes (hush__accum_blend_holes, vectorised over rows
    * of a plan with blocks): four frames, a third of the pixels without a
@@ -1726,9 +1748,11 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
    * of accumulation.h per pixel (empty taps out, weights renormalised; a
    * hole keeps the history, its age not increased) */
   REQUIRE(hush__accum_init(dev, &acc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__accum_init_color(dev, &cacc, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
   float *spp = malloc(n * sizeof(float));
   REQUIRE(spp);
   int holes_ok = 1, saw_empty = 0;
+  color_ok = 1;
   for (int f = 0; f < 4; f++) {
     for (int c = 0; c < 3; c++)
       for (size_t i = 0; i < n; i++) smp[c][i] = (float)(c + 1) * urand(&rng);
@@ -1737,6 +1761,9 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
     const int src = acc.latest;
     hush__accum_blend_holes(&acc, &plan, (const float *const *)smp, spp, &ap, var,
                             f % 2 ? 1 : 2);
+    hush__accum_blend_holes(&cacc, &plan, (const float *const *)smp, spp, &ap, cvar,
+                            f % 2 ? 2 : 1);
+    color_ok &= color_only_same(&acc, &cacc, cvar);
     const hush_planar *col = hush__accum_color(&acc);
     const hush_planar *mom = hush__accum_moments(&acc);
     const float *ages = hush__accum_age(&acc)->plane[0];
@@ -1795,9 +1822,12 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   }
   CHECK(holes_ok);
   if (W > 20 && H > 20) CHECK(saw_empty); /* the case the renormalisation is for */
+  CHECK_MSG(color_ok, "with holes, the accumulation without moments differs in colour or age");
   hush__accum_free(&acc);
+  hush__accum_free(&cacc);
   free(spp);
   free(var);
+  free(cvar);
   free(age);
   for (int k = 0; k < 4; k++) {
     free(v[k]);

@@ -10,8 +10,8 @@
 #include <math.h>
 #include <string.h>
 
-hush_status hush__accum_init(hush_device device, hush_accum *acc, int channels, uint32_t width,
-                             uint32_t height) {
+static hush_status accum_init(hush_device device, hush_accum *acc, int channels,
+                              int with_moments, uint32_t width, uint32_t height) {
   memset(acc, 0, sizeof *acc);
   if (channels < 1 || channels > 4)
     return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT,
@@ -19,14 +19,25 @@ hush_status hush__accum_init(hush_device device, hush_accum *acc, int channels, 
   acc->width = width;
   acc->height = height;
   acc->channels = channels;
+  acc->with_moments = with_moments;
   hush_status s = HUSH_OK;
   for (int k = 0; k < 2 && !s; k++) {
     s = hush__planar_init(device, &acc->color[k], channels, width, height);
-    if (!s) s = hush__planar_init(device, &acc->moments[k], 2, width, height);
+    if (!s && with_moments) s = hush__planar_init(device, &acc->moments[k], 2, width, height);
     if (!s) s = hush__planar_init(device, &acc->age[k], 1, width, height);
   }
   if (s) hush__accum_free(acc);
   return s;
+}
+
+hush_status hush__accum_init(hush_device device, hush_accum *acc, int channels, uint32_t width,
+                             uint32_t height) {
+  return accum_init(device, acc, channels, 1, width, height);
+}
+
+hush_status hush__accum_init_color(hush_device device, hush_accum *acc, int channels,
+                                   uint32_t width, uint32_t height) {
+  return accum_init(device, acc, channels, 0, width, height);
 }
 
 void hush__accum_free(hush_accum *acc) {
@@ -48,7 +59,8 @@ typedef struct blend_ctx {
   const float *sample[4];
   const float *pc[4], *pm1, *pm2, *pa; /* history: the previous set */
   float *oc[4], *om1, *om2, *oa;       /* this frame's set */
-  float *variance;                     /* may be NULL */
+  float *variance;                     /* may be NULL; NULL without moments */
+  int mom;                             /* the moments are kept (else pm*, om* NULL) */
   float alpha_min, alpha_mom_min, max_age;
 } blend_ctx;
 
@@ -103,8 +115,10 @@ static HUSH_ALWAYS_INLINE void blend_store(const blend_ctx *b, size_t i, const b
                                            const int nc) {
   const float out[4] = {q->c0, q->c1, q->c2, q->c3};
   for (int c = 0; c < nc; c++) b->oc[c][i] = out[c];
-  b->om1[i] = q->m1;
-  b->om2[i] = q->m2;
+  if (b->mom) {
+    b->om1[i] = q->m1;
+    b->om2[i] = q->m2;
+  }
   b->oa[i] = q->age;
   if (b->variance) b->variance[i] = q->var;
 }
@@ -121,11 +135,11 @@ static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
   }
   blend_px q = {s[0], s[1], s[2], s[3], h[0], h[1], h[2], h[3], 0.0f, 0.0f, 0.0f,
                 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
-  if (n) {
+  if (n && b->mom) {
     q.hm1 = hush__reproject_apply(b->pm1, idx, w, n);
     q.hm2 = hush__reproject_apply(b->pm2, idx, w, n);
-    q.ha = hush__reproject_apply(b->pa, idx, w, n);
   }
+  if (n) q.ha = hush__reproject_apply(b->pa, idx, w, n);
   blend_compute(&p, &q, n > 0, nc);
   blend_store(b, i, &q, nc);
 }
@@ -157,7 +171,7 @@ enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW };
 static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int x_begin,
                                             int len, int32_t base, const int mode,
                                             const float (*restrict tb)[4][CHUNK],
-                                            const int nc) {
+                                            const int nc, const int mom) {
   const int contiguous = mode == MODE_CONTIGUOUS;
   const int window = mode == MODE_WINDOW;
   const int x_end = x_begin + len;
@@ -170,8 +184,9 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row;
   const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
   const float *pm1 = b->pm1, *pm2 = b->pm2, *pa = b->pa;
-  float *om1 = b->om1 + row, *om2 = b->om2 + row, *oa = b->oa + row;
-  float *var = b->variance ? b->variance + row : NULL;
+  float *om1 = mom ? b->om1 + row : NULL, *om2 = mom ? b->om2 + row : NULL;
+  float *oa = b->oa + row;
+  float *var = mom && b->variance ? b->variance + row : NULL;
   /* channels as scalars (channel 0 stands in for the missing ones, never
    * read or written): arrays of pointers indexed in the loop would not
    * vectorise */
@@ -201,8 +216,8 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
     q.h1 = nc > 1 ? HUSH_APPLY4(p1, 1) : 0.0f;
     q.h2 = nc > 2 ? HUSH_APPLY4(p2, 2) : 0.0f;
     q.h3 = nc > 3 ? HUSH_APPLY4(p3, 3) : 0.0f;
-    q.hm1 = HUSH_APPLY4(pm1, 4);
-    q.hm2 = HUSH_APPLY4(pm2, 5);
+    q.hm1 = mom ? HUSH_APPLY4(pm1, 4) : 0.0f;
+    q.hm2 = mom ? HUSH_APPLY4(pm2, 5) : 0.0f;
     q.ha = HUSH_APPLY4(pa, 6);
 #undef HUSH_APPLY4
 #undef HUSH_TAP
@@ -211,10 +226,12 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
     if (nc > 1) o1[x] = q.c1;
     if (nc > 2) o2[x] = q.c2;
     if (nc > 3) o3[x] = q.c3;
-    om1[x] = q.m1;
-    om2[x] = q.m2;
+    if (mom) {
+      om1[x] = q.m1;
+      om2[x] = q.m2;
+      if (var) var[x] = q.var;
+    }
     oa[x] = q.age;
-    if (var) var[x] = q.var;
   }
 }
 
@@ -223,7 +240,8 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
 
 /* One row of a plan with blocks, chunk by chunk, then the rare 3X3 pixels
  * redone through their taps. */
-static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const int nc) {
+static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const int nc,
+                                         const int mom) {
   const int W = (int)b->W;
   const int32_t *origin = b->plan->origin + row;
   const uint8_t *kind = b->plan->kind + row;
@@ -235,11 +253,11 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
     /* a constant length for full chunks: one vector iteration, no
      * alignment peeling or scalar epilogue */
     if (x1 - x0 < CHUNK) {
-      blend_pixels(b, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc);
+      blend_pixels(b, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc, mom);
       continue;
     }
     if (contiguous) {
-      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL, nc);
+      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL, nc, mom);
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
@@ -254,27 +272,30 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
       const float *planes[7] = {b->pc[0], b->pc[nc > 1], b->pc[nc > 2 ? 2 : 0],
                                 b->pc[nc > 3 ? 3 : 0], b->pm1, b->pm2, b->pa};
       for (int t = 0; t < 7; t++) {
-        if (t > 0 && t < 4 && t >= nc) continue;
+        if ((t > 0 && t < 4 && t >= nc) || (!mom && (t == 4 || t == 5))) continue;
         if (rows == 1)
           hush__window_taps(planes[t], base, W, e, dy, 1, tb[t]);
         else
           hush__window_taps(planes[t], base, W, e, dy, 2, tb[t]);
       }
-      blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc);
+      blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc, mom);
       continue;
     }
 #endif
-    blend_pixels(b, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
+    blend_pixels(b, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc, mom);
   }
-  for (size_t i = row; i < row + (size_t)W; i++)
-    if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) blend_pixel(b, i, nc);
+  const size_t end = row + (size_t)W;
+  for (size_t i = hush__reproject_next_3x3(b->plan, row, end); i < end;
+       i = hush__reproject_next_3x3(b->plan, i + 1, end))
+    blend_pixel(b, i, nc);
 }
 
-/* Rows y of the image, with nc a constant. */
-static HUSH_ALWAYS_INLINE void blend_rows(const blend_ctx *b, int y, const int nc) {
+/* Rows y of the image, with nc and mom constants. */
+static HUSH_ALWAYS_INLINE void blend_rows(const blend_ctx *b, int y, const int nc,
+                                          const int mom) {
   const size_t row = (size_t)y * b->W;
   if (b->plan && b->plan->blocks) {
-    blend_row(b, row, nc);
+    blend_row(b, row, nc, mom);
   } else {
     for (size_t i = row; i < row + b->W; i++) blend_pixel(b, i, nc);
   }
@@ -294,16 +315,51 @@ static void blend_setup(blend_ctx *b, const hush_accum *acc, const hush_reprojec
     b->pc[c] = acc->color[src].plane[c];
     b->oc[c] = acc->color[dst].plane[c];
   }
-  b->pm1 = acc->moments[src].plane[0];
-  b->pm2 = acc->moments[src].plane[1];
+  b->mom = acc->with_moments;
+  if (b->mom) {
+    b->pm1 = acc->moments[src].plane[0];
+    b->pm2 = acc->moments[src].plane[1];
+    b->om1 = acc->moments[dst].plane[0];
+    b->om2 = acc->moments[dst].plane[1];
+  }
   b->pa = acc->age[src].plane[0];
-  b->om1 = acc->moments[dst].plane[0];
-  b->om2 = acc->moments[dst].plane[1];
   b->oa = acc->age[dst].plane[0];
-  b->variance = variance;
+  b->variance = b->mom ? variance : NULL;
   b->alpha_min = params->alpha_min;
   b->alpha_mom_min = params->alpha_moments_min;
   b->max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
+}
+
+/* The rows of a blend, in small dynamic chunks: rows cost very different
+ * amounts (a chunk whose footprints do not follow each other gathers its
+ * taps one by one, ~3x the time of one that loads them as vectors) and
+ * such rows cluster in bands (the sky under a turning camera, an object's
+ * silhouette): a static split in halves left one thread with most of them
+ * (2 threads: 1.2x faster than 1). Each pixel is computed on its own, so
+ * the result does not depend on which thread blends it. With and without
+ * moments in separate functions, so that each keeps its own loop. */
+static void blend_all(const blend_ctx *b, int nc, int H, int threads) {
+#pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
+  for (int y = 0; y < H; y++) {
+    switch (nc) {
+    case 1: blend_rows(b, y, 1, 1); break;
+    case 2: blend_rows(b, y, 2, 1); break;
+    case 3: blend_rows(b, y, 3, 1); break;
+    default: blend_rows(b, y, 4, 1); break;
+    }
+  }
+}
+
+static void blend_all_color(const blend_ctx *b, int nc, int H, int threads) {
+#pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
+  for (int y = 0; y < H; y++) {
+    switch (nc) {
+    case 1: blend_rows(b, y, 1, 0); break;
+    case 2: blend_rows(b, y, 2, 0); break;
+    case 3: blend_rows(b, y, 3, 0); break;
+    default: blend_rows(b, y, 4, 0); break;
+    }
+  }
 }
 
 void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
@@ -311,27 +367,12 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
                        float *variance, int threads) {
   if (threads < 1) threads = 1;
   const int dst = 1 - acc->latest;
-  const int nc = acc->channels;
-  const int H = (int)acc->height;
   blend_ctx b;
   blend_setup(&b, acc, plan, sample, params, variance);
-
-  /* Rows cost very different amounts (a chunk whose footprints do not
-   * follow each other gathers its taps one by one, ~3x the time of one that
-   * loads them as vectors) and such rows cluster in bands (the sky under a
-   * turning camera, an object's silhouette): a static split in halves left
-   * one thread with most of them (2 threads: 1.2x faster than 1). Rows are
-   * handed out in small chunks instead; each pixel is computed on its own,
-   * so the result does not depend on which thread blends it. */
-#pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
-  for (int y = 0; y < H; y++) {
-    switch (nc) {
-    case 1: blend_rows(&b, y, 1); break;
-    case 2: blend_rows(&b, y, 2); break;
-    case 3: blend_rows(&b, y, 3); break;
-    default: blend_rows(&b, y, 4); break;
-    }
-  }
+  if (b.mom)
+    blend_all(&b, acc->channels, (int)acc->height, threads);
+  else
+    blend_all_color(&b, acc->channels, (int)acc->height, threads);
   acc->latest = dst;
   acc->has_history = 1;
   acc->empty = 0;
@@ -358,11 +399,11 @@ static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, con
   }
   blend_px q = {s[0], s[1], s[2], s[3], h[0], h[1], h[2], h[3], 0.0f, 0.0f, 0.0f,
                 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f, 0.0f};
-  if (has) {
+  if (has && b->mom) {
     q.hm1 = hush__reproject_apply(b->pm1, idx, w, n) * inv;
     q.hm2 = hush__reproject_apply(b->pm2, idx, w, n) * inv;
-    q.ha = hush__reproject_apply(b->pa, idx, w, n) * inv;
   }
+  if (has) q.ha = hush__reproject_apply(b->pa, idx, w, n) * inv;
   if (!spp || spp[i] > 0.0f) {
     blend_compute(&p, &q, has, nc); /* traced */
   } else {
@@ -397,7 +438,7 @@ static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, con
  * "some pixel is empty" flag here).
  */
 static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, const float *spp,
-                                              const int has_spp, const int nc) {
+                                              const int has_spp, const int nc, const int mom) {
   const hush_reproject_plan *plan = b->plan;
   const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
   const int W = (int)b->W;
@@ -407,8 +448,9 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
   const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
   const float *pm1 = b->pm1, *pm2 = b->pm2, *pa = b->pa;
   const float *sp = has_spp ? spp + row : NULL;
-  float *om1 = b->om1 + row, *om2 = b->om2 + row, *oa = b->oa + row;
-  float *var = b->variance ? b->variance + row : NULL;
+  float *om1 = mom ? b->om1 + row : NULL, *om2 = mom ? b->om2 + row : NULL;
+  float *oa = b->oa + row;
+  float *var = mom && b->variance ? b->variance + row : NULL;
   const float *p0 = b->pc[0], *p1 = b->pc[nc > 1], *p2 = b->pc[nc > 2 ? 2 : 0];
   const float *p3 = b->pc[nc > 3 ? 3 : 0];
   const float *s0 = b->sample[0] + row, *s1 = b->sample[nc > 1] + row;
@@ -440,8 +482,8 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
     q.h1 = nc > 1 ? hush__select_bits(has, HUSH_APPLY4(p1), 0.0f) : 0.0f;
     q.h2 = nc > 2 ? hush__select_bits(has, HUSH_APPLY4(p2), 0.0f) : 0.0f;
     q.h3 = nc > 3 ? hush__select_bits(has, HUSH_APPLY4(p3), 0.0f) : 0.0f;
-    q.hm1 = hush__select_bits(has, HUSH_APPLY4(pm1), 0.0f);
-    q.hm2 = hush__select_bits(has, HUSH_APPLY4(pm2), 0.0f);
+    q.hm1 = mom ? hush__select_bits(has, HUSH_APPLY4(pm1), 0.0f) : 0.0f;
+    q.hm2 = mom ? hush__select_bits(has, HUSH_APPLY4(pm2), 0.0f) : 0.0f;
     q.ha = hush__select_bits(has, HUSH_APPLY4(pa), 0.0f);
 #undef HUSH_APPLY4
     const float h0 = q.h0, h1 = q.h1, h2 = q.h2, h3 = q.h3, hm1 = q.hm1, hm2 = q.hm2;
@@ -462,10 +504,12 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
     if (nc > 1) o1[x] = c1;
     if (nc > 2) o2[x] = c2;
     if (nc > 3) o3[x] = c3;
-    om1[x] = m1;
-    om2[x] = m2;
+    if (mom) {
+      om1[x] = m1;
+      om2[x] = m2;
+      if (var) var[x] = v;
+    }
     oa[x] = age;
-    if (var) var[x] = v;
     empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
   }
   return empty;
@@ -473,13 +517,16 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
 
 /* One row of hush__accum_blend_holes with nc a constant. */
 static HUSH_ALWAYS_INLINE int blend_rows_holes(const blend_ctx *b, int y, const float *spp,
-                                               const int nc) {
+                                               const int nc, const int mom) {
   const size_t row = (size_t)y * b->W;
   int empty = 0;
   if (b->plan && b->plan->blocks) {
-    empty = spp ? blend_row_holes(b, row, spp, 1, nc) : blend_row_holes(b, row, NULL, 0, nc);
-    for (size_t i = row; i < row + b->W; i++)
-      if (b->plan->kind[i] == HUSH_FOOTPRINT_3X3) empty |= blend_pixel_holes(b, i, spp, nc);
+    empty = spp ? blend_row_holes(b, row, spp, 1, nc, mom)
+                : blend_row_holes(b, row, NULL, 0, nc, mom);
+    const size_t end = row + b->W;
+    for (size_t i = hush__reproject_next_3x3(b->plan, row, end); i < end;
+         i = hush__reproject_next_3x3(b->plan, i + 1, end))
+      empty |= blend_pixel_holes(b, i, spp, nc);
   } else {
     for (size_t i = row; i < row + b->W; i++) empty |= blend_pixel_holes(b, i, spp, nc);
   }
@@ -502,11 +549,15 @@ void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
   int empty = 0;
 #pragma omp parallel for reduction(| : empty) schedule(dynamic, BLEND_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) {
-    switch (nc) {
-    case 1: empty |= blend_rows_holes(&b, y, spp, 1); break;
-    case 2: empty |= blend_rows_holes(&b, y, spp, 2); break;
-    case 3: empty |= blend_rows_holes(&b, y, spp, 3); break;
-    default: empty |= blend_rows_holes(&b, y, spp, 4); break;
+    switch (nc * 2 + b.mom) {
+    case 2: empty |= blend_rows_holes(&b, y, spp, 1, 0); break;
+    case 3: empty |= blend_rows_holes(&b, y, spp, 1, 1); break;
+    case 4: empty |= blend_rows_holes(&b, y, spp, 2, 0); break;
+    case 5: empty |= blend_rows_holes(&b, y, spp, 2, 1); break;
+    case 6: empty |= blend_rows_holes(&b, y, spp, 3, 0); break;
+    case 7: empty |= blend_rows_holes(&b, y, spp, 3, 1); break;
+    case 8: empty |= blend_rows_holes(&b, y, spp, 4, 0); break;
+    default: empty |= blend_rows_holes(&b, y, spp, 4, 1); break;
     }
   }
   acc->latest = dst;
@@ -637,8 +688,9 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
 #endif
     tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
   }
-  for (size_t i = row; i < row + (size_t)W; i++) {
-    if (plan->kind[i] != HUSH_FOOTPRINT_3X3) continue;
+  const size_t end = row + (size_t)W;
+  for (size_t i = hush__reproject_next_3x3(plan, row, end); i < end;
+       i = hush__reproject_next_3x3(plan, i + 1, end)) {
     const float a = blend_alpha(t->age[i], t->alpha_min);
     int32_t idx[9];
     float w[9];

@@ -43,7 +43,8 @@ typedef struct hush_accum {
   uint32_t width, height;
   int channels;           /* 1..4 */
   hush_planar color[2];   /* `channels` planes */
-  hush_planar moments[2]; /* 2 planes: E[l], E[l^2] */
+  hush_planar moments[2]; /* 2 planes: E[l], E[l^2]; none without moments */
+  int with_moments;       /* 0: colour and age only (hush__accum_init_color) */
   hush_planar age[2];     /* 1 plane: history length, >= 1 (a float) */
   int latest;             /* the set written by the last blend */
   int has_history;        /* set[latest] holds a frame */
@@ -52,6 +53,12 @@ typedef struct hush_accum {
 
 hush_status hush__accum_init(hush_device device, hush_accum *acc, int channels, uint32_t width,
                              uint32_t height);
+/* As hush__accum_init without the luminance moments, for a caller that
+ * never reads them (BMFR): the blends neither gather nor write them (two of
+ * the seven history planes) and ignore `variance`; the colour and the age
+ * are the same bits as with them. */
+hush_status hush__accum_init_color(hush_device device, hush_accum *acc, int channels,
+                                   uint32_t width, uint32_t height);
 void hush__accum_free(hush_accum *acc);
 /* Forgets the history: the next blend starts over (age 1 everywhere). */
 void hush__accum_reset(hush_accum *acc);

@@ -177,6 +177,16 @@ static inline void hush__reproject_bilinear(float fx, float fy, float w[4]) {
   w[3] = fx * fy;
 }
 
+/* The first pixel in [i, end) with a 3X3 footprint, or end. The rows'
+ * passes redo those few pixels after their vector loops; memchr finds them
+ * about 20x faster than a byte-by-byte test of every pixel (that loop was
+ * a sixth of the phase I blend). */
+static inline size_t hush__reproject_next_3x3(const hush_reproject_plan *plan, size_t i,
+                                              size_t end) {
+  const void *p = i < end ? memchr(plan->kind + i, HUSH_FOOTPRINT_3X3, end - i) : NULL;
+  return p ? (size_t)((const uint8_t *)p - plan->kind) : end;
+}
+
 /* Whether pixel i is gathered as a 2x2 block (the common case): then its
  * taps are origin, origin + 1, origin + width, origin + width + 1, all inside
  * the image, with the weights of hush__reproject_weights4. */

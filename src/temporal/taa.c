@@ -318,8 +318,10 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
       /* the border columns and the 3X3 footprints, through the taps */
       resolve_taps(&t, plan, prev, 0, y, W);
       if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
-      for (int x = 1; x < W - 1; x++)
-        if (plan->kind[row + (size_t)x] == HUSH_FOOTPRINT_3X3) resolve_taps(&t, plan, prev, x, y, W);
+      const size_t last = row + (size_t)W - 1;
+      for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
+           i = hush__reproject_next_3x3(plan, i + 1, last))
+        resolve_taps(&t, plan, prev, (int)(i - row), y, W);
     }
   }
   taa->latest = 1 - taa->latest;

@@ -285,7 +285,7 @@ static hush_status bmfr_create(hush_filter f, void **state) {
   const uint32_t W = f->width, H = f->height;
   st->threads = f->device->threads > 0 ? f->device->threads : 1;
   hush_status s = hush__reprojector_init(f->device, &st->rp, W, H);
-  if (!s) s = hush__accum_init(f->device, &st->acc, 3, W, H);
+  if (!s) s = hush__accum_init_color(f->device, &st->acc, 3, W, H);
   if (!s) s = hush__planar_init(f->device, &st->color, 3, W, H);
   if (!s) s = hush__planar_init(f->device, &st->fitted, 3, W, H);
   if (!s) s = hush__planar_init(f->device, &st->fhist[0], 3, W, H);
