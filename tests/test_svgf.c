@@ -902,6 +902,10 @@ static void test_level_formula(hush_device dev) {
       float n[3] = {right ? 0.6f : 0.05f * rnd(), 0.05f * rnd(), right ? 0.8f : 1.0f};
       const float len = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
       for (int c = 0; c < 3; c++) zn.plane[1 + c][i] = n[c] / len;
+      if (y == 1 || (y == LH / 2 && x < 40) || (y == 3 && x >= 16 && x < 20)) {
+        /* sky (no surface: depth and normal 0): whole vectors and a part of one */
+        for (int c = 0; c < 4; c++) zn.plane[c][i] = 0.0f;
+      }
       const size_t si = (size_t)y * in.stride + x;
       const float base = right ? 0.2f : 0.7f;
       for (int c = 0; c < 3; c++) in.plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());

@@ -314,6 +314,14 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
   rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
   if (VALIDITY) rx.ok += x;
+  /* No surface under any of the 16 pixels (the sky: normal 0): each tap's
+   * exponent is then at most nbias, below its weight floor when sigma_n
+   * log2 e >= S_FLOOR (sigma_n >= 20), so every tap would weigh exactly 0
+   * and leave the sums as they are: the taps are skipped, the same bits. */
+  const __mmask16 surface = _mm512_cmp_ps_mask(n0p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
+                            _mm512_cmp_ps_mask(n1p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
+                            _mm512_cmp_ps_mask(n2p, _mm512_setzero_ps(), _CMP_NEQ_UQ);
+  if (!(surface & m) && c->bias >= S_FLOOR) npairs = 0;
   for (int k = 0; k < npairs; k++) {
     const avx_pair *t = &pairs[k];
     const __m512 a = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));

@@ -232,6 +232,7 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
   float *v = var + pi;
   const __m512 sn = _mm512_set1_ps(g->np.sigma_n_log2e), nbias = _mm512_set1_ps(-g->np.sigma_n_log2e);
   const __m512 sz = _mm512_set1_ps(g->sigma_z), eps_z = _mm512_set1_ps(SVGF_EPS_Z);
+  const int sky_skip = g->np.sigma_n_log2e >= 20.0f * SVGF_LOG2E;
   for (int x = 0; x < W; x += 16) {
     const int n = W - x < 16 ? W - x : 16;
     const __mmask16 lanes = (__mmask16)((1u << n) - 1u);
@@ -258,7 +259,15 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
     const __m512 n2p = _mm512_mul_ps(sn, _mm512_maskz_loadu_ps(lanes, n2 + x));
     __m512 sw = _mm512_set1_ps(1.0f);
     __m512 s1 = _mm512_maskz_loadu_ps(lanes, m1 + x), s2 = _mm512_maskz_loadu_ps(lanes, m2 + x);
-    for (int p = 0; p < NPAIRS; p++) {
+    /* No surface under any young lane (the sky: normal 0): every tap's
+     * exponent is at most -sigma_n log2 e, below the weight floor when
+     * sigma_n >= 20, so each weight would be exactly 0; the taps are
+     * skipped, the same bits. */
+    const __mmask16 surface = _mm512_cmp_ps_mask(n0p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
+                              _mm512_cmp_ps_mask(n1p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
+                              _mm512_cmp_ps_mask(n2p, _mm512_setzero_ps(), _CMP_NEQ_UQ);
+    const int npairs = (surface & young) || !sky_skip ? NPAIRS : 0;
+    for (int p = 0; p < npairs; p++) {
       const avx_vpair *t = &pairs[p];
       const __m512 d = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
       const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(d), eps_z)));
