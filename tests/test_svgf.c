@@ -804,7 +804,7 @@ static void test_weight_math(void) {
 
 /* ---- one a-trous level against the formula ------------------------------- */
 
-#define LW 37 /* not a multiple of the vector width: the row tails run too */
+#define LW 53 /* 32 + 16 + 5: two vectors at once, one, and a row tail */
 #define LH 23
 
 /* A level computed in double straight from the formulas of atrous.h and
@@ -902,7 +902,8 @@ static void test_level_formula(hush_device dev) {
       float n[3] = {right ? 0.6f : 0.05f * rnd(), 0.05f * rnd(), right ? 0.8f : 1.0f};
       const float len = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
       for (int c = 0; c < 3; c++) zn.plane[1 + c][i] = n[c] / len;
-      if (y == 1 || (y == LH / 2 && x < 40) || (y == 3 && x >= 16 && x < 20)) {
+      if (y == 1 || (y == LH / 2 && x < 40) || (y == 3 && x >= 16 && x < 20) ||
+          (y == 5 && x >= 32 && x < 48) || (y == 7 && x < 16)) {
         /* sky (no surface: depth and normal 0): whole vectors and a part of one */
         for (int c = 0; c < 4; c++) zn.plane[c][i] = 0.0f;
       }

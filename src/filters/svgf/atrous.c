@@ -263,15 +263,20 @@ static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 r
 #undef LD
 }
 
-/* 16 pixels from x (n of them, n < 16 only at the row's end). */
-static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, const float *vu,
-                                          const float *vd, const float *gx, const float *gy,
-                                          const float *zon, const float *eps,
-                                          const avx_pair *pairs, int npairs, int x, int n,
-                                          float *const out[SVGF_SIGNAL_CHANNELS],
-                                          float *const also[3], const int FULL,
-                                          const int VALIDITY, const int WITH_VAR) {
-  const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
+/* One vector of 16 pixels: what its taps need, and its sums. */
+typedef struct avx_px {
+  __m512 zp, lp, n0p, n1p, n2p, inv_l, sgx, sgy, zl;
+  __mmask16 surface; /* lanes with a surface (normal not 0) */
+  avx_sums acc;
+} avx_px;
+
+/* The per-pixel terms of the 16 pixels from x (n of them, n < 16 only at
+ * the row's end, m their mask) and the centre tap's sums. */
+static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, const float *vu,
+                                         const float *vd, const float *gx, const float *gy,
+                                         const float *zon, const float *eps, int x,
+                                         __mmask16 m, const int FULL, const int VALIDITY,
+                                         avx_px *p) {
 #define LDX(P, OFF) (FULL ? _mm512_loadu_ps((P) + x + (OFF)) : _mm512_maskz_loadu_ps(m, (P) + x + (OFF)))
   const __m512 q = _mm512_set1_ps(0.25f), h = _mm512_set1_ps(0.5f);
   const __m512 hu = _mm512_fmadd_ps(h, LDX(vu, 0), _mm512_mul_ps(q, _mm512_add_ps(LDX(vu, -1), LDX(vu, 1))));
@@ -289,48 +294,46 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   const __m512 sd = _mm512_mul_ps(var3, rs);
   const __m512 dl = _mm512_min_ps(_mm512_fmadd_ps(_mm512_set1_ps(c->sigma_l), sd, e),
                                   _mm512_set1_ps(1e30f));
-  __m512 inv_l = _mm512_mul_ps(_mm512_set1_ps(SVGF_LOG2E), svgf_avx_rcp(dl));
-  if (VALIDITY) inv_l = _mm512_mul_ps(inv_l, LDX(r->ok, 0));
+  p->inv_l = _mm512_mul_ps(_mm512_set1_ps(SVGF_LOG2E), svgf_avx_rcp(dl));
+  if (VALIDITY) p->inv_l = _mm512_mul_ps(p->inv_l, LDX(r->ok, 0));
   const __m512 sz = _mm512_set1_ps(c->g->sigma_z);
-  const __m512 sgx = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gx, 0)), _mm512_set1_ps(1e20f)),
-                                   _mm512_set1_ps(-1e20f));
-  const __m512 sgy = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gy, 0)), _mm512_set1_ps(1e20f)),
-                                   _mm512_set1_ps(-1e20f));
-  const __m512 zl = _mm512_mul_ps(LDX(zon, 0), _mm512_set1_ps(SVGF_LOG2E));
-  const __m512 zp = LDX(r->z, 0), lp = LDX(r->l, 0);
+  p->sgx = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gx, 0)), _mm512_set1_ps(1e20f)),
+                         _mm512_set1_ps(-1e20f));
+  p->sgy = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gy, 0)), _mm512_set1_ps(1e20f)),
+                         _mm512_set1_ps(-1e20f));
+  p->zl = _mm512_mul_ps(LDX(zon, 0), _mm512_set1_ps(SVGF_LOG2E));
+  p->zp = LDX(r->z, 0);
+  p->lp = LDX(r->l, 0);
   const __m512 ns = _mm512_set1_ps(c->nscale);
-  const __m512 n0p = _mm512_mul_ps(ns, LDX(r->n0, 0)), n1p = _mm512_mul_ps(ns, LDX(r->n1, 0)),
-               n2p = _mm512_mul_ps(ns, LDX(r->n2, 0));
+  p->n0p = _mm512_mul_ps(ns, LDX(r->n0, 0));
+  p->n1p = _mm512_mul_ps(ns, LDX(r->n1, 0));
+  p->n2p = _mm512_mul_ps(ns, LDX(r->n2, 0));
+  p->surface = (_mm512_cmp_ps_mask(p->n0p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
+                _mm512_cmp_ps_mask(p->n1p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
+                _mm512_cmp_ps_mask(p->n2p, _mm512_setzero_ps(), _CMP_NEQ_UQ)) & m;
   const __m512 h0 = _mm512_set1_ps(c->h0);
   const __m512 hp = VALIDITY ? _mm512_mul_ps(h0, LDX(r->ok, 0)) : h0;
-  avx_sums acc;
-  acc.sw = hp;
-  acc.s0 = _mm512_mul_ps(hp, LDX(r->c0, 0));
-  acc.s1 = _mm512_mul_ps(hp, LDX(r->c1, 0));
-  acc.s2 = _mm512_mul_ps(hp, LDX(r->c2, 0));
-  acc.sv = _mm512_mul_ps(_mm512_mul_ps(hp, hp), LDX(r->v, 0));
-  const __m512 eps_z = _mm512_set1_ps(SVGF_EPS_Z);
-  avx_row rx = *r;
-  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
-  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
-  if (VALIDITY) rx.ok += x;
-  /* No surface under any of the 16 pixels (the sky: normal 0): each tap's
-   * exponent is then at most nbias, below its weight floor when sigma_n
-   * log2 e >= S_FLOOR (sigma_n >= 20), so every tap would weigh exactly 0
-   * and leave the sums as they are: the taps are skipped, the same bits. */
-  const __mmask16 surface = _mm512_cmp_ps_mask(n0p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
-                            _mm512_cmp_ps_mask(n1p, _mm512_setzero_ps(), _CMP_NEQ_UQ) |
-                            _mm512_cmp_ps_mask(n2p, _mm512_setzero_ps(), _CMP_NEQ_UQ);
-  if (!(surface & m) && c->bias >= S_FLOOR) npairs = 0;
-  for (int k = 0; k < npairs; k++) {
-    const avx_pair *t = &pairs[k];
-    const __m512 a = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
-    const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(a), eps_z)));
-    const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-    avx_tap(&rx, t->a, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, WITH_VAR, &acc);
-    avx_tap(&rx, t->b, rdd, inv_l, zp, lp, n0p, n1p, n2p, nb, nf, m, FULL, VALIDITY, WITH_VAR, &acc);
-  }
-  __m512 sw = acc.sw, sv = acc.sv;
+  p->acc.sw = hp;
+  p->acc.s0 = _mm512_mul_ps(hp, LDX(r->c0, 0));
+  p->acc.s1 = _mm512_mul_ps(hp, LDX(r->c1, 0));
+  p->acc.s2 = _mm512_mul_ps(hp, LDX(r->c2, 0));
+  p->acc.sv = _mm512_mul_ps(_mm512_mul_ps(hp, hp), LDX(r->v, 0));
+#undef LDX
+}
+
+/* The depth factor of pair t for the vector p (both taps of a pair see the
+ * same |grad z . (q - p)|). */
+static HUSH_ALWAYS_INLINE __m512 avx_rdd(const avx_px *p, const avx_pair *t) {
+  const __m512 a = _mm512_fmadd_ps(p->sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(p->sgy, _mm512_set1_ps(t->fdy)));
+  return _mm512_mul_ps(p->zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(a), _mm512_set1_ps(SVGF_EPS_Z))));
+}
+
+/* The sums of p normalised and stored for the pixels from x (mask m). */
+static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __mmask16 m,
+                                          float *const out[SVGF_SIGNAL_CHANNELS],
+                                          float *const also[3], const int VALIDITY,
+                                          const int WITH_VAR) {
+  __m512 sw = p->acc.sw, sv = p->acc.sv;
   if (VALIDITY) {
     /* nothing valid in reach: stays a hole (0, not valid) */
     const __mmask16 some = _mm512_cmp_ps_mask(sw, _mm512_setzero_ps(), _CMP_GT_OQ);
@@ -340,8 +343,8 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
     sv = _mm512_maskz_mov_ps(some, sv);
   }
   const __m512 inv = svgf_avx_rcp(sw);
-  const __m512 rr = _mm512_mul_ps(acc.s0, inv), gg = _mm512_mul_ps(acc.s1, inv),
-               bb = _mm512_mul_ps(acc.s2, inv);
+  const __m512 rr = _mm512_mul_ps(p->acc.s0, inv), gg = _mm512_mul_ps(p->acc.s1, inv),
+               bb = _mm512_mul_ps(p->acc.s2, inv);
   _mm512_mask_storeu_ps(out[SVGF_R] + x, m, rr);
   _mm512_mask_storeu_ps(out[SVGF_G] + x, m, gg);
   _mm512_mask_storeu_ps(out[SVGF_B] + x, m, bb);
@@ -358,7 +361,68 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
         _mm512_mul_ps(_mm512_set1_ps(0.0722f), bb));
     _mm512_mask_storeu_ps(out[SVGF_LUM] + x, m, lum);
   }
-#undef LDX
+}
+
+/* The row planes advanced to pixel x. */
+static HUSH_ALWAYS_INLINE avx_row avx_row_at(const avx_row *r, int x, const int VALIDITY) {
+  avx_row rx = *r;
+  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
+  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
+  if (VALIDITY) rx.ok += x;
+  return rx;
+}
+
+/*
+ * The vectors of 16 pixels at x and, with TWO, at x + 16 (both full), their
+ * taps interleaved pair by pair: each tap is a chain of about 15 dependent
+ * operations, and two independent vectors in flight keep more of them
+ * ready for the two vector ports (same operations per lane: same bits).
+ * Else the 16 pixels at x (n of them, n < 16 only at the row's end).
+ * A vector with no surface under any pixel (the sky: normal 0) skips its
+ * taps when sigma_n log2 e >= S_FLOOR (sigma_n >= 20): each tap's exponent
+ * is then at most nbias, below its weight floor, so every tap would weigh
+ * exactly 0 and leave the sums as they are (same bits).
+ */
+static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r, const float *vu,
+                                           const float *vd, const float *gx, const float *gy,
+                                           const float *zon, const float *eps,
+                                           const avx_pair *pairs, int npairs, int x, int n,
+                                           float *const out[SVGF_SIGNAL_CHANNELS],
+                                           float *const also[3], const int TWO, const int FULL,
+                                           const int VALIDITY, const int WITH_VAR) {
+  const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
+  avx_px p0, p1;
+  avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p0);
+  if (TWO) avx_setup(c, r, vu, vd, gx, gy, zon, eps, x + 16, m, 1, VALIDITY, &p1);
+  const int sky_skip = c->bias >= S_FLOOR;
+  const avx_row rx = avx_row_at(r, x, VALIDITY);
+  if (TWO && (p0.surface || p1.surface || !sky_skip)) {
+    for (int k = 0; k < npairs; k++) {
+      const avx_pair *t = &pairs[k];
+      const __m512 rdd0 = avx_rdd(&p0, t), rdd1 = avx_rdd(&p1, t);
+      const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
+      avx_tap(&rx, t->a, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, 1,
+              VALIDITY, WITH_VAR, &p0.acc);
+      avx_tap(&rx, t->a + 16, rdd1, p1.inv_l, p1.zp, p1.lp, p1.n0p, p1.n1p, p1.n2p, nb, nf, m, 1,
+              VALIDITY, WITH_VAR, &p1.acc);
+      avx_tap(&rx, t->b, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, 1,
+              VALIDITY, WITH_VAR, &p0.acc);
+      avx_tap(&rx, t->b + 16, rdd1, p1.inv_l, p1.zp, p1.lp, p1.n0p, p1.n1p, p1.n2p, nb, nf, m, 1,
+              VALIDITY, WITH_VAR, &p1.acc);
+    }
+  } else if (!TWO && (p0.surface || !sky_skip)) {
+    for (int k = 0; k < npairs; k++) {
+      const avx_pair *t = &pairs[k];
+      const __m512 rdd0 = avx_rdd(&p0, t);
+      const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
+      avx_tap(&rx, t->a, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, FULL,
+              VALIDITY, WITH_VAR, &p0.acc);
+      avx_tap(&rx, t->b, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, FULL,
+              VALIDITY, WITH_VAR, &p0.acc);
+    }
+  }
+  avx_finish(&p0, x, m, out, also, VALIDITY, WITH_VAR);
+  if (TWO) avx_finish(&p1, x + 16, m, out, also, VALIDITY, WITH_VAR);
 }
 
 static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const int VALIDITY,
@@ -402,12 +466,15 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const in
   float *also[3];
   for (int ch = 0; ch < 3; ch++) also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
   int x = 0;
+  for (; x + 32 <= W; x += 32)
+    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 32, out, also, 1, 1, VALIDITY,
+                WITH_VAR);
   for (; x + 16 <= W; x += 16)
-    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, also, 1, VALIDITY,
-               WITH_VAR);
+    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, also, 0, 1, VALIDITY,
+                WITH_VAR);
   if (x < W)
-    avx_vector(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, also, 0, VALIDITY,
-               WITH_VAR);
+    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, also, 0, 0,
+                VALIDITY, WITH_VAR);
   if (c->out->pad > 0)
     for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
       if (out[ch]) svgf_pad_row(out[ch], W, c->out->pad);
