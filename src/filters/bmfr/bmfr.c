@@ -321,18 +321,48 @@ typedef struct fit_frame {
   size_t ld;
 } fit_frame;
 
-/* dst[r B + c] = plane[ys[r] W + xs[c]]: the block's pixels, mirrored at
- * the image edges. Columns c0..c1-1 are inside the image (xs[c] = x0 + c)
- * and copied as a run; only the mirrored ones go through xs. */
-static void gather(const float *plane, int W, const int *xs, const int *ys, int B, int x0,
-                   int c0, int c1, float *restrict dst) {
+/* Where a block lies: its first pixel (x0, y0; outside the image for a
+ * block of the border, whose outside pixels are mirrored), the image
+ * columns and rows of each of its pixels (xs, ys), and the range of its
+ * columns (c0..c1-1) and rows (r0..r1-1) inside the image. */
+typedef struct block_geom {
+  int x0, y0, c0, c1, r0, r1;
+  int xs[64], ys[64];
+} block_geom;
+
+static void block_geom_of(const bmfr_grid *grid, int bx, int by, block_geom *g) {
+  const int B = grid->block, W = grid->width, H = grid->height;
+  g->x0 = grid->x0 + bx * B;
+  g->y0 = grid->y0 + by * B;
+  for (int i = 0; i < B; i++) {
+    g->xs[i] = hush__bmfr_mirror(g->x0 + i, W);
+    g->ys[i] = hush__bmfr_mirror(g->y0 + i, H);
+  }
+  g->c0 = g->x0 < 0 ? -g->x0 : 0;
+  g->c1 = g->x0 + B > W ? W - g->x0 : B;
+  g->r0 = g->y0 < 0 ? -g->y0 : 0;
+  g->r1 = g->y0 + B > H ? H - g->y0 : B;
+}
+
+/*
+ * The pixels of `count` side-by-side blocks of one block row (geometry g)
+ * from plane into column `col` of each block's scratch (blocks `span`
+ * floats apart): dst[r B + c] = plane[ys[r] W + xs[c]]. Row by row across
+ * the blocks, so that each image row is read as one run of count B pixels
+ * (block by block, the 32 pieces of 128 bytes of a block come from 32
+ * pages and leave the hardware prefetcher nothing to follow).
+ */
+static void gather_strip(const float *plane, int W, const block_geom *g, int count, int B,
+                         float *scratch, size_t span, size_t col) {
   for (int r = 0; r < B; r++) {
-    const float *row = plane + (size_t)ys[r] * W;
-    float *d = dst + (size_t)r * B;
-    for (int c = 0; c < c0; c++) d[c] = row[xs[c]];
-#pragma omp simd
-    for (int c = c0; c < c1; c++) d[c] = row[x0 + c]; /* a call to memcpy would cost more */
-    for (int c = c1; c < B; c++) d[c] = row[xs[c]];
+    const float *row = plane + (size_t)g[0].ys[r] * W; /* one block row: the same ys */
+    for (int k = 0; k < count; k++) {
+      const block_geom *b = &g[k];
+      float *restrict d = scratch + (size_t)k * span + col + (size_t)r * B;
+      for (int c = 0; c < b->c0; c++) d[c] = row[b->xs[c]];
+      memcpy(d + b->c0, row + b->x0 + b->c0, (size_t)(b->c1 - b->c0) * sizeof(float));
+      for (int c = b->c1; c < B; c++) d[c] = row[b->xs[c]];
+    }
   }
 }
 
@@ -418,84 +448,113 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
   return nvalid;
 }
 
-static void fit_block(const fit_frame *fr, int bx, int by, float *scratch) {
-  const int B = fr->grid.block, n = fr->n, W = fr->grid.width, H = fr->grid.height;
+/* The columns of a block's scratch (ld floats each; see SCRATCH_COLUMNS). */
+typedef struct block_cols {
+  float *base, *T, *A, *zb, *mask, *y, *spare;
+} block_cols;
+
+static block_cols block_cols_of(float *scratch, size_t ld) {
+  block_cols b;
+  b.base = scratch;
+  b.T = b.base + (size_t)BMFR_BASE_COUNT * ld;
+  b.A = b.T + (size_t)BMFR_MAX_FEATURES * ld;
+  b.zb = b.A + (size_t)(BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld;
+  b.mask = b.zb + (size_t)BMFR_CHANNELS * ld;
+  b.y = b.mask + ld;
+  b.spare = b.y + (size_t)BMFR_CHANNELS * ld;
+  return b;
+}
+
+/* The fit of one gathered block: depth in spare, radiance in zb, the
+ * feature channels in base; leaves the fit in y (where the mask is 1). */
+static void fit_gathered(const fit_frame *fr, block_cols *b) {
+  const int B = fr->grid.block, n = fr->n;
   const size_t ld = fr->ld;
-  float *base = scratch;
-  float *T = base + (size_t)BMFR_BASE_COUNT * ld;
-  float *A = T + (size_t)BMFR_MAX_FEATURES * ld;
-  float *zb = A + (size_t)(BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld;
-  float *mask = zb + (size_t)BMFR_CHANNELS * ld;
-  float *y = mask + ld;
-  float *spare = y + (size_t)BMFR_CHANNELS * ld;
-
-  const int x0 = fr->grid.x0 + bx * B, y0 = fr->grid.y0 + by * B;
-  int xs[64], ys[64];
-  for (int i = 0; i < B; i++) {
-    xs[i] = hush__bmfr_mirror(x0 + i, W);
-    ys[i] = hush__bmfr_mirror(y0 + i, H);
-  }
-  /* the block's columns inside the image (the others are mirrored) */
-  const int c0 = x0 < 0 ? -x0 : 0, c1 = x0 + B > W ? W - x0 : B;
-
-  /* gather: validity, radiance, the channels the features use */
-  gather(fr->depth, W, xs, ys, B, x0, c0, c1, spare);
   int nvalid = 0;
   for (int i = 0; i < n; i++) {
-    mask[i] = spare[i] > 0.0f ? 1.0f : 0.0f;
-    nvalid += spare[i] > 0.0f;
+    b->mask[i] = b->spare[i] > 0.0f ? 1.0f : 0.0f;
+    nvalid += b->spare[i] > 0.0f;
   }
-  for (size_t i = (size_t)n; i < ld; i++) mask[i] = 0.0f;
+  for (size_t i = (size_t)n; i < ld; i++) b->mask[i] = 0.0f;
   float *zc[BMFR_CHANNELS];
   for (int c = 0; c < BMFR_CHANNELS; c++) {
-    zc[c] = zb + (size_t)c * ld;
-    gather(fr->z[c], W, xs, ys, B, x0, c0, c1, zc[c]);
+    zc[c] = b->zb + (size_t)c * ld;
     for (size_t i = (size_t)n; i < ld; i++) zc[c][i] = 0.0f; /* the fit reads ld rows */
   }
-  if (fr->outlier > 0.0f) nvalid = exclude_outliers(zc, mask, B, fr->outlier, spare, spare + ld);
-  for (int k = 0; k < BMFR_BASE_COUNT; k++)
-    if (fr->base[k]) gather(fr->base[k], W, xs, ys, B, x0, c0, c1, base + (size_t)k * ld);
+  if (fr->outlier > 0.0f)
+    nvalid = exclude_outliers(zc, b->mask, B, fr->outlier, b->spare, b->spare + ld);
   if (fr->set->gradients)
     for (int r = 0; r < B; r++)
       for (int c = 0; c < B; c++) {
-        base[(size_t)BMFR_BASE_GRADIENT * ld + (size_t)r * B + c] = (float)c;
-        base[(size_t)(BMFR_BASE_GRADIENT + 1) * ld + (size_t)r * B + c] = (float)r;
+        b->base[(size_t)BMFR_BASE_GRADIENT * ld + (size_t)r * B + c] = (float)c;
+        b->base[(size_t)(BMFR_BASE_GRADIENT + 1) * ld + (size_t)r * B + c] = (float)r;
       }
-
-  /* features, fit, weighted sum */
-  float *yc[BMFR_CHANNELS];
-  for (int c = 0; c < BMFR_CHANNELS; c++) yc[c] = y + (size_t)c * ld;
   if (nvalid > 0) {
     const int count = fr->set->count;
     float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-    hush__bmfr_features_block(fr->set, base, mask, n, ld, T, spare);
-    hush__bmfr_fit(T, count, (const float *const *)zc, fr->noise, mask, n, nvalid, ld, A,
-                   fr->refine, y, coef);
-    hush__bmfr_synthesize(T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
+    float *yc[BMFR_CHANNELS];
+    for (int c = 0; c < BMFR_CHANNELS; c++) yc[c] = b->y + (size_t)c * ld;
+    hush__bmfr_features_block(fr->set, b->base, b->mask, n, ld, b->T, b->spare);
+    hush__bmfr_fit(b->T, count, (const float *const *)zc, fr->noise, b->mask, n, nvalid, ld, b->A,
+                   fr->refine, b->y, coef);
+    hush__bmfr_synthesize(b->T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   }
+}
 
-  /* the block's own pixels (not its mirrored margin); holes and outliers
-   * keep their accumulated radiance */
-  const int r0 = y0 < 0 ? -y0 : 0, r1 = y0 + B > H ? H - y0 : B;
-  for (int r = r0; r < r1; r++) {
-    const size_t row = (size_t)(y0 + r) * W;
+/* Blocks per strip: side by side in a block row, gathered and written
+ * back row by row across the strip (gather_strip). */
+#define STRIP_MAX 4
+
+/* The blocks bx0 .. bx0 + count - 1 of block row by: gathered together,
+ * fitted one by one, written back together (each block's own pixels, not
+ * its mirrored margin; holes and outliers keep their accumulated radiance). */
+static void fit_strip(const fit_frame *fr, int bx0, int count, int by, float *scratch) {
+  const int B = fr->grid.block, W = fr->grid.width;
+  const size_t ld = fr->ld, span = (size_t)SCRATCH_COLUMNS * ld;
+  block_geom g[STRIP_MAX];
+  block_cols b[STRIP_MAX];
+  for (int k = 0; k < count; k++) {
+    block_geom_of(&fr->grid, bx0 + k, by, &g[k]);
+    b[k] = block_cols_of(scratch + (size_t)k * span, ld);
+  }
+  const size_t base_col = (size_t)(b[0].base - scratch), zb_col = (size_t)(b[0].zb - scratch),
+               spare_col = (size_t)(b[0].spare - scratch);
+  gather_strip(fr->depth, W, g, count, B, scratch, span, spare_col);
+  for (int c = 0; c < BMFR_CHANNELS; c++)
+    gather_strip(fr->z[c], W, g, count, B, scratch, span, zb_col + (size_t)c * ld);
+  for (int k = 0; k < BMFR_BASE_COUNT; k++)
+    if (fr->base[k]) gather_strip(fr->base[k], W, g, count, B, scratch, span, base_col + (size_t)k * ld);
+  for (int k = 0; k < count; k++) fit_gathered(fr, &b[k]);
+  for (int r = g[0].r0; r < g[0].r1; r++) {
+    const size_t row = (size_t)(g[0].y0 + r) * W;
     const int i0 = r * B;
-    for (int c = 0; c < BMFR_CHANNELS; c++) {
-      float *restrict dst = fr->out[c] + row;
-      const float *restrict src = yc[c] + i0, *restrict zz = zc[c] + i0, *restrict mk = mask + i0;
-      for (int k = c0; k < c1; k++) dst[x0 + k] = mk[k] > 0.0f ? src[k] : zz[k];
-    }
+    for (int c = 0; c < BMFR_CHANNELS; c++)
+      for (int k = 0; k < count; k++) {
+        float *restrict dst = fr->out[c] + row + g[k].x0;
+        const float *restrict src = b[k].y + (size_t)c * ld + i0,
+                              *restrict zz = b[k].zb + (size_t)c * ld + i0,
+                              *restrict mk = b[k].mask + i0;
+        for (int x = g[k].c0; x < g[k].c1; x++) dst[x] = mk[x] > 0.0f ? src[x] : zz[x];
+      }
   }
 }
 
 static void fit_frame_blocks(const fit_frame *fr, float *scratch, int threads) {
-  const int nblocks = fr->grid.nx * fr->grid.ny;
-  const size_t per_thread = (size_t)SCRATCH_COLUMNS * fr->ld;
+  const int nx = fr->grid.nx, ny = fr->grid.ny;
+  /* as many blocks per strip as the per-thread scratch holds (MAX_LD rows
+   * per column: 4 blocks of 32x32) */
+  int per = (int)(MAX_LD / fr->ld);
+  per = per < 1 ? 1 : per > STRIP_MAX ? STRIP_MAX : per;
+  const int strips_x = (nx + per - 1) / per;
+  const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
 #pragma omp parallel num_threads(threads)
   {
     float *mine = scratch + (size_t)omp_get_thread_num() * per_thread;
-#pragma omp for schedule(dynamic, 4)
-    for (int b = 0; b < nblocks; b++) fit_block(fr, b % fr->grid.nx, b / fr->grid.nx, mine);
+#pragma omp for schedule(dynamic, 1)
+    for (int s = 0; s < strips_x * ny; s++) {
+      const int bx0 = (s % strips_x) * per, by = s / strips_x;
+      fit_strip(fr, bx0, nx - bx0 < per ? nx - bx0 : per, by, mine);
+    }
   }
 }
 
