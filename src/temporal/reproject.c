@@ -573,7 +573,7 @@ typedef struct tap_ref {
  */
 static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, int32_t j, float wt, float ox,
                                             float oy, const tap_ref *r, const int use_id,
-                                            const int grad_test) {
+                                            const int grad_test, unsigned *retry) {
   const float zt = p->depth[j];
   const float d = r->n0 * p->normal[0][j] + r->n1 * p->normal[1][j] + r->n2 * p->normal[2][j];
   const float idt = p->id[j];
@@ -589,7 +589,14 @@ static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, int32_t j, float
   }
   const int id_ok = (use_id == 0) | (idt == r->id);
   const int kind_ok = (r->bg & (surface == 0)) | ((r->bg == 0) & surface_ok); /* bg: bg taps */
-  return (unsigned)(kind_ok & (wt >= HUSH_REPROJECT_MIN_WEIGHT) & id_ok);
+  const int weight_ok = wt >= HUSH_REPROJECT_MIN_WEIGHT;
+  /* without grad_test: whether the tap fails here but could pass the
+   * gradient test (its depth test failed, or its normal is NaN, which
+   * only the gradient test's form lets through) */
+  if (!grad_test)
+    *retry = (unsigned)((r->bg == 0) & surface & ((d < p->cos_min) == 0) & weight_ok & id_ok &
+                        (surface_ok == 0));
+  return (unsigned)(kind_ok & weight_ok & id_ok);
 }
 
 /*
@@ -651,6 +658,7 @@ typedef struct span_taps {
    * of a chunk of 16 at 128 bits (16 bytes), so 4 floats a vector */
   int32_t inside[SPAN];     /* the footprint lies wholly inside the image */
   int32_t mask[SPAN];       /* consistent taps */
+  int32_t retry[SPAN];      /* the plain test: taps only the depth test failed */
   /* hush_footprint. The span test: BILINEAR where its origin, mask, fx, fy
    * are final, else NONE (plan_pixel decides and overwrites all five). */
   int32_t kind[SPAN];
@@ -720,37 +728,56 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
     float bw[4];
     hush__reproject_bilinear(fx, fy, bw);
     const int32_t j0 = contiguous ? base + k : o->origin[k];
+    unsigned q0 = 0, q1 = 0, q2 = 0, q3 = 0;
     const unsigned m =
-        span_tap(&pv, j0, bw[0], 0.0f - fx, 0.0f - fy, &r, use_id, grad_test) |
-        span_tap(&pv, j0 + 1, bw[1], 1.0f - fx, 0.0f - fy, &r, use_id, grad_test) << 1 |
-        span_tap(&pv, j0 + W, bw[2], 0.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 2 |
-        span_tap(&pv, j0 + W + 1, bw[3], 1.0f - fx, 1.0f - fy, &r, use_id, grad_test) << 3;
+        span_tap(&pv, j0, bw[0], 0.0f - fx, 0.0f - fy, &r, use_id, grad_test, &q0) |
+        span_tap(&pv, j0 + 1, bw[1], 1.0f - fx, 0.0f - fy, &r, use_id, grad_test, &q1) << 1 |
+        span_tap(&pv, j0 + W, bw[2], 0.0f - fx, 1.0f - fy, &r, use_id, grad_test, &q2) << 2 |
+        span_tap(&pv, j0 + W + 1, bw[3], 1.0f - fx, 1.0f - fy, &r, use_id, grad_test, &q3) << 3;
+    if (!grad_test) o->retry[k] = (int32_t)(q0 | q1 | q2 | q3);
     o->mask[k] = (int32_t)m;
     o->kind[k] = (o->inside[k] & (m != 0u)) ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
   }
 }
 
-/* The span test: footprints, slopes, then the tap tests chunk by chunk. */
+/* The tap tests of pixels k0..k1-1 of a span (one chunk). */
+static HUSH_ALWAYS_INLINE void test_chunk(const build_ctx *c, size_t row, int k0, int k1,
+                                          const float *restrict sze, span_taps *restrict o,
+                                          int contiguous, const int use_id, const int grad_test) {
+  /* a constant length for full chunks: one vector iteration, no
+   * alignment peeling or scalar epilogue */
+  if (k1 - k0 < CHUNK)
+    test_pixels(c, row, k0, k1 - k0, sze, o, 0, 0, use_id, grad_test);
+  else if (contiguous)
+    test_pixels(c, row, k0, CHUNK, sze, o, o->origin[k0] - k0, 1, use_id, grad_test);
+  else
+    test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, use_id, grad_test);
+}
+
+/* The span test: footprints, then the tap tests chunk by chunk (with the
+ * depth slopes where they can matter). */
 static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin, int n,
                                          const float *restrict spx, const float *restrict spy,
                                          const float *restrict sze, span_taps *restrict o,
                                          const int use_id, const int grad_test) {
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   span_footprints(c->W, c->H, spx, spy, o, n);
-  if (grad_test) span_slopes(c, y, x_begin, n, sze, o->gx, o->gy, use_id);
   for (int k0 = 0; k0 < n; k0 += CHUNK) {
     const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
     int contiguous = 1;
     for (int k = k0; k < k1; k++)
       contiguous &= o->inside[k] & (o->origin[k] == o->origin[k0] + (k - k0));
-    /* a constant length for full chunks: one vector iteration, no
-     * alignment peeling or scalar epilogue */
-    if (k1 - k0 < CHUNK)
-      test_pixels(c, row, k0, k1 - k0, sze, o, 0, 0, use_id, grad_test);
-    else if (contiguous)
-      test_pixels(c, row, k0, CHUNK, sze, o, o->origin[k0] - k0, 1, use_id, grad_test);
-    else
-      test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, use_id, grad_test);
+    /* the plain test first; the depth slopes only for a chunk where the
+     * gradient could change a tap (one only its depth test failed) or
+     * plan_pixel will need them (a pixel left open). The gradient test
+     * passes every tap the plain one does, so elsewhere both agree. */
+    test_chunk(c, row, k0, k1, sze, o, contiguous, use_id, 0);
+    if (!grad_test) continue;
+    int again = 0;
+    for (int k = k0; k < k1; k++) again |= o->retry[k] | (o->kind[k] != HUSH_FOOTPRINT_BILINEAR);
+    if (!again) continue;
+    span_slopes(c, y, x_begin + k0, k1 - k0, sze + k0, o->gx + k0, o->gy + k0, use_id);
+    test_chunk(c, row, k0, k1, sze, o, contiguous, use_id, 1);
   }
 }
 
