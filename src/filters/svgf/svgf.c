@@ -173,8 +173,10 @@ static int level_step(int order, int i, int levels) {
   }
 }
 
-/* The a-trous input of the first level: colour, variance and luminance. */
-static void first_signal(const hush_planar *color, const float *var, const float *age,
+/* The a-trous input of the first level: colour, variance and luminance,
+ * and with `valid` (frames with holes, the only ones whose levels read it)
+ * the validity. */
+static void first_signal(const hush_planar *color, const float *var, const float *age, int valid,
                          svgf_padded *sig, int threads) {
   const int W = sig->width, H = sig->height;
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -188,9 +190,12 @@ static void first_signal(const hush_planar *color, const float *var, const float
                     *restrict sl = svgf_padded_row(sig, SVGF_LUM, y),
                     *restrict ok = svgf_padded_row(sig, SVGF_VALID, y);
     const float *restrict a = age + o;
+    if (valid) {
+#pragma omp simd
+      for (int x = 0; x < W; x++) ok[x] = hush__select_bits(a[x] > 0.0f, 1.0f, 0.0f);
+    }
 #pragma omp simd
     for (int x = 0; x < W; x++) {
-      ok[x] = hush__select_bits(a[x] > 0.0f, 1.0f, 0.0f);
       sr[x] = r[x];
       sg[x] = g[x];
       sb[x] = b[x];
@@ -198,7 +203,7 @@ static void first_signal(const hush_planar *color, const float *var, const float
       sl[x] = hush_luminance(r[x], g[x], b[x]);
     }
     for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
-      svgf_pad_row(svgf_padded_row(sig, c, y), W, sig->pad);
+      if (valid || c != SVGF_VALID) svgf_pad_row(svgf_padded_row(sig, c, y), W, sig->pad);
   }
 }
 
@@ -310,7 +315,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
   if (var_view && export_variance) hush__view_export(&st->var, var_view, threads);
   const float *age = hush__accum_age(&c->acc)->plane[0];
-  first_signal(hush__accum_color(&c->acc), st->var.plane[0], age, &st->signal[0], threads);
+  first_signal(hush__accum_color(&c->acc), st->var.plane[0], age, fc->holes, &st->signal[0],
+               threads);
   hush__filter_timing_stage(f, "variance");
 
   svgf_level_params lp;
