@@ -330,6 +330,20 @@ static void test_bench_scene(void) {
   CHECK(strstr(r.out, "total") != NULL);
   run(&r, "bench", "--path orbit");
   CHECK(r.status == 2 && strstr(r.err, "--scene"));
+  /* psf replays the vertices the frames selected through the public API */
+  run(&r, "bench", "--scene builtin:cornell --size 32x24 --frames 3 --warmup 1 --distinct 2 "
+                   "--filters psf,accumulate --set scale=8 --set psf.vertex=2 --csv '" WORK "/psf.csv'");
+  CHECK_MSG(r.status == 0, "exit %d: %s", r.status, r.err);
+  const char *psf = strstr(r.out, "\npsf ");
+  CHECK_MSG(psf && strstr(psf, " add ") && strstr(psf, " resolve ") && strstr(psf, " lookup "),
+            "no psf stages in: %s", r.out);
+  const char *med = strstr(r.out, "medians per frame: ");
+  CHECK_MSG(med && atoi(med + strlen("medians per frame: ")) > 0, "no vertices: %s", r.out);
+  CHECK(strstr(read_file(WORK "/psf.csv"), "\npsf,add,32,24,3,") != NULL);
+  run(&r, "bench", "--filters psf --size 32x24");
+  CHECK(r.status == 1 && strstr(r.err, "psf") && strstr(r.err, "--scene"));
+  run(&r, "bench", "--scene builtin:cornell --size 32x24 --frames 2 --filters psf --set scale=0");
+  CHECK(r.status == 1 && strstr(r.err, "scale"));
 }
 
 int main(void) {

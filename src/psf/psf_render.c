@@ -380,3 +380,33 @@ hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
   }
   return HUSH_OK;
 }
+
+hush_status hush__psf_renderer_vertices(const hush_psf_renderer *r, hush_psf_vertex **out,
+                                        uint32_t *count, float *pixel_angle) {
+  *out = NULL;
+  *count = 0;
+  *pixel_angle = r->pixel_angle;
+  size_t n = 0;
+  for (size_t i = 0; i < r->samples; i++) n += has_vertex(r, i);
+  if (n > UINT32_MAX)
+    return hush__fail(r->device, HUSH_ERROR_OUT_OF_RANGE, "psf: more than 2^32 vertices");
+  hush_psf_vertex *v = malloc((n ? n : 1) * sizeof *v);
+  if (!v) return hush__fail(r->device, HUSH_ERROR_OUT_OF_MEMORY, "psf: out of memory");
+  size_t k = 0;
+  for (size_t i = 0; i < r->samples; i++) {
+    if (!has_vertex(r, i)) continue;
+    hush_psf_vertex *o = &v[k++];
+    for (int c = 0; c < 3; c++) {
+      o->position[c] = r->planes.position[c][i];
+      o->normal[c] = r->planes.normal[c][i];
+      o->origin[c] = r->planes.origin[c][i];
+      o->radiance[c] = r->planes.radiance[c][i];
+    }
+    o->distance = r->planes.distance[i];
+    o->seed = r->seed[i];
+    o->flags = r->flags[i];
+  }
+  *out = v;
+  *count = (uint32_t)n;
+  return HUSH_OK;
+}

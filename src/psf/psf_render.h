@@ -64,4 +64,11 @@ hush_status hush__psf_renderer_repeat(hush_psf_renderer *r);
 hush_status hush__psf_renderer_finish(hush_psf_renderer *r, hush_frame frame,
                                       hush_psf_timings *timings);
 
+/* The selected vertices of the frame just rendered, in sample order, as the
+ * records a path tracer gives hush_psf_add_vertices (for `hush bench`, which
+ * replays them through the public API). *out is allocated here and owned by
+ * the caller (free); *count may be 0. *pixel_angle receives the frame's. */
+hush_status hush__psf_renderer_vertices(const hush_psf_renderer *r, hush_psf_vertex **out,
+                                        uint32_t *count, float *pixel_angle);
+
 #endif

@@ -7,6 +7,13 @@
  * sequence. Warm-up frames are excluded; per stage and in total it reports
  * the median and the 5th and 95th percentiles, with the thread count and the
  * CPU model, as a table on stdout and optionally as CSV.
+ *
+ * "psf" (hashed path-space filtering, src/psf/) is not a frame filter: it
+ * averages the path tracer's vertices. With --scene the vertices each frame
+ * selected while it rendered are kept, and replayed through the public API
+ * (hush_psf_add_vertices from the device's threads, 8 rows of vertices per
+ * call, then hush_psf_resolve and hush_psf_lookup), as a path tracer using
+ * the library would call it.
  */
 #include "cli.h"
 #include "scene_frames.h"
@@ -17,6 +24,7 @@
 #include "io/atomic_file.h"
 #include "io/frame.h"
 
+#include <omp.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -36,7 +44,8 @@ static const char *const help_text =
     "of the whole execute, in milliseconds per frame.\n"
     "\n"
     "options:\n"
-    "  --filters A,B,...   filters to time (default: every filter)\n"
+    "  --filters A,B,...   filters to time (default: every filter, and psf with\n"
+    "                      --scene)\n"
     "  --size WxH          frame size (default 1280x720)\n"
     "  --frames N          timed frames per filter (default 60)\n"
     "  --warmup N          untimed frames first (default 5)\n"
@@ -47,11 +56,16 @@ static const char *const help_text =
     "                      (default: synthetic frames)\n"
     "  --path MOVE         with --scene: the camera move, as `hush render --path`\n"
     "  --csv FILE          also write the results as CSV\n"
+    "  -h, --help          show this help\n"
     "Filters that need the layer 'gradient' (asvgf) get a stand-in: per 3x3\n"
     "stratum the centre pixel's luminance as current and previous value, the\n"
     "previous one doubled in the left quarter of the frame (the lighting\n"
     "changed there: the history is shortened, as after a light went off).\n"
-    "  -h, --help          show this help\n";
+    "psf (hashed path-space filtering) needs --scene: it replays the vertices\n"
+    "each frame selected while rendering through hush_psf_add_vertices (the\n"
+    "device's threads, 8 rows of vertices per call), hush_psf_resolve and\n"
+    "hush_psf_lookup, and also prints the medians of its statistics; --set\n"
+    "applies to it too (scale=8 or psf.scale=8, table_size=2, vertex=2, ...).\n";
 
 typedef struct bench_options {
   char filters[512];
@@ -60,7 +74,15 @@ typedef struct bench_options {
   int set_count;
   const char *csv;
   const char *scene, *path; /* --scene: rendered frames */
+  int psf;                  /* psf is timed (named, or the default list with --scene) */
 } bench_options;
+
+/* What psf replays: per distinct frame, the vertices it selected. */
+typedef struct psf_frames {
+  hush_psf_vertex *vertices[256]; /* owned */
+  uint32_t count[256];
+  float pixel_angle[256];
+} psf_frames;
 
 typedef struct stage_times {
   const char *name;
@@ -177,6 +199,38 @@ static int apply_sets(const bench_options *o, hush_device device, hush_filter f)
   return 0;
 }
 
+/* Is `name` one of psf's parameters (those of the table, or the renderer's
+ * "vertex")? */
+static int is_psf_param(const char *name) {
+  if (strcmp(name, "vertex") == 0) return 1;
+  uint32_t n;
+  const hush_param_info *p = hush_psf_params(&n);
+  for (uint32_t i = 0; i < n; i++)
+    if (strcmp(p[i].name, name) == 0) return 1;
+  return 0;
+}
+
+/* Applies the --set values psf has: to the renderer (r, for "vertex") or to
+ * the filter object (psf); one of them is NULL. */
+static int apply_psf_sets(const bench_options *o, hush_device device, hush_psf_renderer *r,
+                          hush_psf psf) {
+  for (int i = 0; i < o->set_count; i++) {
+    const char *eq = strchr(o->sets[i], '=');
+    char key[128];
+    const size_t len = (size_t)(eq - o->sets[i]);
+    if (len >= sizeof key) return cli_error("bench", "--set %s: name too long", o->sets[i]);
+    memcpy(key, o->sets[i], len);
+    key[len] = '\0';
+    const char *name = strncmp(key, "psf.", 4) == 0 ? key + 4 : key; /* as hush eval's */
+    if (!is_psf_param(name)) continue;
+    hush_status st = HUSH_OK;
+    if (r) st = hush__psf_renderer_set(r, name, eq + 1);
+    else if (strcmp(name, "vertex") != 0) st = hush_psf_set_string(psf, name, eq + 1);
+    if (st != HUSH_OK) return cli_device_error("bench", device, st, o->sets[i]);
+  }
+  return 0;
+}
+
 static stage_times *stage_slot(bench_result *r, const char *name, uint32_t frames) {
   for (uint32_t i = 0; i < r->stage_count; i++)
     if (strcmp(r->stages[i].name, name) == 0) return &r->stages[i];
@@ -249,6 +303,106 @@ static int bench_filter(const bench_options *o, hush_device device, hush_frame *
   return rc;
 }
 
+/* Vertices per hush_psf_add_vertices call: 8 rows, as the renderer's bands
+ * (each call groups its vertices by cell before it visits the table). */
+static uint32_t psf_call_size(const bench_options *o) { return 8u * o->width; }
+
+/* Adds (kind 0) or looks up (kind 1) the n vertices v in calls of `call`
+ * vertices from the device's threads; returns the first failure. */
+static hush_status psf_calls(hush_psf psf, int kind, const hush_psf_vertex *v, uint32_t n,
+                             uint32_t call, uint32_t *tickets, float *rgb, int threads) {
+  const int64_t calls = ((int64_t)n + call - 1) / call;
+  hush_status first = HUSH_OK;
+#pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
+  for (int64_t c = 0; c < calls; c++) {
+    const uint32_t at = (uint32_t)c * call, m = n - at < call ? n - at : call;
+    const hush_status st = kind == 0 ? hush_psf_add_vertices(psf, v + at, m, tickets + at)
+                                     : hush_psf_lookup(psf, v + at, tickets + at, m, rgb + 3 * (size_t)at);
+    if (st != HUSH_OK) {
+#pragma omp critical(psf_bench_status)
+      if (first == HUSH_OK) first = st;
+    }
+  }
+  return first;
+}
+
+/* Statistics of the timed frames, medians printed after the stage table. */
+typedef struct psf_bench_stats {
+  double *vertices, *cells, *collisions, *failed, *occupancy; /* one per timed frame */
+} psf_bench_stats;
+
+static double median_of(double *v, uint32_t n) {
+  qsort(v, n, sizeof *v, compare_double);
+  return percentile(v, n, 0.5);
+}
+
+/* psf through the public API on the recorded vertices, frames played as the
+ * filters' (history continues; the first step resets it). */
+static int bench_psf(const bench_options *o, hush_device device, const psf_frames *pf,
+                     bench_result *res, char *line, size_t line_size) {
+  res->filter = "psf";
+  uint32_t most = 0;
+  for (uint32_t i = 0; i < o->distinct; i++) most = pf->count[i] > most ? pf->count[i] : most;
+  hush_psf psf = hush_psf_new(device, o->width, o->height);
+  if (!psf) return cli_device_error("bench", device, HUSH_ERROR_OUT_OF_MEMORY, "psf");
+  int rc = apply_psf_sets(o, device, NULL, psf);
+  uint32_t *tickets = malloc(((size_t)most + 1) * sizeof *tickets);
+  float *rgb = malloc(((size_t)most + 1) * 3 * sizeof *rgb);
+  psf_bench_stats st = {0};
+  double **stat_arrays[5] = {&st.vertices, &st.cells, &st.collisions, &st.failed, &st.occupancy};
+  for (int i = 0; i < 5; i++) *stat_arrays[i] = calloc(o->frames, sizeof(double));
+  int have_all = tickets && rgb;
+  for (int i = 0; i < 5; i++) have_all &= *stat_arrays[i] != NULL;
+  if (!rc && !have_all) rc = cli_error("bench", "out of memory");
+  const int threads = hush_device_threads(device);
+  const uint32_t call = psf_call_size(o);
+  const char *names[3] = {"add", "resolve", "lookup"};
+  for (uint32_t k = 0; k < o->warmup + o->frames && !rc; k++) {
+    const uint32_t idx = played_frame(k, o->distinct);
+    const hush_psf_vertex *v = pf->vertices[idx];
+    const uint32_t n = pf->count[idx];
+    const double t0 = hush__now_ms();
+    hush_status s = hush_psf_begin_frame(psf, k, pf->pixel_angle[idx],
+                                         k == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE);
+    if (s == HUSH_OK) s = psf_calls(psf, 0, v, n, call, tickets, rgb, threads);
+    const double t1 = hush__now_ms();
+    if (s == HUSH_OK) s = hush_psf_resolve(psf);
+    const double t2 = hush__now_ms();
+    if (s == HUSH_OK) s = psf_calls(psf, 1, v, n, call, tickets, rgb, threads);
+    const double t3 = hush__now_ms();
+    if (s != HUSH_OK) {
+      rc = cli_device_error("bench", device, s, "psf");
+      break;
+    }
+    if (k < o->warmup) continue;
+    const uint32_t f = k - o->warmup;
+    const double ms[4] = {t1 - t0, t2 - t1, t3 - t2, t3 - t0};
+    for (int i = 0; i < 4; i++) {
+      stage_times *slot = stage_slot(res, i < 3 ? names[i] : "total", o->frames);
+      if (slot) slot->ms[f] = ms[i];
+    }
+    hush_psf_stats ps;
+    hush_psf_get_stats(psf, &ps);
+    const double nv = ps.vertices ? (double)ps.vertices : 1.0;
+    st.vertices[f] = (double)ps.vertices;
+    st.cells[f] = (double)ps.cells_used;
+    st.collisions[f] = 100.0 * (double)ps.collisions / nv;
+    st.failed[f] = 100.0 * (double)ps.failed / nv;
+    st.occupancy[f] = 100.0 * ps.occupancy;
+  }
+  if (!rc)
+    snprintf(line, line_size, "%-12s medians per frame: %.0f vertices, %.0f cells, collisions %.1f%%, no cell %.2f%%, "
+           "occupancy %.1f%% (%u vertices per hush_psf_add_vertices call)\n", "",
+           median_of(st.vertices, o->frames), median_of(st.cells, o->frames),
+           median_of(st.collisions, o->frames), median_of(st.failed, o->frames),
+           median_of(st.occupancy, o->frames), call);
+  for (int i = 0; i < 5; i++) free(*stat_arrays[i]);
+  free(tickets);
+  free(rgb);
+  hush_psf_release(psf);
+  return rc;
+}
+
 static void print_result(const bench_result *r, uint32_t frames, FILE *csv, const char *cpu,
                          int threads, const bench_options *o) {
   printf("%-12s %-14s %9s %9s %9s\n", r->filter, "stage", "median", "p5", "p95");
@@ -270,23 +424,38 @@ static void free_result(bench_result *r) {
 }
 
 /* The distinct frames rendered by the path tracer at 1 spp, frames 0 ..
- * distinct-1 of the camera move. */
+ * distinct-1 of the camera move; with pf, also the vertices psf selected in
+ * each. */
 static int render_frames(const bench_options *o, hush_device device, hush_frame *frames,
-                         hush_camera *cams) {
+                         hush_camera *cams, psf_frames *pf) {
   scene_frames sf;
   int rc = scene_frames_open(&sf, "bench", device, o->scene, o->path, o->width, o->height,
                              o->distinct);
   hush_render_params params;
   hush__render_defaults(&params);
-  for (uint32_t i = 0; !rc && i < o->distinct; i++)
+  hush_psf_renderer *r = NULL;
+  if (!rc && pf) {
+    const hush_status st =
+        hush__psf_renderer_new(device, sf.width, sf.height, params.spp, 1, &r);
+    rc = st == HUSH_OK ? apply_psf_sets(o, device, r, NULL) : cli_device_error("bench", device, st, "psf");
+    sf.psf = r;
+  }
+  for (uint32_t i = 0; !rc && i < o->distinct; i++) {
     rc = scene_frames_render(&sf, i, &params, (int)o->threads, NULL, &frames[i], &cams[i]);
+    if (!rc && r) {
+      const hush_status st = hush__psf_renderer_vertices(r, &pf->vertices[i], &pf->count[i],
+                                                         &pf->pixel_angle[i]);
+      if (st != HUSH_OK) rc = cli_device_error("bench", device, st, "psf");
+    }
+  }
   scene_frames_close(&sf);
+  hush__psf_renderer_free(r);
   return rc;
 }
 
 static int make_frames(const bench_options *o, hush_device device, hush_frame *frames,
-                       hush_camera *cams) {
-  if (o->scene) return render_frames(o, device, frames, cams);
+                       hush_camera *cams, psf_frames *pf) {
+  if (o->scene) return render_frames(o, device, frames, cams, pf);
   hush_synth_params p;
   hush__synth_defaults(&p);
   p.width = o->width;
@@ -342,21 +511,30 @@ static int add_gradients(hush_device device, hush_frame *frames, uint32_t count)
   return 0;
 }
 
-/* Fills names[] from the comma list (or every class) and checks each. */
-static int filter_list(const bench_options *o, char *buf, const char **names, uint32_t *count) {
+/* Fills names[] from the comma list (or every class) and checks each;
+ * "psf" sets o->psf instead (and needs --scene). */
+static int filter_list(bench_options *o, char *buf, const char **names, uint32_t *count) {
   *count = 0;
   if (!o->filters[0]) {
     for (uint32_t i = 0; i < hush_filter_class_count() && i < MAX_FILTERS; i++)
       names[(*count)++] = hush_filter_class_at(i)->name;
+    o->psf = o->scene != NULL;
     return 0;
   }
   strcpy(buf, o->filters);
   for (char *tok = strtok(buf, ","); tok; tok = strtok(NULL, ",")) {
+    if (strcmp(tok, "psf") == 0) {
+      if (!o->scene)
+        return cli_error("bench", "psf filters the path tracer's vertices: it needs --scene "
+                                  "(e.g. --scene builtin:courtyard)");
+      o->psf = 1;
+      continue;
+    }
     if (!hush_filter_class_find(tok)) return cli_error("bench", "unknown filter '%s'", tok);
     if (*count == MAX_FILTERS) return cli_error("bench", "more than %d filters", MAX_FILTERS);
     names[(*count)++] = tok;
   }
-  return *count ? 0 : cli_error("bench", "--filters is empty");
+  return *count || o->psf ? 0 : cli_error("bench", "--filters is empty");
 }
 
 int cmd_bench(int argc, char **argv) {
@@ -371,7 +549,9 @@ int cmd_bench(int argc, char **argv) {
   if (!device) return CLI_EXIT_RUNTIME;
   hush_frame *frames = calloc(o.distinct, sizeof *frames);
   hush_camera *cams = calloc(o.distinct, sizeof *cams);
-  int rc = frames && cams ? make_frames(&o, device, frames, cams) : cli_error("bench", "out of memory");
+  psf_frames *pf = o.psf ? calloc(1, sizeof *pf) : NULL;
+  int rc = frames && cams && (pf || !o.psf) ? make_frames(&o, device, frames, cams, pf)
+                                            : cli_error("bench", "out of memory");
   if (!rc && needs_image(names, nf, "gradient")) rc = add_gradients(device, frames, o.distinct);
 
   char cpu[256];
@@ -394,6 +574,17 @@ int cmd_bench(int argc, char **argv) {
     if (!rc) print_result(&res, o.frames, csv, cpu, threads, &o);
     free_result(&res);
   }
+  if (!rc && pf) {
+    bench_result res;
+    memset(&res, 0, sizeof res);
+    char line[512];
+    rc = bench_psf(&o, device, pf, &res, line, sizeof line);
+    if (!rc) {
+      print_result(&res, o.frames, csv, cpu, threads, &o);
+      fputs(line, stdout);
+    }
+    free_result(&res);
+  }
   if (csv) {
     if (rc)
       hush__atomic_abort(csv, tmp);
@@ -403,6 +594,8 @@ int cmd_bench(int argc, char **argv) {
   for (uint32_t i = 0; frames && i < o.distinct; i++) hush_frame_release(frames[i]);
   free(frames);
   free(cams);
+  for (uint32_t i = 0; pf && i < o.distinct; i++) free(pf->vertices[i]);
+  free(pf);
   hush_device_release(device);
   return rc;
 }
