@@ -15,7 +15,9 @@
  *     docs/psf.md);
  *   - the temporal blend is the running mean up to max_samples and
  *     exponential after it; unused cells are evicted after max_age frames;
- *   - in the renderer, psf keeps the image's energy and lowers the noise.
+ *   - in the renderer, psf keeps the image's energy and lowers the noise;
+ *   - records copied to planes (the vectorised transpose and the scalar
+ *     tail) land word for word in the right plane.
  */
 #include "check.h"
 
@@ -572,11 +574,42 @@ static void test_docs(void) {
   }
 }
 
+/* Records of random words (NaN and Inf patterns too) to planes, for
+ * lengths that take the 16-record transpose, the tail, or both. */
+static void test_block_fill(void) {
+  enum { N = HUSH_PSF_KEY_BLOCK };
+  static hush_psf_vertex v[N];
+  static uint32_t words[15 * N];
+  for (size_t k = 0; k < 15 * N; k++) words[k] = (uint32_t)(rnd() * 4294967040.0f) ^ (uint32_t)k;
+  memcpy(v, words, sizeof v);
+  const uint32_t lengths[] = {1, 15, 16, 17, 37, 48, N};
+  int wrong = 0;
+  for (size_t t = 0; t < sizeof lengths / sizeof *lengths; t++) {
+    static hush_psf_block b;
+    memset(&b, 0xa5, sizeof b);
+    hush_psf_planes planes;
+    hush__psf_block_fill(&b, v, lengths[t], &planes);
+    for (uint32_t j = 0; j < lengths[t]; j++) {
+      const uint32_t *rec = words + 15 * (size_t)j;
+      for (int w = 0; w < 13; w++) wrong += memcmp(&b.f[w][j], &rec[w], 4) != 0;
+      wrong += b.seed[j] != rec[13];
+      wrong += b.flags[j] != rec[14];
+    }
+    for (int c = 0; c < 3; c++) {
+      wrong += planes.position[c] != b.f[c] || planes.normal[c] != b.f[3 + c];
+      wrong += planes.origin[c] != b.f[6 + c] || planes.radiance[c] != b.f[10 + c];
+    }
+    wrong += planes.distance != b.f[9] || planes.seed != b.seed || planes.flags != b.flags;
+  }
+  CHECK_MSG(wrong == 0, "block fill: %d words in the wrong place", wrong);
+}
+
 int main(void) {
   /* one worker thread for the library's own loops: the concurrency under
    * test is test_threads's pthreads (ThreadSanitizer understands them) */
   hush_device dev = hush_device_new("threads=1");
   REQUIRE(dev);
+  test_block_fill();
   test_exact_means(dev);
   test_batches(dev);
   test_no_mixing(dev);

@@ -29,6 +29,10 @@
 #include <stdint.h>
 #include <string.h>
 
+#if defined(__AVX512F__) && defined(__x86_64__)
+#include <immintrin.h>
+#endif
+
 /* Bits of a key: the verification hash below, the age (priority, §3.4) above. */
 #define HUSH_PSF_AGE_SHIFT 26u
 #define HUSH_PSF_VMASK ((1u << HUSH_PSF_AGE_SHIFT) - 1u)
@@ -218,9 +222,67 @@ typedef struct hush_psf_block {
   uint32_t seed[HUSH_PSF_KEY_BLOCK], flags[HUSH_PSF_KEY_BLOCK];
 } hush_psf_block;
 
+_Static_assert(sizeof(hush_psf_vertex) == 15 * sizeof(float),
+               "a vertex record is 15 words: position, normal, origin, distance, radiance, "
+               "seed, flags");
+
+#if defined(__AVX512F__) && defined(__x86_64__)
+/* The 128-bit lanes of four vectors transposed: out[L] lane g = a[g] lane L. */
+static inline void hush__psf_lanes4(const __m512 a[4], __m512 out[4]) {
+  const __m512 v0 = _mm512_shuffle_f32x4(a[0], a[1], _MM_SHUFFLE(1, 0, 1, 0));
+  const __m512 v1 = _mm512_shuffle_f32x4(a[0], a[1], _MM_SHUFFLE(3, 2, 3, 2));
+  const __m512 v2 = _mm512_shuffle_f32x4(a[2], a[3], _MM_SHUFFLE(1, 0, 1, 0));
+  const __m512 v3 = _mm512_shuffle_f32x4(a[2], a[3], _MM_SHUFFLE(3, 2, 3, 2));
+  out[0] = _mm512_shuffle_f32x4(v0, v2, _MM_SHUFFLE(2, 0, 2, 0));
+  out[1] = _mm512_shuffle_f32x4(v0, v2, _MM_SHUFFLE(3, 1, 3, 1));
+  out[2] = _mm512_shuffle_f32x4(v1, v3, _MM_SHUFFLE(2, 0, 2, 0));
+  out[3] = _mm512_shuffle_f32x4(v1, v3, _MM_SHUFFLE(3, 1, 3, 1));
+}
+
+/* Records j .. j + 15 to the planes at j: a 16x16 transpose (the 15 words
+ * of each record, and a zero) in 64 shuffles, where copying word by word
+ * costs 15 loads and 15 stores per record (the copy was a quarter of
+ * hush_psf_add_vertices). */
+static inline void hush__psf_block_fill16(hush_psf_block *b, const hush_psf_vertex *vs,
+                                          uint32_t j) {
+  const float *src = (const float *)(const void *)(vs + j);
+  __m512 r[16], t[16];
+  for (int i = 0; i < 16; i++) r[i] = _mm512_maskz_loadu_ps(0x7fff, src + 15 * i);
+  /* t[2i], t[2i+1], lane L: words 4L, 4L+1 and 4L+2, 4L+3 of records 2i, 2i+1 interleaved */
+  for (int i = 0; i < 16; i += 2) {
+    t[i] = _mm512_unpacklo_ps(r[i], r[i + 1]);
+    t[i + 1] = _mm512_unpackhi_ps(r[i], r[i + 1]);
+  }
+  /* r[4g + c], lane L: word 4L + c of records 4g .. 4g + 3 */
+  for (int g = 0; g < 16; g += 4) {
+    const __m512d t0 = _mm512_castps_pd(t[g]), t1 = _mm512_castps_pd(t[g + 1]);
+    const __m512d t2 = _mm512_castps_pd(t[g + 2]), t3 = _mm512_castps_pd(t[g + 3]);
+    r[g] = _mm512_castpd_ps(_mm512_unpacklo_pd(t0, t2));
+    r[g + 1] = _mm512_castpd_ps(_mm512_unpackhi_pd(t0, t2));
+    r[g + 2] = _mm512_castpd_ps(_mm512_unpacklo_pd(t1, t3));
+    r[g + 3] = _mm512_castpd_ps(_mm512_unpackhi_pd(t1, t3));
+  }
+  for (int c = 0; c < 4; c++) {
+    const __m512 a[4] = {r[c], r[4 + c], r[8 + c], r[12 + c]};
+    __m512 w[4]; /* w[L]: word 4L + c of the 16 records */
+    hush__psf_lanes4(a, w);
+    for (int L = 0; L < 4; L++) {
+      const int word = 4 * L + c;
+      if (word < 13) _mm512_storeu_ps(&b->f[word][j], w[L]);
+      else if (word == 13) _mm512_storeu_si512(&b->seed[j], _mm512_castps_si512(w[L]));
+      else if (word == 14) _mm512_storeu_si512(&b->flags[j], _mm512_castps_si512(w[L]));
+    }
+  }
+}
+#endif
+
 static inline void hush__psf_block_fill(hush_psf_block *b, const hush_psf_vertex *vs, uint32_t n,
                                         hush_psf_planes *planes) {
-  for (uint32_t j = 0; j < n; j++) {
+  uint32_t j = 0;
+#if defined(__AVX512F__) && defined(__x86_64__)
+  for (; j + 16 <= n; j += 16) hush__psf_block_fill16(b, vs, j);
+#endif
+  for (; j < n; j++) {
     const hush_psf_vertex *v = &vs[j];
     for (int c = 0; c < 3; c++) {
       b->f[c][j] = v->position[c];
