@@ -35,6 +35,12 @@ part_speed() {
   local frames=${BENCH_FRAMES:-60}
   "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 1 --csv "$work/t1.csv" >/dev/null
   "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 2 --csv "$work/t2.csv" >/dev/null
+  # psf filters the path tracer's vertices: a built-in scene, so no ../shared needed
+  local t
+  for t in 1 2; do
+    "$hush" bench --scene builtin:courtyard --filters psf --size 1280x720 --frames "$frames" \
+      --distinct 8 --threads $t --csv "$work/psf$t.csv" >"$work/psf$t.txt"
+  done
   {
     echo "## Speed: \`hush bench --size 1280x720 --frames $frames\` ($today)"
     echo
@@ -46,6 +52,22 @@ part_speed() {
       echo "| filter | stage | median | p5 | p95 |"
       echo "|---|---|---|---|---|"
       bench_table "$work/t$t.csv"
+      echo
+    done
+    echo "### psf (hashed path-space filtering) through its public API"
+    echo
+    echo "\`hush bench --scene builtin:courtyard --filters psf --size 1280x720 --frames $frames --distinct 8\`:"
+    echo "the vertices of 8 rendered frames of the orbit, replayed through \`hush_psf_add_vertices\`"
+    echo "(the device's threads), \`hush_psf_resolve\` and \`hush_psf_lookup\`; default parameters."
+    echo
+    echo "| threads | stage | median | p5 | p95 |"
+    echo "|---|---|---|---|---|"
+    for t in 1 2; do
+      tail -n +2 "$work/psf$t.csv" | awk -F, -v t=$t '{ printf "| %s | %s | %.2f | %.2f | %.2f |\n", t, $2, $(NF-2), $(NF-1), $NF }'
+    done
+    echo
+    for t in 1 2; do
+      echo "$t thread(s): $(grep -o 'medians per frame:.*' "$work/psf$t.txt")"
       echo
     done
   } >docs/results/speed.md
