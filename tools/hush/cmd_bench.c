@@ -181,19 +181,32 @@ static void cpu_model(char *buf, size_t size) {
   fclose(f);
 }
 
+#define SET_KEY_MAX 128
+
+/* The name of --set value i (before its '=', checked at parsing) into key;
+ * returns its value, or NULL (printed) when the name is too long. */
+static const char *set_key(const bench_options *o, int i, char key[SET_KEY_MAX]) {
+  const char *eq = strchr(o->sets[i], '=');
+  const size_t len = (size_t)(eq - o->sets[i]);
+  if (len >= SET_KEY_MAX) {
+    cli_error("bench", "--set %s: name too long", o->sets[i]);
+    return NULL;
+  }
+  memcpy(key, o->sets[i], len);
+  key[len] = '\0';
+  return eq + 1;
+}
+
 static int apply_sets(const bench_options *o, hush_device device, hush_filter f) {
   const hush_filter_class_info *cls = hush_filter_get_class(f);
   for (int i = 0; i < o->set_count; i++) {
-    const char *eq = strchr(o->sets[i], '=');
-    char key[128];
-    const size_t len = (size_t)(eq - o->sets[i]);
-    if (len >= sizeof key) return cli_error("bench", "--set %s: name too long", o->sets[i]);
-    memcpy(key, o->sets[i], len);
-    key[len] = '\0';
+    char key[SET_KEY_MAX];
+    const char *value = set_key(o, i, key);
+    if (!value) return CLI_EXIT_RUNTIME;
     int has = 0;
     for (uint32_t k = 0; k < cls->param_count; k++) has |= strcmp(cls->params[k].name, key) == 0;
     if (!has) continue; /* parameters are per filter; skip those this one lacks */
-    const hush_status st = hush_filter_set_string(f, key, eq + 1);
+    const hush_status st = hush_filter_set_string(f, key, value);
     if (st != HUSH_OK) return cli_device_error("bench", device, st, o->sets[i]);
   }
   return 0;
@@ -215,17 +228,14 @@ static int is_psf_param(const char *name) {
 static int apply_psf_sets(const bench_options *o, hush_device device, hush_psf_renderer *r,
                           hush_psf psf) {
   for (int i = 0; i < o->set_count; i++) {
-    const char *eq = strchr(o->sets[i], '=');
-    char key[128];
-    const size_t len = (size_t)(eq - o->sets[i]);
-    if (len >= sizeof key) return cli_error("bench", "--set %s: name too long", o->sets[i]);
-    memcpy(key, o->sets[i], len);
-    key[len] = '\0';
+    char key[SET_KEY_MAX];
+    const char *value = set_key(o, i, key);
+    if (!value) return CLI_EXIT_RUNTIME;
     const char *name = strncmp(key, "psf.", 4) == 0 ? key + 4 : key; /* as hush eval's */
     if (!is_psf_param(name)) continue;
     hush_status st = HUSH_OK;
-    if (r) st = hush__psf_renderer_set(r, name, eq + 1);
-    else if (strcmp(name, "vertex") != 0) st = hush_psf_set_string(psf, name, eq + 1);
+    if (r) st = hush__psf_renderer_set(r, name, value);
+    else if (strcmp(name, "vertex") != 0) st = hush_psf_set_string(psf, name, value);
     if (st != HUSH_OK) return cli_device_error("bench", device, st, o->sets[i]);
   }
   return 0;
