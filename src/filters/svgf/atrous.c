@@ -237,38 +237,37 @@ typedef struct avx_row {
   const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
 } avx_row;
 
-/* One tap at offset off from the vector at x. FULL: all 16 lanes in the row
- * (plain loads); else the loads are masked by m. */
-static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, __m512 inv_l,
-                                       __m512 zp, __m512 lp, __m512 n0p, __m512 n1p, __m512 n2p,
-                                       __m512 nbias, __m512 nfloor, __mmask16 m, const int FULL,
-                                       const int VALIDITY, const int WITH_VAR, avx_sums *acc) {
-#define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
-  const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(zp, LD(r->z)));
-  const __m512 dl = _mm512_abs_ps(_mm512_sub_ps(lp, LD(r->l)));
-  __m512 t = _mm512_fnmadd_ps(dl, inv_l, nbias);
-  t = _mm512_fnmadd_ps(dz, rdd, t);
-  t = _mm512_fmadd_ps(n0p, LD(r->n0), t);
-  t = _mm512_fmadd_ps(n1p, LD(r->n1), t);
-  t = _mm512_fmadd_ps(n2p, LD(r->n2), t);
-  /* NaN compares false: weight 0 */
-  const __mmask16 keep = _mm512_cmp_ps_mask(t, nfloor, _CMP_GT_OQ);
-  __m512 w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
-  if (VALIDITY) w = _mm512_mul_ps(w, LD(r->ok));
-  acc->sw = _mm512_add_ps(acc->sw, w);
-  acc->s0 = _mm512_fmadd_ps(w, LD(r->c0), acc->s0);
-  acc->s1 = _mm512_fmadd_ps(w, LD(r->c1), acc->s1);
-  acc->s2 = _mm512_fmadd_ps(w, LD(r->c2), acc->s2);
-  if (WITH_VAR) acc->sv = _mm512_fmadd_ps(_mm512_mul_ps(w, w), LD(r->v), acc->sv);
-#undef LD
-}
-
 /* One vector of 16 pixels: what its taps need, and its sums. */
 typedef struct avx_px {
   __m512 zp, lp, n0p, n1p, n2p, inv_l, sgx, sgy, zl;
   __mmask16 surface; /* lanes with a surface (normal not 0) */
   avx_sums acc;
 } avx_px;
+
+/* One tap at offset off from the vector at x. FULL: all 16 lanes in the row
+ * (plain loads); else the loads are masked by m. */
+static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, avx_px *p,
+                                       __m512 nbias, __m512 nfloor, __mmask16 m, const int FULL,
+                                       const int VALIDITY, const int WITH_VAR) {
+#define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
+  const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(p->zp, LD(r->z)));
+  const __m512 dl = _mm512_abs_ps(_mm512_sub_ps(p->lp, LD(r->l)));
+  __m512 t = _mm512_fnmadd_ps(dl, p->inv_l, nbias);
+  t = _mm512_fnmadd_ps(dz, rdd, t);
+  t = _mm512_fmadd_ps(p->n0p, LD(r->n0), t);
+  t = _mm512_fmadd_ps(p->n1p, LD(r->n1), t);
+  t = _mm512_fmadd_ps(p->n2p, LD(r->n2), t);
+  /* NaN compares false: weight 0 */
+  const __mmask16 keep = _mm512_cmp_ps_mask(t, nfloor, _CMP_GT_OQ);
+  __m512 w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
+  if (VALIDITY) w = _mm512_mul_ps(w, LD(r->ok));
+  p->acc.sw = _mm512_add_ps(p->acc.sw, w);
+  p->acc.s0 = _mm512_fmadd_ps(w, LD(r->c0), p->acc.s0);
+  p->acc.s1 = _mm512_fmadd_ps(w, LD(r->c1), p->acc.s1);
+  p->acc.s2 = _mm512_fmadd_ps(w, LD(r->c2), p->acc.s2);
+  if (WITH_VAR) p->acc.sv = _mm512_fmadd_ps(_mm512_mul_ps(w, w), LD(r->v), p->acc.sv);
+#undef LD
+}
 
 /* The per-pixel terms of the 16 pixels from x (n of them, n < 16 only at
  * the row's end, m their mask) and the centre tap's sums. */
@@ -401,24 +400,18 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
       const avx_pair *t = &pairs[k];
       const __m512 rdd0 = avx_rdd(&p0, t), rdd1 = avx_rdd(&p1, t);
       const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, 1,
-              VALIDITY, WITH_VAR, &p0.acc);
-      avx_tap(&rx, t->a + 16, rdd1, p1.inv_l, p1.zp, p1.lp, p1.n0p, p1.n1p, p1.n2p, nb, nf, m, 1,
-              VALIDITY, WITH_VAR, &p1.acc);
-      avx_tap(&rx, t->b, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, 1,
-              VALIDITY, WITH_VAR, &p0.acc);
-      avx_tap(&rx, t->b + 16, rdd1, p1.inv_l, p1.zp, p1.lp, p1.n0p, p1.n1p, p1.n2p, nb, nf, m, 1,
-              VALIDITY, WITH_VAR, &p1.acc);
+      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->a + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->b + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR);
     }
   } else if (!TWO && (p0.surface || !sky_skip)) {
     for (int k = 0; k < npairs; k++) {
       const avx_pair *t = &pairs[k];
       const __m512 rdd0 = avx_rdd(&p0, t);
       const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, FULL,
-              VALIDITY, WITH_VAR, &p0.acc);
-      avx_tap(&rx, t->b, rdd0, p0.inv_l, p0.zp, p0.lp, p0.n0p, p0.n1p, p0.n2p, nb, nf, m, FULL,
-              VALIDITY, WITH_VAR, &p0.acc);
+      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR);
     }
   }
   avx_finish(&p0, x, m, out, also, VALIDITY, WITH_VAR);
