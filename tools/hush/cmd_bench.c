@@ -317,8 +317,10 @@ static int bench_filter(const bench_options *o, hush_device device, hush_frame *
  * (each call groups its vertices by cell before it visits the table). */
 static uint32_t psf_call_size(const bench_options *o) { return 8u * o->width; }
 
-/* Adds (kind 0) or looks up (kind 1) the n vertices v in calls of `call`
- * vertices from the device's threads; returns the first failure. */
+enum { PSF_ADD, PSF_LOOKUP };
+
+/* Adds (PSF_ADD) or looks up (PSF_LOOKUP) the n vertices v in calls of
+ * `call` vertices from the device's threads; returns the first failure. */
 static hush_status psf_calls(hush_psf psf, int kind, const hush_psf_vertex *v, uint32_t n,
                              uint32_t call, uint32_t *tickets, float *rgb, int threads) {
   const int64_t calls = ((int64_t)n + call - 1) / call;
@@ -326,7 +328,7 @@ static hush_status psf_calls(hush_psf psf, int kind, const hush_psf_vertex *v, u
 #pragma omp parallel for schedule(dynamic, 1) num_threads(threads)
   for (int64_t c = 0; c < calls; c++) {
     const uint32_t at = (uint32_t)c * call, m = n - at < call ? n - at : call;
-    const hush_status st = kind == 0 ? hush_psf_add_vertices(psf, v + at, m, tickets + at)
+    const hush_status st = kind == PSF_ADD ? hush_psf_add_vertices(psf, v + at, m, tickets + at)
                                      : hush_psf_lookup(psf, v + at, tickets + at, m, rgb + 3 * (size_t)at);
     if (st != HUSH_OK) {
 #pragma omp critical(psf_bench_status)
@@ -336,10 +338,8 @@ static hush_status psf_calls(hush_psf psf, int kind, const hush_psf_vertex *v, u
   return first;
 }
 
-/* Statistics of the timed frames, medians printed after the stage table. */
-typedef struct psf_bench_stats {
-  double *vertices, *cells, *collisions, *failed, *occupancy; /* one per timed frame */
-} psf_bench_stats;
+/* The statistics kept per timed frame, medians printed after the stage table. */
+enum { S_VERTICES, S_CELLS, S_COLLISIONS, S_FAILED, S_OCCUPANCY, S_COUNT };
 
 static double median_of(double *v, uint32_t n) {
   qsort(v, n, sizeof *v, compare_double);
@@ -358,12 +358,8 @@ static int bench_psf(const bench_options *o, hush_device device, const psf_frame
   int rc = apply_psf_sets(o, device, NULL, psf);
   uint32_t *tickets = malloc(((size_t)most + 1) * sizeof *tickets);
   float *rgb = malloc(((size_t)most + 1) * 3 * sizeof *rgb);
-  psf_bench_stats st = {0};
-  double **stat_arrays[5] = {&st.vertices, &st.cells, &st.collisions, &st.failed, &st.occupancy};
-  for (int i = 0; i < 5; i++) *stat_arrays[i] = calloc(o->frames, sizeof(double));
-  int have_all = tickets && rgb;
-  for (int i = 0; i < 5; i++) have_all &= *stat_arrays[i] != NULL;
-  if (!rc && !have_all) rc = cli_error("bench", "out of memory");
+  double *stat = calloc((size_t)S_COUNT * o->frames, sizeof *stat); /* [S_*][frame] */
+  if (!rc && !(tickets && rgb && stat)) rc = cli_error("bench", "out of memory");
   const int threads = hush_device_threads(device);
   const uint32_t call = psf_call_size(o);
   const char *names[3] = {"add", "resolve", "lookup"};
@@ -374,11 +370,11 @@ static int bench_psf(const bench_options *o, hush_device device, const psf_frame
     const double t0 = hush__now_ms();
     hush_status s = hush_psf_begin_frame(psf, k, pf->pixel_angle[idx],
                                          k == 0 ? HUSH_HISTORY_RESET : HUSH_HISTORY_CONTINUE);
-    if (s == HUSH_OK) s = psf_calls(psf, 0, v, n, call, tickets, rgb, threads);
+    if (s == HUSH_OK) s = psf_calls(psf, PSF_ADD, v, n, call, tickets, rgb, threads);
     const double t1 = hush__now_ms();
     if (s == HUSH_OK) s = hush_psf_resolve(psf);
     const double t2 = hush__now_ms();
-    if (s == HUSH_OK) s = psf_calls(psf, 1, v, n, call, tickets, rgb, threads);
+    if (s == HUSH_OK) s = psf_calls(psf, PSF_LOOKUP, v, n, call, tickets, rgb, threads);
     const double t3 = hush__now_ms();
     if (s != HUSH_OK) {
       rc = cli_device_error("bench", device, s, "psf");
@@ -394,19 +390,18 @@ static int bench_psf(const bench_options *o, hush_device device, const psf_frame
     hush_psf_stats ps;
     hush_psf_get_stats(psf, &ps);
     const double nv = ps.vertices ? (double)ps.vertices : 1.0;
-    st.vertices[f] = (double)ps.vertices;
-    st.cells[f] = (double)ps.cells_used;
-    st.collisions[f] = 100.0 * (double)ps.collisions / nv;
-    st.failed[f] = 100.0 * (double)ps.failed / nv;
-    st.occupancy[f] = 100.0 * ps.occupancy;
+    const double of_frame[S_COUNT] = {(double)ps.vertices, (double)ps.cells_used,
+                                      100.0 * (double)ps.collisions / nv,
+                                      100.0 * (double)ps.failed / nv, 100.0 * ps.occupancy};
+    for (int i = 0; i < S_COUNT; i++) stat[(size_t)i * o->frames + f] = of_frame[i];
   }
+  double med[S_COUNT] = {0};
+  for (int i = 0; !rc && i < S_COUNT; i++) med[i] = median_of(stat + (size_t)i * o->frames, o->frames);
   if (!rc)
     snprintf(line, line_size, "%-12s medians per frame: %.0f vertices, %.0f cells, collisions %.1f%%, no cell %.2f%%, "
            "occupancy %.1f%% (%u vertices per hush_psf_add_vertices call)\n", "",
-           median_of(st.vertices, o->frames), median_of(st.cells, o->frames),
-           median_of(st.collisions, o->frames), median_of(st.failed, o->frames),
-           median_of(st.occupancy, o->frames), call);
-  for (int i = 0; i < 5; i++) free(*stat_arrays[i]);
+           med[S_VERTICES], med[S_CELLS], med[S_COLLISIONS], med[S_FAILED], med[S_OCCUPANCY], call);
+  free(stat);
   free(tickets);
   free(rgb);
   hush_psf_release(psf);
