@@ -443,7 +443,8 @@ typedef struct hush_psf_t *hush_psf;
 #define HUSH_PSF_NO_CELL 0xffffffffu
 
 /* hush_psf_vertex.flags: the surface is glossy; its direction goes into
- * the verification hash (cells then differ by the direction of view). */
+ * the verification hash (cells then differ by the direction of view), and
+ * its cells are "glossy_scale" times larger. */
 #define HUSH_PSF_GLOSSY 1u
 
 typedef struct hush_psf_vertex {
@@ -481,8 +482,9 @@ HUSH_API hush_psf hush_psf_new(hush_device device, uint32_t width, uint32_t heig
 HUSH_API void hush_psf_retain(hush_psf psf);
 HUSH_API void hush_psf_release(hush_psf psf);
 
-/* The parameter table (static): "scale", "table_size", "jitter", "normals",
- * "probes", "max_samples", "max_age", "temporal"; docs/psf.md explains them. */
+/* The parameter table (static): "scale", "glossy_scale", "table_size",
+ * "jitter", "normals", "probes", "max_samples", "max_age", "temporal";
+ * docs/psf.md explains them. */
 HUSH_API const hush_param_info *hush_psf_params(uint32_t *count);
 /* Setters validate name, type and range as hush_filter_set_*. A change of
  * "table_size" reallocates the table at the next begin_frame (history lost). */

@@ -7,6 +7,8 @@
  *     and under uniform radiance every vertex gets exactly that radiance;
  *   - the same with more cells and vertices than a batch holds, in one call
  *     or in many short calls through one batch (as the renderer adds);
+ *   - glossy vertices get cells glossy_scale times larger, split by their
+ *     normal only with glossy_normals;
  *   - vertices with different keys never share a cell, even when a tiny
  *     table forces collisions, evictions and failures (those keep their own
  *     radiance);
@@ -109,10 +111,14 @@ static hush_psf_key_params key_params(hush_psf p, uint32_t frame, float pixel_an
   float f;
   hush_psf_get_float(p, "scale", &f);
   kp.scale = f;
+  hush_psf_get_float(p, "glossy_scale", &f);
+  kp.glossy_scale = f;
   hush_psf_get_float(p, "jitter", &f);
   kp.jitter = f;
   hush_psf_get_float(p, "normals", &f);
   kp.normals = f != 0.0f;
+  hush_psf_get_float(p, "glossy_normals", &f);
+  kp.glossy_normals = f != 0.0f;
   kp.pixel_angle = pixel_angle;
   kp.frame = frame;
   return kp;
@@ -152,6 +158,92 @@ static void test_exact_means(hush_device dev) {
   free(out);
   hush_psf_release(p);
   free(v);
+  free(t);
+}
+
+/* Glossy vertices (their direction in the verification hash) get cells
+ * glossy_scale times larger: with jitter on, a glossy vertex's primary hash
+ * (position and level only) is that of the same vertex, not glossy, under
+ * scale * glossy_scale; through the API they fill that many times fewer
+ * cells of a plane, each still the exact mean of its vertices. */
+static void test_glossy_cells(hush_device dev) {
+  enum { N = 20000 };
+  hush_psf_vertex *v = malloc(N * sizeof *v), *plain = malloc(N * sizeof *plain);
+  uint32_t *t = malloc(N * sizeof *t);
+  REQUIRE(v && plain && t);
+  make_vertices(v, N, 2.0f, 0);
+  for (uint32_t k = 0; k < N; k++) {
+    v[k].origin[0] = 4.0f * rnd() - 2.0f; /* some distance and a direction of view */
+    v[k].distance = 3.0f * rnd();
+    v[k].flags = HUSH_PSF_GLOSSY;
+    plain[k] = v[k];
+    plain[k].flags = 0;
+  }
+  const float glossy[3] = {1.0f, 4.0f, 0.5f};
+  for (int g = 0; g < 3; g++) {
+    hush_psf_key_params kg = {.scale = 3.0f, .glossy_scale = glossy[g], .pixel_angle = 0.002f,
+                              .jitter = 1.0f, .normals = 1, .frame = 7u};
+    hush_psf_key_params kn = kg;
+    kn.scale = kg.scale * glossy[g];
+    int differ = 0, same_v = 0;
+    for (uint32_t k = 0; k < N; k++) {
+      hush_psf_key a, b;
+      REQUIRE(hush__psf_key_of(&kg, &v[k], &a) && hush__psf_key_of(&kn, &plain[k], &b));
+      differ += a.i != b.i;
+      same_v += a.v == b.v;
+    }
+    CHECK_MSG(differ == 0, "glossy_scale %g: %d glossy vertices not in the cells of scale %g",
+              glossy[g], differ, kn.scale);
+    CHECK_MSG(same_v < N / 100, "glossy_scale %g: the direction is not in %d verification hashes",
+              glossy[g], same_v);
+  }
+
+  /* the normal splits glossy cells only with glossy_normals; diffuse ones
+   * always (normals): a vertex and its copy with another normal (no
+   * jitter: it moves the vertex in the normal's tangent plane) */
+  for (int gn = 0; gn < 2; gn++) {
+    hush_psf_key_params kp = {.scale = 3.0f, .glossy_scale = 4.0f, .pixel_angle = 0.002f,
+                              .jitter = 0.0f, .normals = 1, .glossy_normals = gn, .frame = 7u};
+    int glossy_same = 0, plain_same = 0;
+    for (uint32_t k = 0; k < 1000; k++) {
+      hush_psf_vertex tilted = v[k], tilted_plain = plain[k];
+      tilted.normal[0] = tilted_plain.normal[0] = 0.6f; /* (0.6, 0.8, 0): another quantum */
+      tilted.normal[1] = tilted_plain.normal[1] = 0.8f;
+      hush_psf_key a, b, c, d;
+      REQUIRE(hush__psf_key_of(&kp, &v[k], &a) && hush__psf_key_of(&kp, &tilted, &b));
+      REQUIRE(hush__psf_key_of(&kp, &plain[k], &c) && hush__psf_key_of(&kp, &tilted_plain, &d));
+      glossy_same += a.v == b.v;
+      plain_same += c.v == d.v;
+    }
+    CHECK_MSG(plain_same == 0, "%d diffuse vertices kept their key with another normal", plain_same);
+    CHECK_MSG(gn ? glossy_same == 0 : glossy_same == 1000,
+              "glossy_normals %d: %d of 1000 glossy vertices kept their key with another normal",
+              gn, glossy_same);
+  }
+
+  uint64_t cells[2];
+  for (int g = 0; g < 2; g++) {
+    hush_psf p = make_psf(dev, 160, 100, 2.0f, 0);
+    CHECK(hush_psf_set_float(p, "glossy_scale", glossy[g]) == HUSH_OK);
+    for (uint32_t k = 0; k < N; k++) memcpy(v[k].origin, (float[3]){0.0f, 5.0f, 0.0f}, sizeof v[k].origin);
+    REQUIRE(hush_psf_begin_frame(p, 0, 0.002f, HUSH_HISTORY_RESET) == HUSH_OK);
+    REQUIRE(hush_psf_add_vertices(p, v, N, t) == HUSH_OK);
+    REQUIRE(hush_psf_resolve(p) == HUSH_OK);
+    hush_psf_stats s;
+    REQUIRE(hush_psf_get_stats(p, &s) == HUSH_OK);
+    CHECK(s.failed == 0);
+    cells[g] = s.cells_used;
+    hush_psf_key_params kp = key_params(p, 0, 0.002f);
+    CHECK(kp.glossy_scale == glossy[g]);
+    check_exact_means(p, v, t, N, &kp, (uint32_t)s.table_size);
+    hush_psf_release(p);
+  }
+  /* 16 times the area per cell (a few directions split some of them) */
+  CHECK_MSG(cells[1] * 8 < cells[0] && cells[1] * 32 > cells[0],
+            "glossy_scale 4 used %llu cells, 1 used %llu", (unsigned long long)cells[1],
+            (unsigned long long)cells[0]);
+  free(v);
+  free(plain);
   free(t);
 }
 
@@ -611,6 +703,7 @@ int main(void) {
   REQUIRE(dev);
   test_block_fill();
   test_exact_means(dev);
+  test_glossy_cells(dev);
   test_batches(dev);
   test_no_mixing(dev);
   test_threads(dev);

@@ -19,9 +19,11 @@
 
 enum {
   P_SCALE,
+  P_GLOSSY_SCALE,
   P_TABLE_SIZE,
   P_JITTER,
   P_NORMALS,
+  P_GLOSSY_NORMALS,
   P_PROBES,
   P_MAX_SAMPLES,
   P_MAX_AGE,
@@ -32,12 +34,18 @@ enum {
 static const hush_param_info params[P_COUNT] = {
     {"scale", HUSH_PARAM_FLOAT, 4.0, 0.01, 1024.0,
      "cell size in projected pixels at the vertex's distance (s of Algorithm 1)", NULL},
+    {"glossy_scale", HUSH_PARAM_FLOAT, 4.0, 0.01, 1024.0,
+     "cells of glossy vertices (HUSH_PSF_GLOSSY) this many times larger: the direction "
+     "of view splits them further (section 4)", NULL},
     {"table_size", HUSH_PARAM_FLOAT, 1.0, 0.001, 64.0,
      "slots per pixel of the frame (rounded up to 64-byte lines of 16 slots)", NULL},
     {"jitter", HUSH_PARAM_FLOAT, 1.0, 0.0, 4.0,
      "tangent-plane jitter of the position before quantisation, in cells (0: none)", NULL},
     {"normals", HUSH_PARAM_BOOL, 1.0, 0.0, 1.0,
      "quantised normal in the verification hash: no averaging across edges", NULL},
+    {"glossy_normals", HUSH_PARAM_BOOL, 0.0, 0.0, 1.0,
+     "the normal also in glossy vertices' verification hash (their direction of view is "
+     "always in it)", NULL},
     {"probes", HUSH_PARAM_INT, 8.0, 1.0, 16.0,
      "slots probed linearly inside the 16-slot cache line", NULL},
     {"max_samples", HUSH_PARAM_FLOAT, 1024.0, 1.0, 1e9,
@@ -198,9 +206,11 @@ hush_status hush_psf_begin_frame(hush_psf psf, uint64_t frame_index, float pixel
   }
   hush__psf_table_begin_frame(&psf->table);
   psf->key.scale = (float)psf->params[P_SCALE];
+  psf->key.glossy_scale = (float)psf->params[P_GLOSSY_SCALE];
   psf->key.pixel_angle = pixel_angle;
   psf->key.jitter = (float)psf->params[P_JITTER];
   psf->key.normals = psf->params[P_NORMALS] != 0.0;
+  psf->key.glossy_normals = psf->params[P_GLOSSY_NORMALS] != 0.0;
   psf->key.frame = (uint32_t)frame_index;
   psf->state = 1;
   return HUSH_OK;

@@ -7,14 +7,17 @@
  *   l' = level_of_detail(d')          d' recomputed at x' (Algorithm 1's l')
  *   x~ = floor(x' / cell(l'))
  *   i  = hash(x~, l')                 which cache line (and first slot)
- *   v  = hash2(x~, l', n~, w~)        verification: quantised normal n~ and,
+ *   v  = hash2(x~, l', n~, w~)        verification: quantised normal n~ or,
  *                                     for glossy vertices, direction w~
  *
  * with cell(l) = scale * pixel_angle * 2^l and level_of_detail(d) =
  * floor(log2 d), so a cell is scale times (0.5 to 1) the projected size of
- * a pixel at the vertex's distance. The normal goes into v only (§3.1,
- * Figure 4c): vertices of one cell with different normals share a cache line
- * and are told apart by linear probing.
+ * a pixel at the vertex's distance; glossy_scale times that for glossy
+ * vertices (§4's coarser cells for glossy surfaces: the direction in v
+ * splits their cells again, so at the same size they would gather few
+ * vertices, and a glossy highlight stays a firefly). The normal goes into v
+ * only (§3.1, Figure 4c): vertices of one cell with different normals share
+ * a cache line and are told apart by linear probing.
  *
  * Everything is a pure function of the vertex, the frame and the parameters,
  * so keys do not depend on the thread that computes them.
@@ -40,9 +43,11 @@
 
 typedef struct hush_psf_key_params {
   float scale;             /* cell size in projected pixels */
+  float glossy_scale;      /* cell size of glossy vertices relative to scale */
   float pixel_angle;       /* pixel width at unit distance */
   float jitter;            /* tangent-plane jitter, in cells (0: none) */
   int normals;             /* quantised normal in the verification hash */
+  int glossy_normals;      /* the same for glossy vertices */
   uint32_t frame;          /* mixed into the jitter's random numbers */
 } hush_psf_key_params;
 
@@ -69,6 +74,12 @@ static inline float hush__psf_keep(float x, int keep) {
   return hush__psf_bits_f(hush__psf_f_bits(x) & (0u - (uint32_t)keep));
 }
 
+/* a where pick is 1, b where it is 0 (exactly, by the bits). */
+static inline float hush__psf_select(float a, float b, int pick) {
+  const uint32_t m = 0u - (uint32_t)pick;
+  return hush__psf_bits_f((hush__psf_f_bits(a) & m) | (hush__psf_f_bits(b) & ~m));
+}
+
 /* floor(log2(d)) for d > 0 from the float's exponent bits, clamped to
  * [-100, 100] (0 and tiny distances share the lowest level, NaN and Inf the
  * highest). */
@@ -80,10 +91,6 @@ static inline int hush__psf_level(float d) {
 /* 2^level as a float (|level| < 127). */
 static inline float hush__psf_exp2i(int level) {
   return hush__psf_bits_f((uint32_t)(level + 127) << 23);
-}
-
-static inline float hush__psf_cell(const hush_psf_key_params *k, int level) {
-  return k->scale * k->pixel_angle * hush__psf_exp2i(level);
 }
 
 /* 1 / sqrt(x) by the bit trick and two Newton steps (relative error below
@@ -157,7 +164,9 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
   const float *restrict R2 = v->radiance[2] + first;
   const uint32_t *restrict S = v->seed + first, *restrict G = v->flags + first;
   const float base = k->scale * k->pixel_angle, jit = k->jitter;
+  const float glossy_base = base * k->glossy_scale;
   const uint32_t frame = k->frame, normals = k->normals ? 1u : 0u;
+  const uint32_t glossy_normals = k->glossy_normals ? 1u : 0u;
   for (size_t j = 0; j < n; j++) { /* size_t: affine indices, so the loop vectorises */
     const float x0 = P0[j], x1 = P1[j], x2 = P2[j];
     const float n0 = N0[j], n1 = N1[j], n2 = N2[j];
@@ -165,7 +174,8 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
     float w0 = o0 - x0, w1 = o1 - x1, w2 = o2 - x2;
     const float len = hush__psf_sqrt(w0 * w0 + w1 * w1 + w2 * w2);
     const int level0 = hush__psf_level(D[j] + len);
-    const float cell0 = base * hush__psf_exp2i(level0);
+    const float unit = hush__psf_select(glossy_base, base, (G[j] & HUSH_PSF_GLOSSY) != 0u);
+    const float cell0 = unit * hush__psf_exp2i(level0);
     /* tangent frame of n (Duff et al. 2017, branchless) */
     const float sign = copysignf(1.0f, n2);
     const float a = -1.0f / (sign + n2), b = n0 * n1 * a;
@@ -181,7 +191,7 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
     const float y2 = x2 + (t2 * u1 + b2 * u2) * jc;
     const float e0 = o0 - y0, e1 = o1 - y1, e2 = o2 - y2;
     const int level = hush__psf_level(D[j] + hush__psf_sqrt(e0 * e0 + e1 * e1 + e2 * e2));
-    const float inv = 1.0f / (base * hush__psf_exp2i(level));
+    const float inv = 1.0f / (unit * hush__psf_exp2i(level));
     /* NaN fails every comparison: this also rejects non-finite input */
     int ok = (fabsf(R0[j]) < 3.0e38f) & (fabsf(R1[j]) < 3.0e38f) & (fabsf(R2[j]) < 3.0e38f) &
              (fabsf(D[j]) < 3.0e38f) & (fabsf(len) < 3.0e38f);
@@ -190,16 +200,17 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
     const uint32_t q2 = hush__psf_floor_i32(y2 * inv, &ok);
     const uint32_t lv = (uint32_t)(level + 256);
     const uint32_t i = hush_pcg_hash(q0 ^ hush_pcg_hash(q1 ^ hush_pcg_hash(q2 ^ hush_pcg_hash(lv))));
+    const uint32_t glossy = (G[j] & HUSH_PSF_GLOSSY) != 0u, gm = 0u - glossy;
     const uint32_t nq = (hush__psf_quant4(n0) | hush__psf_quant4(n1) << 2 |
                          hush__psf_quant4(n2) << 4 | 1u << 6) *
-                        normals;
+                        ((normals & ~gm) | (glossy_normals & gm));
     const float il = hush__psf_rsqrt(len * len);
     w0 *= il;
     w1 *= il;
     w2 *= il;
     const uint32_t wq = (hush__psf_quant4(w0) | hush__psf_quant4(w1) << 2 |
                          hush__psf_quant4(w2) << 4 | 1u << 6) *
-                        (G[j] & HUSH_PSF_GLOSSY);
+                        glossy;
     const uint32_t extra = nq | wq << 8;
     uint32_t h = hush__psf_fmix(q0 * 0x9e3779b1u + lv);
     h = hush__psf_fmix(h ^ (q1 * 0x85ebca77u));
