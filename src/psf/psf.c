@@ -32,7 +32,7 @@ enum {
 };
 
 static const hush_param_info params[P_COUNT] = {
-    {"scale", HUSH_PARAM_FLOAT, 4.0, 0.01, 1024.0,
+    {"scale", HUSH_PARAM_FLOAT, 8.0, 0.01, 1024.0,
      "cell size in projected pixels at the vertex's distance (s of Algorithm 1)", NULL},
     {"glossy_scale", HUSH_PARAM_FLOAT, 4.0, 0.01, 1024.0,
      "cells of glossy vertices (HUSH_PSF_GLOSSY) this many times larger: the direction "

@@ -88,7 +88,7 @@ static const char *const help_text =
     "                       each frame gets a layer psf (the filtered radiance; color\n"
     "                       stays the unfiltered one), DIR/psf.csv the per-frame\n"
     "                       statistics, and with --png DIR/frame_NNNN_psf.png\n"
-    "  --psf-scale S        cell size in projected pixels (default 4)\n"
+    "  --psf-scale S        cell size in projected pixels (default 8)\n"
     "  --psf-vertex 1|2     filter at the first or second diffuse vertex (default 1)\n"
     "  --psf-table-size T   hash table slots per pixel (default 1)\n"
     "  --psf-jitter J, --psf-probes N, --psf-max-samples N\n"
