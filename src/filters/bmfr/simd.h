@@ -74,7 +74,7 @@ static inline vf vf_max(vf a, vf b) { return vf_select(b > a, b, a); }
 
 /* 1 in the lanes whose index i0 + l is at least k, else 0. */
 static inline vf vf_from(int i0, int k) {
-  vf keep;
+  vf keep = {0}; /* every lane is set below; -O1 (ThreadSanitizer build) cannot tell */
   for (int l = 0; l < VF_LANES; l++) keep[l] = i0 + l >= k ? 1.0f : 0.0f;
   return keep;
 }
