@@ -483,8 +483,8 @@ HUSH_API void hush_psf_retain(hush_psf psf);
 HUSH_API void hush_psf_release(hush_psf psf);
 
 /* The parameter table (static): "scale", "glossy_scale", "table_size",
- * "jitter", "normals", "probes", "max_samples", "max_age", "temporal";
- * docs/psf.md explains them. */
+ * "jitter", "normals", "glossy_normals", "probes", "max_samples", "max_age",
+ * "temporal"; docs/psf.md explains them. */
 HUSH_API const hush_param_info *hush_psf_params(uint32_t *count);
 /* Setters validate name, type and range as hush_filter_set_*. A change of
  * "table_size" reallocates the table at the next begin_frame (history lost). */

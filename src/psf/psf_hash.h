@@ -174,7 +174,8 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
     float w0 = o0 - x0, w1 = o1 - x1, w2 = o2 - x2;
     const float len = hush__psf_sqrt(w0 * w0 + w1 * w1 + w2 * w2);
     const int level0 = hush__psf_level(D[j] + len);
-    const float unit = hush__psf_select(glossy_base, base, (G[j] & HUSH_PSF_GLOSSY) != 0u);
+    const uint32_t glossy = (G[j] & HUSH_PSF_GLOSSY) != 0u, gm = 0u - glossy;
+    const float unit = hush__psf_select(glossy_base, base, (int)glossy);
     const float cell0 = unit * hush__psf_exp2i(level0);
     /* tangent frame of n (Duff et al. 2017, branchless) */
     const float sign = copysignf(1.0f, n2);
@@ -200,7 +201,6 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
     const uint32_t q2 = hush__psf_floor_i32(y2 * inv, &ok);
     const uint32_t lv = (uint32_t)(level + 256);
     const uint32_t i = hush_pcg_hash(q0 ^ hush_pcg_hash(q1 ^ hush_pcg_hash(q2 ^ hush_pcg_hash(lv))));
-    const uint32_t glossy = (G[j] & HUSH_PSF_GLOSSY) != 0u, gm = 0u - glossy;
     const uint32_t nq = (hush__psf_quant4(n0) | hush__psf_quant4(n1) << 2 |
                          hush__psf_quant4(n2) << 4 | 1u << 6) *
                         ((normals & ~gm) | (glossy_normals & gm));
