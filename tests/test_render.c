@@ -801,6 +801,56 @@ static void test_cornell_gbuffer(void) {
   rig_close(&r);
 }
 
+/* ---- one-sided emitters ----------------------------------------------------------------- */
+
+/* The Cornell lamp (builtin:cornell, y = 1.98, facing down, 2 cm below the
+ * ceiling) lights what is below it and nothing above it: no light sample
+ * is drawn from the gap above it, a camera ray meeting its back sees no
+ * emission, and `two_sided_emitters` restores both (twice the power).
+ * Without this the gap glowed and lit a rim of ceiling that no other
+ * renderer's Cornell box has. */
+static void test_one_sided_emitters(void) {
+  rig r;
+  rig_open(&r, "cornell");
+  for (int two = 0; two <= 1; two++) {
+    hush__lights_free(&r.lights);
+    r.scene.two_sided_emitters = two;
+    REQUIRE(hush__lights_init(r.device, &r.lights, &r.scene) == HUSH_OK);
+    int below = 0, above = 0, wrong = 0;
+    for (uint32_t i = 0; i < 4000; i++) {
+      const float u[3] = {rnd(50, i), rnd(51, i), rnd(52, i)};
+      hush_light_sample a;
+      /* under the lamp, and in the gap above it */
+      if (hush__lights_sample(&r.lights, hush_v3(0.1f, 1.0f, 0.05f), u, &a) && a.pdf > 0.0f) {
+        below++;
+        wrong += !(a.wi.y > 0.0f) || !(a.radiance[0] > 0.0f);
+      }
+      if (hush__lights_sample(&r.lights, hush_v3(0.1f, 1.99f, 0.05f), u, &a) && a.pdf > 0.0f) {
+        above++;
+        wrong += !(a.wi.y < 0.0f);
+      }
+    }
+    CHECK_MSG(below == 4000 && wrong == 0, "two-sided %d: %d of 4000 samples below, %d wrong",
+              two, below, wrong);
+    CHECK_MSG(two ? above == 4000 : above == 0, "two-sided %d: %d samples from above the lamp", two,
+              above);
+
+    hush_integrator it;
+    hush__integrator_defaults(&it, &r.scene, &r.lights);
+    hush_rand rng;
+    hush__rand_init(&rng, HUSH_SAMPLER_RANDOM, 1, 0, 0, 0, 0, 1);
+    hush_path_result back, front;
+    hush__integrator_trace(&it, hush_v3(0.1f, 1.99f, 0.05f), hush_v3(0.0f, -1.0f, 0.0f), &rng, 0,
+                           0, NULL, &back);
+    hush__integrator_trace(&it, hush_v3(0.1f, 1.5f, 0.05f), hush_v3(0.0f, 1.0f, 0.0f), &rng, 0, 0,
+                           NULL, &front);
+    CHECK_MSG(front.emission[0] == 17.0f, "the lamp's front: emission %g", front.emission[0]);
+    CHECK_MSG(back.emission[0] == (two ? 17.0f : 0.0f), "two-sided %d: the lamp's back emits %g",
+              two, back.emission[0]);
+  }
+  rig_close(&r);
+}
+
 /* ---- emission layer ----------------------------------------------------------------------- */
 
 /* The emission layer holds what the camera ray sees directly at its first
@@ -1061,6 +1111,7 @@ int main(void) {
   test_reuse_frame();
   test_cornell_gbuffer();
   test_emission_layer();
+  test_one_sided_emitters();
   test_bsdf_lobes();
   test_lobe_layers();
   return check_summary();

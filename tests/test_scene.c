@@ -411,6 +411,7 @@ static void test_load_small(void) {
   CHECK(s.skipped_triangles == 1);
   CHECK(s.width == 64 && s.height == 32);
   CHECK(s.camera_fov_axis_x == 0);
+  CHECK(s.two_sided_emitters == 0); /* the default: area lights emit from their front */
   CHECK(strcmp(s.name, "quad") == 0);
   CHECK(s.env.type == HUSH_ENV_CONSTANT && s.sphere_count == 1);
   CHECK(s.texture_count == 2); /* the same PNG as colour and as alpha */
@@ -517,6 +518,19 @@ static void test_load_errors(void) {
                NULL, HUSH_ERROR_CORRUPT, "emissive_triangles", "says 2");
   expect_error("fov", edited(json, "\"fov_deg\": 60", "\"fov_deg\": \"a\""), NULL,
                HUSH_ERROR_CORRUPT, "camera.fov_deg", "number");
+  expect_error("emitters", edited(json, "\"two_sided\": true", "\"two_sided_emitters\": 1"), NULL,
+               HUSH_ERROR_CORRUPT, "two_sided_emitters", "true or false");
+  {
+    char dir[1100];
+    snprintf(dir, sizeof dir, "%s/emitters_on", TMP_DIR);
+    make_quad_scene(dir);
+    char file[1200];
+    snprintf(file, sizeof file, "%s/scene.json", dir);
+    write_file(file, edited(json, "\"two_sided\": true", "\"two_sided_emitters\": true"));
+    REQUIRE(hush__scene_load(dev, dir, &s) == HUSH_OK);
+    CHECK(s.two_sided_emitters == 1 && s.two_sided == 0);
+    hush__scene_free(&s);
+  }
   /* a texture that is not what its name says */
   char path[1100];
   snprintf(path, sizeof path, "%s/corrupt", TMP_DIR);

@@ -370,7 +370,9 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   }
   const hush_surface *sp = st->sp;
   const hush_material *m = &sc->materials[sp->material];
-  if (max3(m->emission) > 0.0f) {
+  /* a one-sided emitter seen from behind emits nothing (as its light
+   * samples: lights.c), but still reflects */
+  if (max3(m->emission) > 0.0f && (!sp->back_face || sc->two_sided_emitters)) {
     float w = 1.0f;
     if (!st->prev_delta) {
       const float cos_l = fabsf(hush_v3_dot(d, sp->ng));

@@ -536,6 +536,26 @@ static hush_status env_init(hush_device device, hush_lights *L, const hush_scene
 
 /* ---- set-up ------------------------------------------------------------------------------- */
 
+/* +1 when the triangle's winding normal is its front, -1 when its vertex
+ * normals point the other way: the rule by which scene.c sets back_face,
+ * so a light sample and a ray that meets the triangle agree on which side
+ * emits (rigid motion keeps the sign). */
+static float front_sign(const hush_scene *s, uint32_t tri) {
+  if (!s->normals) return 1.0f;
+  const uint32_t *ix = s->indices + 3 * (size_t)tri;
+  const float *a = s->positions + 3 * (size_t)ix[0];
+  const float *b = s->positions + 3 * (size_t)ix[1];
+  const float *c = s->positions + 3 * (size_t)ix[2];
+  const hush_vec3 ng = hush_v3_cross(hush_v3(b[0] - a[0], b[1] - a[1], b[2] - a[2]),
+                                     hush_v3(c[0] - a[0], c[1] - a[1], c[2] - a[2]));
+  hush_vec3 n = hush_v3(0.0f, 0.0f, 0.0f);
+  for (int k = 0; k < 3; k++) {
+    const float *v = s->normals + 3 * (size_t)ix[k];
+    n = hush_v3_add(n, hush_v3(v[0], v[1], v[2]));
+  }
+  return hush_v3_dot(ng, n) < 0.0f ? -1.0f : 1.0f;
+}
+
 static void triangle_corners(const hush_scene *s, uint32_t tri, uint32_t frame, hush_vec3 p[3]) {
   p[0] = hush__scene_point(s, tri, 0.0f, 0.0f, frame);
   p[1] = hush__scene_point(s, tri, 1.0f, 0.0f, frame);
@@ -560,8 +580,9 @@ static hush_status tris_init(hush_device device, hush_lights *L, const hush_scen
   L->tris = malloc(n * sizeof(uint32_t));
   L->tri_cdf = malloc((n + 1) * sizeof(float));
   L->tri_pmf = calloc(s->triangle_count, sizeof(float));
+  L->tri_front = malloc(n * sizeof(float));
   double *w = malloc(n * sizeof(double));
-  if (!L->tris || !L->tri_cdf || !L->tri_pmf || !w) {
+  if (!L->tris || !L->tri_cdf || !L->tri_pmf || !L->tri_front || !w) {
     free(w);
     return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for the light table");
   }
@@ -570,6 +591,7 @@ static hush_status tris_init(hush_device device, hush_lights *L, const hush_scen
     const float le = lum3(s->materials[s->triangle_material[t]].emission);
     if (!(le > 0.0f)) continue;
     L->tris[n] = t;
+    L->tri_front[n] = s->two_sided_emitters ? 0.0f : front_sign(s, t);
     /* rigid motion keeps areas: object space is good enough */
     w[n] = (double)hush__lights_triangle_area(s, t) * le;
     n++;
@@ -579,7 +601,7 @@ static hush_status tris_init(hush_device device, hush_lights *L, const hush_scen
     L->tri_pmf[L->tris[i]] = total > 0.0 ? (float)(w[i] / total) : 1.0f / (float)n;
   free(w);
   L->tri_count = n;
-  L->tri_power = (float)(total * L_PI * 2.0); /* both sides emit */
+  L->tri_power = (float)(total * L_PI * (s->two_sided_emitters ? 2.0 : 1.0));
   return HUSH_OK;
 }
 
@@ -616,6 +638,7 @@ void hush__lights_free(hush_lights *L) {
   free(L->tris);
   free(L->tri_cdf);
   free(L->tri_pmf);
+  free(L->tri_front);
   free(L->p_sphere);
   hush__envmap_free(&L->map);
   free(L->sky_table);
@@ -822,6 +845,8 @@ static int sample_triangle(const hush_lights *L, hush_vec3 p, float u0, float u1
   const float dist = hush_v3_length(to);
   if (!(dist > 0.0f)) return 0;
   s->wi = hush_v3_scale(to, 1.0f / dist);
+  /* p behind a one-sided light: no light (front 0: both sides emit) */
+  if (L->tri_front[i] * hush_v3_dot(s->wi, cr) > 0.0f) return 0;
   const float cos_l = fabsf(hush_v3_dot(s->wi, cr)) / (2.0f * area);
   s->pdf = hush__lights_triangle_pdf(L, tri, area, dist, cos_l);
   if (!(s->pdf > 0.0f)) return 0;

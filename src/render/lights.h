@@ -72,6 +72,8 @@ typedef struct hush_lights {
   float *tri_cdf;          /* tri_count + 1 */
   float *tri_pmf;          /* per GLOBAL triangle: probability within the group (0: not a light) */
   float tri_power;
+  float *tri_front;        /* tri_count (tris' order): +1 or -1, the sign that turns the
+                            * winding normal to the emitting side; 0: both sides emit */
   /* the environment (NONE, CONSTANT, MAP, SUNSKY) */
   hush_env_type env_type;
   float env_color[3];      /* CONSTANT */

@@ -160,6 +160,9 @@ typedef struct hush_scene {
   uint32_t sphere_count;
 
   int two_sided;                 /* manifest default for all materials */
+  int two_sided_emitters;        /* emissive triangles emit from both sides; else only from
+                                  * their front (the side of the stored normals, as
+                                  * hush_surface.back_face; Mitsuba's and PBRT's area lights) */
   hush_camera_pose camera;       /* the manifest's camera */
   int camera_fov_axis_x;
   uint32_t width, height;        /* the manifest's resolution */

@@ -928,6 +928,10 @@ static hush_status parse_manifest(loader *l, const cJSON *root) {
   const cJSON *two = cJSON_GetObjectItemCaseSensitive(root, "two_sided");
   if (two && !cJSON_IsBool(two)) return bad_field(c, "two_sided", "not true or false");
   s->two_sided = cJSON_IsTrue(two);
+  const cJSON *two_e = cJSON_GetObjectItemCaseSensitive(root, "two_sided_emitters");
+  if (two_e && !cJSON_IsBool(two_e))
+    return bad_field(c, "two_sided_emitters", "not true or false");
+  s->two_sided_emitters = cJSON_IsTrue(two_e);
 
   const cJSON *camera = cJSON_GetObjectItemCaseSensitive(root, "camera");
   if (!camera) return bad_field(c, "camera", "missing");
