@@ -44,7 +44,8 @@ part_speed() {
   {
     echo "## Speed: \`hush bench --size 1280x720 --frames $frames\` ($today)"
     echo
-    echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded."
+    echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded, on"
+    echo "$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -n 1) ($(nproc) cores; the project's VM, whose host CPU changes between sessions)."
     echo
     for t in 1 2; do
       echo "### $t thread(s)"

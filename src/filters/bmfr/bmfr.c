@@ -151,7 +151,7 @@ static const hush_param_info bmfr_params[P_COUNT] = {
      "with taa: weight of the current frame in the TAA blend", NULL},
     {"emission_bypass", HUSH_PARAM_BOOL, 1, 0, 1,
      "with 'emission' bound: fit color minus emission and add the emission back, so lights seen "
-     "directly never enter a block's fit (cornell-box relMSE 0.116 -> 0.022; docs/bmfr.md)",
+     "directly never enter a block's fit (cornell-box relMSE 0.084 -> 0.004; docs/bmfr.md)",
      NULL},
     {"temporal_gradients", HUSH_PARAM_BOOL, 0, 0, 1,
      "adaptive BMFR: A-SVGF's temporal gradients (image 'gradient', required when on) shorten "
