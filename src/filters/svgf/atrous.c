@@ -58,6 +58,9 @@ typedef struct level_ctx {
   int npairs;
 } level_ctx;
 
+/* Pixels per pass of the portable row loop (its stack buffers). */
+#define ROW_CHUNK 512
+
 /* Per row: the offsets of both taps of every pair from the pixel, in
  * floats (rows clamped at the frame's border; columns by the padding). The
  * guide and the signal share the stride (svgf.c pads them alike). */
@@ -150,57 +153,72 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
     fdy[k] = c->pairs[k].fdy;
     nlh[k] = c->pairs[k].nlh;
   }
+  /* The pixel loop has no branch (gcc vectorises no loop with one, which
+   * without AVX-512's masked stores left it scalar): the optional outputs
+   * go to chunk buffers copied out after it, the optional epsilon comes
+   * from a buffer of the constant. */
+  float eps_k[ROW_CHUNK], ok_b[ROW_CHUNK], var_b[ROW_CHUNK];
+  if (!eps)
+    for (int i = 0; i < ROW_CHUNK; i++) eps_k[i] = SVGF_EPS_L;
+  for (int x0 = 0; x0 < W; x0 += ROW_CHUNK) {
+    const int x1 = W - x0 > ROW_CHUNK ? x0 + ROW_CHUNK : W;
+    const float *restrict ep = eps ? eps + x0 : eps_k;
+    float *restrict okb = ok_b - x0, *restrict vb = var_b - x0;
 #pragma omp simd
-  for (int x = 0; x < W; x++) {
-    /* the luminance weight's scale: the 3x3 Gaussian of the variance */
-    const float hu = fmaf(0.5f, vu[x], 0.25f * (vu[x - 1] + vu[x + 1]));
-    const float hm = fmaf(0.5f, v[x], 0.25f * (v[x - 1] + v[x + 1]));
-    const float hd = fmaf(0.5f, vd[x], 0.25f * (vd[x - 1] + vd[x + 1]));
-    const float var3 = fmaf(0.5f, hm, 0.25f * (hu + hd));
-    const float dl = fmaf(sigma_l, svgf_sqrt_pos(var3), eps ? eps[x] : SVGF_EPS_L);
-    float inv_l = SVGF_LOG2E * svgf_rcp_pos(dl < 1e30f ? dl : 1e30f);
-    /* a pixel without data has no luminance to compare: weight 1 */
-    if (VALIDITY) inv_l *= ok[x];
-    /* the gradient within +-1e20 (NaN taken as 1e20): every denominator,
-     * at most 1e20 times the largest offset, is in svgf_rcp2_pos's range */
-    const float ax = sigma_z * gx[x], ay = sigma_z * gy[x];
-    const float cx = ax < 1e20f ? ax : 1e20f, cy = ay < 1e20f ? ay : 1e20f;
-    const float sgx = cx > -1e20f ? cx : -1e20f, sgy = cy > -1e20f ? cy : -1e20f;
-    const float zl = zon[x] * SVGF_LOG2E;
-    const float zp = z[x], lp = l[x];
-    const float n0p = nscale * n0[x], n1p = nscale * n1[x], n2p = nscale * n2[x];
-    /* the centre tap: every edge-stopping weight is 1 */
-    const float hp = VALIDITY ? h0 * ok[x] : h0;
-    float sw = hp, s0 = hp * c0[x], s1 = hp * c1[x], s2 = hp * c2[x], sv = hp * hp * v[x];
+    for (int x = x0; x < x1; x++) {
+      /* the luminance weight's scale: the 3x3 Gaussian of the variance */
+      const float hu = fmaf(0.5f, vu[x], 0.25f * (vu[x - 1] + vu[x + 1]));
+      const float hm = fmaf(0.5f, v[x], 0.25f * (v[x - 1] + v[x + 1]));
+      const float hd = fmaf(0.5f, vd[x], 0.25f * (vd[x - 1] + vd[x + 1]));
+      const float var3 = fmaf(0.5f, hm, 0.25f * (hu + hd));
+      const float dl = fmaf(sigma_l, svgf_sqrt_pos(var3), ep[x - x0]);
+      float inv_l = SVGF_LOG2E * svgf_rcp_pos(dl < 1e30f ? dl : 1e30f);
+      /* a pixel without data has no luminance to compare: weight 1 */
+      if (VALIDITY) inv_l *= ok[x];
+      /* the gradient within +-1e20 (NaN taken as 1e20): every denominator,
+       * at most 1e20 times the largest offset, is in svgf_rcp2_pos's range */
+      const float ax = sigma_z * gx[x], ay = sigma_z * gy[x];
+      const float cx = ax < 1e20f ? ax : 1e20f, cy = ay < 1e20f ? ay : 1e20f;
+      const float sgx = cx > -1e20f ? cx : -1e20f, sgy = cy > -1e20f ? cy : -1e20f;
+      const float zl = zon[x] * SVGF_LOG2E;
+      const float zp = z[x], lp = l[x];
+      const float n0p = nscale * n0[x], n1p = nscale * n1[x], n2p = nscale * n2[x];
+      /* the centre tap: every edge-stopping weight is 1 */
+      const float hp = VALIDITY ? h0 * ok[x] : h0;
+      float sw = hp, s0 = hp * c0[x], s1 = hp * c1[x], s2 = hp * c2[x], sv = hp * hp * v[x];
 #pragma GCC unroll 12
-    for (int k = 0; k < NPAIRS; k++) {
-      /* both taps of a pair see the same |grad z . (q - p)| */
-      const float rdd = zl * svgf_rcp2_pos(fabsf(fmaf(sgx, fdx[k], sgy * fdy[k])) + SVGF_EPS_Z);
-      const float t_bias = bias + nlh[k], t_floor = S_FLOOR + nlh[k];
-      TAP(off.a[k]);
-      TAP(off.b[k]);
+      for (int k = 0; k < NPAIRS; k++) {
+        /* both taps of a pair see the same |grad z . (q - p)| */
+        const float rdd = zl * svgf_rcp2_pos(fabsf(fmaf(sgx, fdx[k], sgy * fdy[k])) + SVGF_EPS_Z);
+        const float t_bias = bias + nlh[k], t_floor = S_FLOOR + nlh[k];
+        TAP(off.a[k]);
+        TAP(off.b[k]);
+      }
+      int some = 1;
+      if (VALIDITY) {
+        /* nothing valid in reach: stays a hole (0, not valid) */
+        some = sw > 0.0f;
+        okb[x] = hush__select_bits(some, 1.0f, 0.0f);
+        sw = hush__select_bits(some, sw, 1.0f);
+        sv = hush__select_bits(some, sv, 0.0f);
+      }
+      const float inv = 1.0f / sw;
+      const float r = s0 * inv, gr = s1 * inv, b = s2 * inv;
+      out_r[x] = r;
+      out_g[x] = gr;
+      out_b[x] = b;
+      vb[x] = sv * inv * inv;
     }
-    int some = 1;
-    if (VALIDITY) {
-      /* nothing valid in reach: stays a hole (0, not valid) */
-      some = sw > 0.0f;
-      if (out_ok) out_ok[x] = hush__select_bits(some, 1.0f, 0.0f);
-      sw = hush__select_bits(some, sw, 1.0f);
-      sv = hush__select_bits(some, sv, 0.0f);
-    }
-    const float inv = 1.0f / sw;
-    const float r = s0 * inv, gr = s1 * inv, b = s2 * inv;
-    out_r[x] = r;
-    out_g[x] = gr;
-    out_b[x] = b;
-    if (also_r) {
-      also_r[x] = r;
-      also_g[x] = gr;
-      also_b[x] = b;
-    }
-    if (out_v) out_v[x] = sv * inv * inv;
-    if (out_l) out_l[x] = hush_luminance(r, gr, b);
+    if (out_ok) memcpy(out_ok + x0, ok_b, (size_t)(x1 - x0) * sizeof *out_ok);
+    if (out_v) memcpy(out_v + x0, var_b, (size_t)(x1 - x0) * sizeof *out_v);
   }
+  if (also_r) {
+    memcpy(also_r, out_r, (size_t)W * sizeof *also_r);
+    memcpy(also_g, out_g, (size_t)W * sizeof *also_g);
+    memcpy(also_b, out_b, (size_t)W * sizeof *also_b);
+  }
+  if (out_l)
+    for (int x = 0; x < W; x++) out_l[x] = hush_luminance(out_r[x], out_g[x], out_b[x]);
   if (c->out->pad > 0)
     for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
       if (c->out->plane[ch]) svgf_pad_row(c->out->plane[ch] + o, W, c->out->pad);

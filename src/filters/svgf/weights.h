@@ -135,7 +135,7 @@ static inline svgf_exp2_poly svgf_exp2_poly_scaled(float h) {
  * bits (h 2^f is in [2^-9, 2], so the result stays normal). NaN is taken
  * as s_max. */
 static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf_exp2_poly *p) {
-  s = s < s_max ? s : s_max;       /* a min */
+  s = hush__select_bits(s < s_max, s, s_max); /* a min (NaN: s_max) */
   const float magic = 12582912.0f; /* 1.5 * 2^23 */
   const float big = magic - s;     /* rounds -s to an integer n */
   const float g = s + (big - magic);
@@ -168,13 +168,13 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
   float w;
   if (squarings == SVGF_NORMAL_EXP) {
     w = svgf_exp2_neg_h(fmaf(sigma_n_log2e, 1.0f - dot, s_zl), SVGF_S_MAX, p);
-    return w > p->floor ? w : 0.0f;
+    return hush__select_bits(w > p->floor, w, 0.0f);
   }
   if (squarings < 0) {
     w = svgf_exp2_neg_h(fmaf(-sigma_n_log2e, hush__ln_pos(dot), s_zl), SVGF_S_MAX, p);
-    return w > p->floor ? w : 0.0f;
+    return hush__select_bits(w > p->floor, w, 0.0f);
   }
-  float d = dot > dot_floor ? dot : dot_floor; /* a max */
+  float d = hush__select_bits(dot > dot_floor, dot, dot_floor); /* a max */
   /* spelled out: gcc does not vectorise a loop around an inner loop */
   if (squarings > 0) d *= d;
   if (squarings > 1) d *= d;
@@ -187,7 +187,7 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
   if (squarings > 8) d *= d;
   if (squarings > 9) d *= d;
   w = d * svgf_exp2_neg_h(s_zl, SVGF_S_MAX, p);
-  return w > p->floor ? w : 0.0f;
+  return hush__select_bits(w > p->floor, w, 0.0f);
 }
 
 /* How sigma_n is applied: squarings >= 0 when sigma_n = 2^squarings (then
