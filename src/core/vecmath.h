@@ -40,8 +40,9 @@ static inline float hush__floorf_vec(float s) {
   const int small = fabsf(s) < 8388608.0f; /* 2^23 */
   const float c = hush__select_bits(small, s, 0.0f);
   const float t = (float)(int32_t)c;
-  float f = t > c ? t - 1.0f : t;
-  f = f == 0.0f ? s * 0.0f : f; /* floorf(-0) = -0 */
+  /* selects, not ?: (gcc does not if-convert these in every loop) */
+  float f = hush__select_bits(t > c, t - 1.0f, t);
+  f = hush__select_bits(f == 0.0f, s * 0.0f, f); /* floorf(-0) = -0 */
   return hush__select_bits(small, f, s);
 }
 
