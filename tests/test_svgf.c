@@ -1083,6 +1083,63 @@ static hush_filter make_emission(hush_device dev, const char *cls, scene *s, flo
   return f;
 }
 
+/* A lamp's edge at 1 spp: the column just right of the lamp sees the lamp
+ * (its emission and its id) on even frames and the wall on odd ones, as a
+ * jittered sample on a pixel the lamp's edge crosses. The lamp and wall
+ * have ids: without the emission input the id test keeps their histories
+ * apart, so the edge keeps flipping between E and the wall; with it, the
+ * lamp's pixels match any id (hush__emission_wildcard_ids) and the edge's
+ * accumulated emission averages its coverage, about E / 2 in both phases,
+ * while the wall a pixel further on gets none. */
+static void test_emission_edge(hush_device dev, const char *cls) {
+  static scene s;
+  static float emission[N * 3], id[N];
+  const float wall = 0.05f;
+  const int edge = LAMP_X0 + 6;
+  for (int bound = 0; bound <= 1; bound++) {
+    lamp_scene(&s, emission, wall, 0);
+    hush_filter f = make_emission(dev, cls, &s, bound ? emission : NULL);
+    hush_image_view v = view_of(id, HUSH_FORMAT_FLOAT);
+    REQUIRE(hush_filter_set_image(f, "id", &v) == HUSH_OK);
+    REQUIRE(hush_filter_commit(f) == HUSH_OK);
+    float lo = INFINITY, hi = -INFINITY, beyond = 0.0f;
+    for (int k = 0; k < 16; k++) {
+      for (int i = 0; i < N; i++) {
+        const int x = i % W, y = i / W;
+        const int lit = in_lamp(i) || (k % 2 == 0 && x == edge && y >= LAMP_Y0 && y < LAMP_Y0 + 6);
+        id[i] = lit ? 1.0f : 2.0f;
+        for (int c = 0; c < 3; c++) {
+          emission[3 * i + c] = lit ? LAMP_E : 0.0f;
+          s.color[3 * i + c] = lit ? LAMP_E : wall;
+        }
+      }
+      run(f, (uint64_t)k);
+      if (k < 8) continue;
+      for (int y = LAMP_Y0; y < LAMP_Y0 + 6; y++) {
+        const float o = s.output[3 * (y * W + edge)];
+        lo = o < lo ? o : lo;
+        hi = o > hi ? o : hi;
+        const float b = s.output[3 * (y * W + edge + 2)];
+        beyond = b > beyond ? b : beyond;
+      }
+    }
+    printf("edge %s bound %d: %g .. %g beyond %g\n", cls, bound, (double)lo, (double)hi, (double)beyond);
+    if (bound) {
+      CHECK_MSG(lo > 0.3f * LAMP_E && hi < 0.7f * LAMP_E,
+                "%s: lamp edge not averaged over frames: %g .. %g (E %g)", cls, (double)lo,
+                (double)hi, (double)LAMP_E);
+      CHECK_MSG(beyond <= wall + 1e-4f, "%s: the lamp's emission reaches 2 pixels out: %g", cls,
+                (double)beyond);
+    } else {
+      /* without the emission input the lamp is colour like any other,
+       * and the ids keep the edge's two histories apart */
+      CHECK_MSG(hi > 0.9f * LAMP_E && lo < 0.1f * LAMP_E, "%s: edge without emission %g .. %g",
+                cls, (double)lo, (double)hi);
+    }
+    hush_filter_release(f);
+  }
+}
+
 /* With 'emission' bound, the lamp's output is its emission (plus at most
  * the wall's radiance the filter may spread onto it) and none of the
  * lamp's radiance reaches the wall; a lamp that also reflects the wall's
@@ -1185,6 +1242,8 @@ int main(void) {
   test_determinism("taa");
   test_emission(dev, "svgf");
   test_emission(dev, "accumulate");
+  test_emission_edge(dev, "svgf");
+  test_emission_edge(dev, "accumulate");
   hush_device_release(dev);
   return check_summary();
 }

@@ -6,6 +6,8 @@
 
 #include "temporal/accumulation.h"
 
+#include <math.h>
+
 void hush__emission_subtract(hush_planar *color, const hush_planar *emission, int threads) {
   const int H = (int)color->height;
   const size_t W = color->width;
@@ -35,6 +37,26 @@ void hush__emission_add(hush_planar *out, const hush_planar *emission, const hus
       const float *flt = filtered->plane[c] + (size_t)y * W;
       for (size_t x = 0; x < W; x++) o[x] = flt[x] + em[x];
     }
+}
+
+void hush__emission_wildcard_ids(hush_reprojector *rp, const hush_planar *emission, int threads) {
+  hush_gbuffer_store *g = hush__reprojector_next(rp);
+  if (!g->has_id) return;
+  float *id = g->id.plane[0];
+  const int H = (int)emission->height;
+  const size_t W = emission->width;
+  const float wild = NAN;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) {
+    const size_t o = (size_t)y * W;
+    const float *e0 = emission->plane[0] + o, *e1 = emission->plane[1] + o,
+                *e2 = emission->plane[2] + o;
+    float *row = id + o;
+    for (size_t x = 0; x < W; x++) {
+      const int lit = (e0[x] > 0.0f) | (e1[x] > 0.0f) | (e2[x] > 0.0f);
+      row[x] = lit ? wild : row[x];
+    }
+  }
 }
 
 void hush__emission_history_free(hush_emission_history *h) {

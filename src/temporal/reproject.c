@@ -382,7 +382,7 @@ typedef struct pixel_ref {
 static inline int same_surface_v(float zj, float ni0, float ni1, float ni2, float nj0, float nj1,
                                  float nj2, float idi, float idj, float cos_min, int use_id) {
   const float d = ni0 * nj0 + ni1 * nj1 + ni2 * nj2;
-  return (zj > 0.0f) & ((d < cos_min) == 0) & ((use_id == 0) | (idi == idj));
+  return (zj > 0.0f) & ((d < cos_min) == 0) & ((use_id == 0) | hush__id_match(idi, idj));
 }
 
 static inline int same_surface(const build_ctx *c, size_t i, size_t j) {
@@ -435,7 +435,7 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
     const float d = r->n[0] * p->normal[0][j] + r->n[1] * p->normal[1][j] + r->n[2] * p->normal[2][j];
     if (d < c->cos_min) return 0;
   }
-  if (c->use_id && p->id[j] != r->id) return 0;
+  if (c->use_id && !hush__id_match(p->id[j], r->id)) return 0;
   return 1;
 }
 
@@ -587,7 +587,7 @@ static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, int32_t j, float
   } else {
     surface_ok = surface & (dz <= r->tolz) & (d >= p->cos_min);
   }
-  const int id_ok = (use_id == 0) | (idt == r->id);
+  const int id_ok = (use_id == 0) | hush__id_match(idt, r->id);
   const int kind_ok = (r->bg & (surface == 0)) | ((r->bg == 0) & surface_ok); /* bg: bg taps */
   const int weight_ok = wt >= HUSH_REPROJECT_MIN_WEIGHT;
   /* without grad_test: whether the tap fails here but could pass the

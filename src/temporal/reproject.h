@@ -56,6 +56,12 @@
 
 /* One frame's geometry as planes (width * height floats each, not owned).
  * NULL members are absent. */
+/* Whether two ids match: equal, or either NaN. Imported ids are never NaN
+ * (image import rejects NaN); a filter marks pixels whose history may mix
+ * across ids with NaN (hush__emission_wildcard_ids: the pixels of a light
+ * seen directly, whose emission it accumulates apart). */
+static inline int hush__id_match(float a, float b) { return (a == b) | (a != a) | (b != b); }
+
 typedef struct hush_gbuffer {
   const float *depth;     /* linear view depth; <= 0 is background. Required. */
   const float *normal[3]; /* world-space unit normal. Required. */

@@ -201,6 +201,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
+  if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   hush__filter_timing_stage(f, "reproject");
 

@@ -624,6 +624,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
+  if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
   if (demod && !demod_fused) hush__demodulate(&st->color, &st->albedo, threads);

@@ -484,6 +484,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
+  if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
   if (split != st->split) {
     /* the first component's history was of the other signal */
