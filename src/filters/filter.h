@@ -64,7 +64,9 @@ extern const char *const hush__nonfinite_names[];
 #define HUSH_IMAGE_NORMAL_ENTRY \
   {"normal", HUSH_IMAGE_INPUT, 1, 3, "world-space shading normal"}
 #define HUSH_IMAGE_ID_ENTRY \
-  {"id", HUSH_IMAGE_INPUT, 0, 1, "mesh or material id: history only from the same id"}
+  {"id", HUSH_IMAGE_INPUT, 0, 1, \
+  "mesh or material id: history only from the same id (where the emission is bypassed, a " \
+  "pixel that sees a light matches any id, so light edges average over frames)"}
 #define HUSH_IMAGE_MOTION_ENTRY \
   {"motion", HUSH_IMAGE_INPUT, 0, 2, \
   "motion in pixels, previous minus current (required with HUSH_MOTION_VECTORS)"}
