@@ -163,7 +163,6 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
   for (int x0 = 0; x0 < W; x0 += ROW_CHUNK) {
     const int x1 = W - x0 > ROW_CHUNK ? x0 + ROW_CHUNK : W;
     const float *restrict ep = eps ? eps + x0 : eps_k;
-    float *restrict okb = ok_b - x0, *restrict vb = var_b - x0;
 #pragma omp simd
     for (int x = x0; x < x1; x++) {
       /* the luminance weight's scale: the 3x3 Gaussian of the variance */
@@ -198,7 +197,7 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
       if (VALIDITY) {
         /* nothing valid in reach: stays a hole (0, not valid) */
         some = sw > 0.0f;
-        okb[x] = hush__select_bits(some, 1.0f, 0.0f);
+        ok_b[x - x0] = hush__select_bits(some, 1.0f, 0.0f);
         sw = hush__select_bits(some, sw, 1.0f);
         sv = hush__select_bits(some, sv, 0.0f);
       }
@@ -207,7 +206,7 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
       out_r[x] = r;
       out_g[x] = gr;
       out_b[x] = b;
-      vb[x] = sv * inv * inv;
+      var_b[x - x0] = sv * inv * inv;
     }
     if (out_ok) memcpy(out_ok + x0, ok_b, (size_t)(x1 - x0) * sizeof *out_ok);
     if (out_v) memcpy(out_v + x0, var_b, (size_t)(x1 - x0) * sizeof *out_v);
