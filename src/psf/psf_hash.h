@@ -27,6 +27,7 @@
 
 #include "hush.h"
 #include "core/rng.h"
+#include "core/vecmath.h" /* hush__select_bits */
 
 #include <math.h>
 #include <stdint.h>
@@ -72,12 +73,6 @@ static inline uint32_t hush__psf_f_bits(float f) {
 /* x where keep is 1, +0 where it is 0. */
 static inline float hush__psf_keep(float x, int keep) {
   return hush__psf_bits_f(hush__psf_f_bits(x) & (0u - (uint32_t)keep));
-}
-
-/* a where pick is 1, b where it is 0 (exactly, by the bits). */
-static inline float hush__psf_select(float a, float b, int pick) {
-  const uint32_t m = 0u - (uint32_t)pick;
-  return hush__psf_bits_f((hush__psf_f_bits(a) & m) | (hush__psf_f_bits(b) & ~m));
 }
 
 /* floor(log2(d)) for d > 0 from the float's exponent bits, clamped to
@@ -175,7 +170,7 @@ static inline void hush__psf_keys_planar(const hush_psf_key_params *k, const hus
     const float len = hush__psf_sqrt(w0 * w0 + w1 * w1 + w2 * w2);
     const int level0 = hush__psf_level(D[j] + len);
     const uint32_t glossy = (G[j] & HUSH_PSF_GLOSSY) != 0u, gm = 0u - glossy;
-    const float unit = hush__psf_select(glossy_base, base, (int)glossy);
+    const float unit = hush__select_bits((int)glossy, glossy_base, base);
     const float cell0 = unit * hush__psf_exp2i(level0);
     /* tangent frame of n (Duff et al. 2017, branchless) */
     const float sign = copysignf(1.0f, n2);

@@ -536,6 +536,17 @@ static hush_status env_init(hush_device device, hush_lights *L, const hush_scene
 
 /* ---- set-up ------------------------------------------------------------------------------- */
 
+/* (b - a) x (c - a) of the triangle's object-space corners: twice its area
+ * along its winding normal. */
+static hush_vec3 object_cross(const hush_scene *s, uint32_t tri) {
+  const uint32_t *ix = s->indices + 3 * (size_t)tri;
+  const float *a = s->positions + 3 * (size_t)ix[0];
+  const float *b = s->positions + 3 * (size_t)ix[1];
+  const float *c = s->positions + 3 * (size_t)ix[2];
+  return hush_v3_cross(hush_v3(b[0] - a[0], b[1] - a[1], b[2] - a[2]),
+                       hush_v3(c[0] - a[0], c[1] - a[1], c[2] - a[2]));
+}
+
 /* +1 when the triangle's winding normal is its front, -1 when its vertex
  * normals point the other way: the rule by which scene.c sets back_face,
  * so a light sample and a ray that meets the triangle agree on which side
@@ -543,11 +554,7 @@ static hush_status env_init(hush_device device, hush_lights *L, const hush_scene
 static float front_sign(const hush_scene *s, uint32_t tri) {
   if (!s->normals) return 1.0f;
   const uint32_t *ix = s->indices + 3 * (size_t)tri;
-  const float *a = s->positions + 3 * (size_t)ix[0];
-  const float *b = s->positions + 3 * (size_t)ix[1];
-  const float *c = s->positions + 3 * (size_t)ix[2];
-  const hush_vec3 ng = hush_v3_cross(hush_v3(b[0] - a[0], b[1] - a[1], b[2] - a[2]),
-                                     hush_v3(c[0] - a[0], c[1] - a[1], c[2] - a[2]));
+  const hush_vec3 ng = object_cross(s, tri);
   hush_vec3 n = hush_v3(0.0f, 0.0f, 0.0f);
   for (int k = 0; k < 3; k++) {
     const float *v = s->normals + 3 * (size_t)ix[k];
@@ -563,13 +570,7 @@ static void triangle_corners(const hush_scene *s, uint32_t tri, uint32_t frame, 
 }
 
 float hush__lights_triangle_area(const hush_scene *s, uint32_t tri) {
-  const uint32_t *ix = s->indices + 3 * (size_t)tri;
-  const float *a = s->positions + 3 * (size_t)ix[0];
-  const float *b = s->positions + 3 * (size_t)ix[1];
-  const float *c = s->positions + 3 * (size_t)ix[2];
-  const hush_vec3 e1 = hush_v3(b[0] - a[0], b[1] - a[1], b[2] - a[2]);
-  const hush_vec3 e2 = hush_v3(c[0] - a[0], c[1] - a[1], c[2] - a[2]);
-  return 0.5f * hush_v3_length(hush_v3_cross(e1, e2));
+  return 0.5f * hush_v3_length(object_cross(s, tri));
 }
 
 static hush_status tris_init(hush_device device, hush_lights *L, const hush_scene *s) {
