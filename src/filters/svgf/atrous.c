@@ -6,6 +6,9 @@
 
 #include "core/hmath.h"
 
+#include <omp.h>
+#include <string.h>
+
 const svgf_kernel svgf_kernel_5x5 = {2, {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16}};
 const svgf_kernel svgf_kernel_3x3 = {1, {1.0f / 4, 1.0f / 2, 1.0f / 4, 0.0f, 0.0f}};
 
@@ -78,6 +81,15 @@ static void offsets_of(const level_ctx *c, int npairs, int y, row_offsets *o) {
   }
 }
 
+/* The pads of the written part [xa, xb) of output row o (a float offset):
+ * the left one from the part holding pixel 0, the right one from the part
+ * holding pixel W-1 (the wavefront splits rows between threads). */
+static void pad_written(const svgf_level_out *out, size_t o, int W, int xa, int xb) {
+  if (out->pad <= 0) return;
+  for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
+    if (out->plane[ch]) svgf_pad_row_sides(out->plane[ch] + o, W, out->pad, xa == 0, xb == W);
+}
+
 /*
  * One tap: its exponent s = (|dz| rdd + |dl| inv_l) + -log2 h (+ the normal
  * term with NORMAL_EXP), then the weight. NORMAL_EXP: w_n =
@@ -113,9 +125,9 @@ static void offsets_of(const level_ctx *c, int npairs, int y, row_offsets *o) {
  * NORMAL_EXP, SQUARINGS and VALIDITY are literals at every call, so the pair
  * loop unrolls into straight-line code that the pixel loop vectorises.
  */
-static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NPAIRS,
-                                         const int NORMAL_EXP, const int SQUARINGS,
-                                         const int VALIDITY) {
+static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, int xa, int xb,
+                                         const int NPAIRS, const int NORMAL_EXP,
+                                         const int SQUARINGS, const int VALIDITY) {
   const svgf_guide *g = c->g;
   const svgf_padded *in = c->in;
   const int W = g->width, H = g->height;
@@ -160,8 +172,8 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
   float eps_k[ROW_CHUNK], ok_b[ROW_CHUNK], var_b[ROW_CHUNK];
   if (!eps)
     for (int i = 0; i < ROW_CHUNK; i++) eps_k[i] = SVGF_EPS_L;
-  for (int x0 = 0; x0 < W; x0 += ROW_CHUNK) {
-    const int x1 = W - x0 > ROW_CHUNK ? x0 + ROW_CHUNK : W;
+  for (int x0 = xa; x0 < xb; x0 += ROW_CHUNK) {
+    const int x1 = xb - x0 > ROW_CHUNK ? x0 + ROW_CHUNK : xb;
     const float *restrict ep = eps ? eps + x0 : eps_k;
 #pragma omp simd
     for (int x = x0; x < x1; x++) {
@@ -211,16 +223,15 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, const int NP
     if (out_ok) memcpy(out_ok + x0, ok_b, (size_t)(x1 - x0) * sizeof *out_ok);
     if (out_v) memcpy(out_v + x0, var_b, (size_t)(x1 - x0) * sizeof *out_v);
   }
+  const size_t n = (size_t)(xb - xa);
   if (also_r) {
-    memcpy(also_r, out_r, (size_t)W * sizeof *also_r);
-    memcpy(also_g, out_g, (size_t)W * sizeof *also_g);
-    memcpy(also_b, out_b, (size_t)W * sizeof *also_b);
+    memcpy(also_r + xa, out_r + xa, n * sizeof *also_r);
+    memcpy(also_g + xa, out_g + xa, n * sizeof *also_g);
+    memcpy(also_b + xa, out_b + xa, n * sizeof *also_b);
   }
   if (out_l)
-    for (int x = 0; x < W; x++) out_l[x] = hush_luminance(out_r[x], out_g[x], out_b[x]);
-  if (c->out->pad > 0)
-    for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
-      if (c->out->plane[ch]) svgf_pad_row(c->out->plane[ch] + o, W, c->out->pad);
+    for (int x = xa; x < xb; x++) out_l[x] = hush_luminance(out_r[x], out_g[x], out_b[x]);
+  pad_written(c->out, o, W, xa, xb);
 }
 
 #if defined(__AVX512F__) && defined(__x86_64__)
@@ -435,8 +446,8 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
   if (TWO) avx_finish(&p1, x + 16, m, out, also, VALIDITY, WITH_VAR);
 }
 
-static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const int VALIDITY,
-                                             const int WITH_VAR) {
+static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, int xb,
+                                             const int VALIDITY, const int WITH_VAR) {
   const svgf_guide *g = c->g;
   const svgf_padded *in = c->in;
   const int W = g->width, H = g->height;
@@ -475,89 +486,154 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, const in
     out[ch] = c->out->plane[ch] ? c->out->plane[ch] + o : NULL;
   float *also[3];
   for (int ch = 0; ch < 3; ch++) also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
-  int x = 0;
-  for (; x + 32 <= W; x += 32)
+  int x = xa;
+  for (; x + 32 <= xb; x += 32)
     avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 32, out, also, 1, 1, VALIDITY,
                 WITH_VAR);
-  for (; x + 16 <= W; x += 16)
+  for (; x + 16 <= xb; x += 16)
     avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, also, 0, 1, VALIDITY,
                 WITH_VAR);
-  if (x < W)
-    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, W - x, out, also, 0, 0,
+  if (x < xb)
+    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, xb - x, out, also, 0, 0,
                 VALIDITY, WITH_VAR);
-  if (c->out->pad > 0)
-    for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
-      if (out[ch]) svgf_pad_row(out[ch], W, c->out->pad);
+  pad_written(c->out, o, W, xa, xb);
 }
 
 /* the variance is carried only where the level writes it (not the last) */
-#define AVX_ROWS(NAME, VALIDITY, WITH_VAR)                                                   \
-  static void NAME(const level_ctx *c, int threads) {                                        \
-    _Pragma("omp parallel for schedule(static) num_threads(threads)")                        \
-    for (int y = 0; y < c->g->height; y++) avx_level_row(c, y, VALIDITY, WITH_VAR);          \
+#define AVX_ROW(NAME, VALIDITY, WITH_VAR)                                                    \
+  static void NAME(const level_ctx *c, int y, int xa, int xb) {                              \
+    avx_level_row(c, y, xa, xb, VALIDITY, WITH_VAR);                                         \
   }
-AVX_ROWS(avx_rows, 0, 1)
-AVX_ROWS(avx_rows_valid, 1, 1)
-AVX_ROWS(avx_rows_novar, 0, 0)
-AVX_ROWS(avx_rows_valid_novar, 1, 0)
+AVX_ROW(avx_row_plain, 0, 1)
+AVX_ROW(avx_row_valid, 1, 1)
+AVX_ROW(avx_row_novar, 0, 0)
+AVX_ROW(avx_row_valid_novar, 1, 0)
 #define HAVE_AVX_LEVEL 1
 #else
 #define HAVE_AVX_LEVEL 0
 #endif
 
-#define LEVEL_ROWS(NAME, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY)                            \
-  static void NAME(const level_ctx *c, int threads) {                                         \
-    _Pragma("omp parallel for schedule(static) num_threads(threads)")                         \
-    for (int y = 0; y < c->g->height; y++)                                                     \
-      level_row(c, y, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY);                               \
+#define LEVEL_ROW(NAME, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY)                             \
+  static void NAME(const level_ctx *c, int y, int xa, int xb) {                               \
+    level_row(c, y, xa, xb, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY);                         \
   }
 /* 5x5 (12 pairs) and 3x3 (4 pairs); the normal weight as exp (default),
  * as the exact power 128 by squarings, or any sigma_n through the log */
-LEVEL_ROWS(rows5_exp, 12, 1, 0, 0)
-LEVEL_ROWS(rows5_exp_valid, 12, 1, 0, 1)
-LEVEL_ROWS(rows5_pow128, 12, 0, 7, 0)
-LEVEL_ROWS(rows5_pow128_valid, 12, 0, 7, 1)
-LEVEL_ROWS(rows5_any, 12, 0, -1, 0)
-LEVEL_ROWS(rows5_any_valid, 12, 0, -1, 1)
-LEVEL_ROWS(rows3_exp, 4, 1, 0, 0)
-LEVEL_ROWS(rows3_exp_valid, 4, 1, 0, 1)
-LEVEL_ROWS(rows3_pow128, 4, 0, 7, 0)
-LEVEL_ROWS(rows3_pow128_valid, 4, 0, 7, 1)
-LEVEL_ROWS(rows3_any, 4, 0, -1, 0)
-LEVEL_ROWS(rows3_any_valid, 4, 0, -1, 1)
+LEVEL_ROW(row5_exp, 12, 1, 0, 0)
+LEVEL_ROW(row5_exp_valid, 12, 1, 0, 1)
+LEVEL_ROW(row5_pow128, 12, 0, 7, 0)
+LEVEL_ROW(row5_pow128_valid, 12, 0, 7, 1)
+LEVEL_ROW(row5_any, 12, 0, -1, 0)
+LEVEL_ROW(row5_any_valid, 12, 0, -1, 1)
+LEVEL_ROW(row3_exp, 4, 1, 0, 0)
+LEVEL_ROW(row3_exp_valid, 4, 1, 0, 1)
+LEVEL_ROW(row3_pow128, 4, 0, 7, 0)
+LEVEL_ROW(row3_pow128_valid, 4, 0, 7, 1)
+LEVEL_ROW(row3_any, 4, 0, -1, 0)
+LEVEL_ROW(row3_any_valid, 4, 0, -1, 1)
+
+/* The first column of part `part` out of `parts` of a row of W pixels,
+ * on a 32-pixel boundary (the AVX-512 loop's pairs of vectors). */
+static int part_edge(int W, int part, int parts) {
+  const long long x = ((long long)W * part / parts + 31) / 32 * 32;
+  return x < W ? (int)x : W;
+}
+
+/* Pixels [xa, xb) of row y of a level. */
+typedef void (*row_fn)(const level_ctx *c, int y, int xa, int xb);
+
+/* c <- what level lp reads and writes; returns its row function. */
+static row_fn level_init(level_ctx *c, const svgf_guide *g, const svgf_level_params *lp,
+                         const svgf_padded *in, const svgf_level_out *out) {
+  c->g = g;
+  c->in = in;
+  c->out = out;
+  c->sigma_l = lp->sigma_l;
+  c->eps_l = lp->eps_l;
+  const float hc = lp->kernel->h[lp->kernel->radius];
+  c->h0 = hc * hc;
+  const int npairs = tap_pairs(lp->kernel, lp->step, c->pairs);
+  c->npairs = npairs;
+  const int exp_form = lp->normal_exp;
+  c->bias = exp_form ? g->np.sigma_n_log2e : 0.0f;
+  c->nscale = exp_form ? g->np.sigma_n_log2e : 1.0f;
+  const int pow128 = g->np.squarings == 7, v = lp->validity;
+#if HAVE_AVX_LEVEL
+  if (exp_form && !lp->portable) {
+    if (out->plane[SVGF_VAR]) return v ? avx_row_valid : avx_row_plain;
+    return v ? avx_row_valid_novar : avx_row_novar;
+  }
+#endif
+  if (npairs == 12) {
+    if (exp_form) return v ? row5_exp_valid : row5_exp;
+    if (pow128) return v ? row5_pow128_valid : row5_pow128;
+    return v ? row5_any_valid : row5_any;
+  }
+  if (exp_form) return v ? row3_exp_valid : row3_exp;
+  if (pow128) return v ? row3_pow128_valid : row3_pow128;
+  return v ? row3_any_valid : row3_any;
+}
 
 void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,
                        const svgf_level_out *out, int threads) {
   level_ctx c;
-  c.g = g;
-  c.in = in;
-  c.out = out;
-  c.sigma_l = lp->sigma_l;
-  c.eps_l = lp->eps_l;
-  const float hc = lp->kernel->h[lp->kernel->radius];
-  c.h0 = hc * hc;
-  const int npairs = tap_pairs(lp->kernel, lp->step, c.pairs);
-  c.npairs = npairs;
-  const int exp_form = lp->normal_exp;
-  c.bias = exp_form ? g->np.sigma_n_log2e : 0.0f;
-  c.nscale = exp_form ? g->np.sigma_n_log2e : 1.0f;
-  const int pow128 = g->np.squarings == 7, v = lp->validity;
-  if (HAVE_AVX_LEVEL && exp_form && !lp->portable) {
-#if HAVE_AVX_LEVEL
-    if (out->plane[SVGF_VAR])
-      (v ? avx_rows_valid : avx_rows)(&c, threads);
-    else
-      (v ? avx_rows_valid_novar : avx_rows_novar)(&c, threads);
-#endif
+  const row_fn row = level_init(&c, g, lp, in, out);
+  const int W = g->width, H = g->height;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) row(&c, y, 0, W);
+}
+
+/*
+ * The wavefront (atrous.h). Level k runs row y at time y + lag[k]; lag[k]
+ * = lag[k-1] + reach + 1 with reach = radius * max(step k, step k-1), so
+ * that at that time level k-1 has written every row level k reads (y +-
+ * radius * step k, and the variance's y +- 1) and has read for the last
+ * time the rows of its input that level k overwrites (level k writes the
+ * buffer level k-2 wrote). The rows run at one time are of different
+ * levels and touch disjoint rows, so they run together; each is split into
+ * one column part per thread, thread i always taking part i (it keeps its
+ * part's rows in its own L2). One barrier per time.
+ */
+void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
+                        const svgf_padded *const *in, const svgf_level_out *const *out, int n,
+                        int threads) {
+  for (; n > SVGF_WAVEFRONT_LEVELS; n -= SVGF_WAVEFRONT_LEVELS) {
+    svgf_atrous_levels(g, lp, in, out, SVGF_WAVEFRONT_LEVELS, threads);
+    lp += SVGF_WAVEFRONT_LEVELS;
+    in += SVGF_WAVEFRONT_LEVELS;
+    out += SVGF_WAVEFRONT_LEVELS;
+  }
+  if (n <= 0) return;
+  if ((long long)g->width * g->height < SVGF_WAVEFRONT_MIN_PIXELS) {
+    for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], out[k], threads);
     return;
   }
-  if (npairs == 12) {
-    if (exp_form) (v ? rows5_exp_valid : rows5_exp)(&c, threads);
-    else if (pow128) (v ? rows5_pow128_valid : rows5_pow128)(&c, threads);
-    else (v ? rows5_any_valid : rows5_any)(&c, threads);
-  } else {
-    if (exp_form) (v ? rows3_exp_valid : rows3_exp)(&c, threads);
-    else if (pow128) (v ? rows3_pow128_valid : rows3_pow128)(&c, threads);
-    else (v ? rows3_any_valid : rows3_any)(&c, threads);
+  level_ctx c[SVGF_WAVEFRONT_LEVELS];
+  row_fn row[SVGF_WAVEFRONT_LEVELS];
+  int lag[SVGF_WAVEFRONT_LEVELS];
+  for (int k = 0; k < n; k++) {
+    row[k] = level_init(&c[k], g, &lp[k], in[k], out[k]);
+    if (k == 0) {
+      lag[k] = 0;
+      continue;
+    }
+    const int step = lp[k].step > lp[k - 1].step ? lp[k].step : lp[k - 1].step;
+    const int radius = lp[k].kernel->radius > lp[k - 1].kernel->radius ? lp[k].kernel->radius
+                                                                        : lp[k - 1].kernel->radius;
+    lag[k] = lag[k - 1] + radius * step + 1;
+  }
+  const int W = g->width, H = g->height, times = H + lag[n - 1];
+#pragma omp parallel num_threads(threads)
+  {
+    const int parts = omp_get_num_threads();
+    for (int t = 0; t < times; t++) {
+#pragma omp for schedule(static, 1)
+      for (int u = 0; u < n * parts; u++) {
+        const int k = u / parts, part = u % parts, y = t - lag[k];
+        /* parts of whole 32-pixel pairs of vectors */
+        const int xa = part_edge(W, part, parts), xb = part_edge(W, part + 1, parts);
+        if (y >= 0 && y < H && xa < xb) row[k](&c[k], y, xa, xb);
+      }
+    }
   }
 }

@@ -71,4 +71,28 @@ typedef struct svgf_level_params {
 void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const svgf_padded *in,
                        const svgf_level_out *out, int threads);
 
+/* Levels run together in one wavefront (more are run in groups). */
+#define SVGF_WAVEFRONT_LEVELS 8
+/* Smaller frames run one level at a time: their planes stay in cache
+ * anyway, and the wavefront's barrier per row and its interleaving of
+ * levels cost more than they save (docs/svgf-speed.md, eighth round:
+ * slower at 320x180 and 480x270, faster from 640x360 on). */
+#define SVGF_WAVEFRONT_MIN_PIXELS 200000
+
+/*
+ * n levels in a row, level k from in[k] to out[k] with lp[k]: the same
+ * outputs as svgf_atrous_level on each in turn, but in one pass down the
+ * rows (a wavefront), each level a few rows behind the one before, so that
+ * the rows a level reads were written moments ago and are still in cache
+ * (one level at a time streams every plane of the frame through memory
+ * per level). in[k] must be out[k-1]'s planes for k > 0, and out[k] may
+ * be in[k-1]'s planes (the ping-pong of svgf.c): the lags keep every read
+ * of a row before its overwrite. No output may be read by anything else
+ * during the call (svgf.c copies the first level into the history itself
+ * only where nothing overwrites it).
+ */
+void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
+                        const svgf_padded *const *in, const svgf_level_out *const *out, int n,
+                        int threads);
+
 #endif

@@ -36,13 +36,15 @@ hush_status svgf_padded_ensure(hush_device device, svgf_padded *p, int channels,
   return HUSH_OK;
 }
 
-void svgf_pad_row(float *row, int width, int pad) {
+void svgf_pad_row_sides(float *row, int width, int pad, int left, int right) {
   const float l = row[0], r = row[width - 1];
-  for (int i = 1; i <= pad; i++) {
-    row[-i] = l;
-    row[width - 1 + i] = r;
-  }
+  if (left)
+    for (int i = 1; i <= pad; i++) row[-i] = l;
+  if (right)
+    for (int i = 1; i <= pad; i++) row[width - 1 + i] = r;
 }
+
+void svgf_pad_row(float *row, int width, int pad) { svgf_pad_row_sides(row, width, pad, 1, 1); }
 
 void svgf_padded_import(svgf_padded *p, int c, const float *src, int threads) {
   const int W = p->width, H = p->height, pad = p->pad;

@@ -40,6 +40,9 @@ static inline float *svgf_padded_row(const svgf_padded *p, int c, int y) {
 /* Replicates pixel 0 and pixel width-1 of row `row` (pointer to its pixel 0)
  * into the pad on each side. */
 void svgf_pad_row(float *row, int width, int pad);
+/* The same for one side or both (left: from pixel 0, right: from pixel
+ * width-1), for a row written in parts by several threads. */
+void svgf_pad_row_sides(float *row, int width, int pad, int left, int right);
 
 /* Copies an unpadded plane (width floats a row) into channel c, pads filled. */
 void svgf_padded_import(svgf_padded *p, int c, const float *src, int threads);

@@ -348,20 +348,32 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
     copy_color(&accumulated, &c->result, threads);
   }
+  /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
+   * §4.1.4.6: the first level run): less noise is fed back, at the cost
+   * of a little extra blur over time. With holes the first level's copy
+   * into it is a pass of its own after that level (copy_color_where), so
+   * the level runs alone; the others run as one wavefront. */
+  const int alone = feedback && fc->holes && fc->iterations > 0 ? 1 : 0;
+  svgf_level_params lps[SVGF_MAX_ITERATIONS];
+  svgf_level_out outs[SVGF_MAX_ITERATIONS];
+  const svgf_padded *ins[SVGF_MAX_ITERATIONS];
+  const svgf_level_out *outp[SVGF_MAX_ITERATIONS];
   for (int i = 0; i < fc->iterations; i++) {
-    svgf_level_out out =
-        i == fc->iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
+    outs[i] = i == fc->iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
     if (i == 0 && feedback_direct)
-      for (int k = 0; k < 3; k++) out.also[k] = hush__accum_color(&c->acc)->plane[k];
-    lp.step = level_step(fc->order, i, fc->iterations);
-    svgf_atrous_level(fc->gd, &lp, &st->signal[cur], &out, threads);
+      for (int k = 0; k < 3; k++) outs[i].also[k] = hush__accum_color(&c->acc)->plane[k];
+    lps[i] = lp;
+    lps[i].step = level_step(fc->order, i, fc->iterations);
+    ins[i] = &st->signal[cur];
+    outp[i] = &outs[i];
     cur = 1 - cur;
-    /* the history keeps some spatial filtering (Schied 2017 §4.4; Dundr
-     * §4.1.4.6: the first level run): less noise is fed back, at the cost
-     * of a little extra blur over time */
-    if (i == 0 && feedback && fc->holes)
-      copy_color_where(&out, hush__accum_color(&c->acc), age, threads);
   }
+  if (alone) {
+    svgf_atrous_level(fc->gd, &lps[0], ins[0], outp[0], threads);
+    copy_color_where(outp[0], hush__accum_color(&c->acc), age, threads);
+  }
+  svgf_atrous_levels(fc->gd, lps + alone, ins + alone, outp + alone, fc->iterations - alone,
+                     threads);
   hush__filter_timing_stage(f, "atrous");
 }
 

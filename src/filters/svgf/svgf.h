@@ -48,6 +48,9 @@ extern const char *const svgf_kernel_names[];
 extern const char *const svgf_order_names[];
 extern const char *const svgf_normal_weight_names[];
 
+/* the most a-trous levels (the "iterations" parameter's bound) */
+#define SVGF_MAX_ITERATIONS 10
+
 /* The parameter rows of "svgf", in P_ order. */
 #define SVGF_PARAM_ROWS \
     HUSH_PARAM_NONFINITE_ENTRY, \
@@ -63,7 +66,7 @@ extern const char *const svgf_normal_weight_names[];
     {"fallback_3x3", HUSH_PARAM_BOOL, 1, 0, 1, \
      "search the 3x3 neighbourhood when no tap of the bilinear footprint is consistent", NULL}, \
     HUSH_PARAM_DEMODULATE_ENTRY, \
-    {"iterations", HUSH_PARAM_INT, 5, 0, 10, \
+    {"iterations", HUSH_PARAM_INT, 5, 0, SVGF_MAX_ITERATIONS, \
      "a-trous levels, tap steps 1, 2, ..., 2^(iterations-1) (0: accumulation only); the thesis " \
      "uses 6 with the 3x3 kernel", \
      NULL}, \
