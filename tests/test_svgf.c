@@ -1085,113 +1085,148 @@ static hush_filter make_emission(hush_device dev, const char *cls, scene *s, flo
 
 
 /*
- * The wavefront (svgf_atrous_levels) gives the bits of the levels run one
- * at a time, through the same ping-pong buffers as svgf.c (level k writes
- * what level k-2 read from): a lag too short lets a level read a row the
- * level before has not written yet, or overwrite one it still reads, and
- * the bits differ. Every tap order, both kernels, with and without
- * validity, both loops, 2 and 3 threads (rows split in parts); a frame
- * above SVGF_WAVEFRONT_MIN_PIXELS whose width is no multiple of 32.
+ * The wavefront gives the bits of the levels run one at a time, through the
+ * same ping-pong buffers as svgf.c (level k writes what level k-2 read
+ * from): a lag too short lets a level read a row the level before has not
+ * written yet, or overwrite one it still reads, and the bits differ.
  */
 #define WFW 520
 #define WFH 400
-static void test_wavefront(hush_device dev) {
-  REQUIRE((long long)WFW * WFH >= SVGF_WAVEFRONT_MIN_PIXELS);
-  static svgf_padded zn, init, buf[2];
-  static float gx[WFW * WFH], gy[WFW * WFH], zon[WFW * WFH];
-  static float last_ref[3][WFW * WFH], last[3][WFW * WFH], also_ref[3][WFW * WFH],
-      also[3][WFW * WFH];
+static svgf_padded wf_zn, wf_init, wf_buf[2];
+static float wf_gx[WFW * WFH], wf_gy[WFW * WFH], wf_zon[WFW * WFH];
+static float wf_last[2][3][WFW * WFH], wf_also[2][3][WFW * WFH];
+
+/* A w x h frame (guide and first signal): two surfaces meeting at a
+ * slanted depth and normal edge, sky in a corner, noisy colour, 30 % of
+ * the pixels without data. */
+static svgf_guide wavefront_frame(hush_device dev, int w, int h) {
   const int pad = 2 << 5; /* 5x5 at step 32 (6 levels) */
-  REQUIRE(svgf_padded_ensure(dev, &zn, 4, WFW, WFH, pad) == HUSH_OK);
-  REQUIRE(svgf_padded_ensure(dev, &init, SVGF_SIGNAL_CHANNELS, WFW, WFH, pad) == HUSH_OK);
-  for (int b = 0; b < 2; b++)
-    REQUIRE(svgf_padded_ensure(dev, &buf[b], SVGF_SIGNAL_CHANNELS, WFW, WFH, pad) == HUSH_OK);
-  for (int y = 0; y < WFH; y++) {
-    for (int x = 0; x < WFW; x++) {
-      const size_t i = (size_t)y * zn.stride + x, pi = (size_t)y * WFW + x;
-      const int right = x > WFW / 3 + y / 4;
-      zn.plane[0][i] = (right ? 3.0f : 2.0f) + 0.01f * (float)y + 0.01f * rnd();
+  svgf_padded_free(&wf_zn);
+  svgf_padded_free(&wf_init);
+  REQUIRE(svgf_padded_ensure(dev, &wf_zn, 4, w, h, pad) == HUSH_OK);
+  REQUIRE(svgf_padded_ensure(dev, &wf_init, SVGF_SIGNAL_CHANNELS, w, h, pad) == HUSH_OK);
+  for (int b = 0; b < 2; b++) {
+    svgf_padded_free(&wf_buf[b]);
+    REQUIRE(svgf_padded_ensure(dev, &wf_buf[b], SVGF_SIGNAL_CHANNELS, w, h, pad) == HUSH_OK);
+  }
+  for (int y = 0; y < h; y++) {
+    for (int x = 0; x < w; x++) {
+      const size_t i = (size_t)y * wf_zn.stride + x, pi = (size_t)y * w + x;
+      const int right = x > w / 3 + y / 4;
+      wf_zn.plane[0][i] = (right ? 3.0f : 2.0f) + 0.01f * (float)y + 0.01f * rnd();
       float n[3] = {right ? 0.6f : 0.05f * rnd(), 0.05f * rnd(), right ? 0.8f : 1.0f};
       const float len = sqrtf(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
-      for (int c = 0; c < 3; c++) zn.plane[1 + c][i] = n[c] / len;
-      if (y > WFH - 30 && x < 100) /* sky */
-        for (int c = 0; c < 4; c++) zn.plane[c][i] = 0.0f;
-      const size_t si = (size_t)y * init.stride + x;
+      for (int c = 0; c < 3; c++) wf_zn.plane[1 + c][i] = n[c] / len;
+      if (y > h - h / 10 && x < w / 5) /* sky */
+        for (int c = 0; c < 4; c++) wf_zn.plane[c][i] = 0.0f;
+      const size_t si = (size_t)y * wf_init.stride + x;
       const float base = right ? 0.2f : 0.7f;
       for (int c = 0; c < 3; c++)
-        init.plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());
-      init.plane[SVGF_VAR][si] = 0.05f * rnd();
-      init.plane[SVGF_LUM][si] =
-          hush_luminance(init.plane[0][si], init.plane[1][si], init.plane[2][si]);
-      init.plane[SVGF_VALID][si] = rnd() < 0.3f ? 0.0f : 1.0f;
-      gx[pi] = 0.01f * (rnd() - 0.5f);
-      gy[pi] = 0.01f + 0.01f * rnd();
-      zon[pi] = 1.0f;
+        wf_init.plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());
+      wf_init.plane[SVGF_VAR][si] = 0.05f * rnd();
+      wf_init.plane[SVGF_LUM][si] =
+          hush_luminance(wf_init.plane[0][si], wf_init.plane[1][si], wf_init.plane[2][si]);
+      wf_init.plane[SVGF_VALID][si] = rnd() < 0.3f ? 0.0f : 1.0f;
+      wf_gx[pi] = 0.01f * (rnd() - 0.5f);
+      wf_gy[pi] = 0.01f + 0.01f * rnd();
+      wf_zon[pi] = 1.0f;
     }
-    for (int c = 0; c < 4; c++) svgf_pad_row(svgf_padded_row(&zn, c, y), WFW, zn.pad);
+    for (int c = 0; c < 4; c++) svgf_pad_row(svgf_padded_row(&wf_zn, c, y), w, wf_zn.pad);
     for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
-      svgf_pad_row(svgf_padded_row(&init, c, y), WFW, init.pad);
+      svgf_pad_row(svgf_padded_row(&wf_init, c, y), w, wf_init.pad);
   }
   svgf_guide g;
-  g.width = WFW;
-  g.height = WFH;
-  g.zn = &zn;
-  g.gx = gx;
-  g.gy = gy;
-  g.zon = zon;
+  g.width = w;
+  g.height = h;
+  g.zn = &wf_zn;
+  g.gx = wf_gx;
+  g.gy = wf_gy;
+  g.zon = wf_zon;
   g.sigma_z = 1.0f;
   g.np = svgf_normal_power_of(128.0f);
+  return g;
+}
+
+/* Levels of a tap order on the frame of wavefront_frame, the last one into
+ * wf_last[slot] (unpadded, as svgf.c's result) and the first one's colour
+ * also into wf_also[slot]. how: 0 one level at a time, 1
+ * svgf_atrous_wavefront, 2 svgf_atrous_levels. */
+static void wavefront_run(const svgf_guide *g, int order, int valid, int portable, int how,
+                          int threads, int slot) {
   /* steps per level: increasing, decreasing, 0-then-decreasing (5x5), and
    * the thesis's 6 levels of 3x3 */
   static const int steps[4][6] = {
       {1, 2, 4, 8, 16}, {16, 8, 4, 2, 1}, {1, 16, 8, 4, 2}, {1, 2, 4, 8, 16, 32}};
-  static const int levels[4] = {5, 5, 5, 6};
+  const int n = order == 3 ? 6 : 5, w = g->width, h = g->height;
+  for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
+    memcpy(wf_buf[0].mem[c], wf_init.mem[c], wf_buf[0].stride * (size_t)h * sizeof(float));
+  svgf_level_params lp[6];
+  svgf_level_out out[6];
+  const svgf_padded *in[6];
+  const svgf_level_out *outp[6];
+  for (int k = 0; k < n; k++) {
+    lp[k].kernel = order == 3 ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
+    lp[k].step = steps[order][k];
+    lp[k].sigma_l = 4.0f;
+    lp[k].eps_l = NULL;
+    lp[k].validity = valid;
+    lp[k].normal_exp = 1;
+    lp[k].portable = portable;
+    in[k] = &wf_buf[k & 1];
+    out[k] = svgf_level_out_padded(&wf_buf[1 - (k & 1)]);
+    if (k == 0)
+      for (int c = 0; c < 3; c++) out[k].also[c] = wf_also[slot][c];
+    if (k == n - 1) {
+      for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) out[k].plane[c] = NULL;
+      for (int c = 0; c < 3; c++) out[k].plane[c] = wf_last[slot][c];
+      out[k].stride = (size_t)w;
+      out[k].pad = 0;
+    }
+    outp[k] = &out[k];
+  }
+  if (how == 0)
+    for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], outp[k], threads);
+  else if (how == 1)
+    svgf_atrous_wavefront(g, lp, in, outp, n, threads);
+  else
+    svgf_atrous_levels(g, lp, in, outp, n, threads);
+}
+
+static int wavefront_same(int w, int h) {
+  const size_t bytes = (size_t)w * h * sizeof(float);
+  for (int c = 0; c < 3; c++)
+    if (memcmp(wf_last[0][c], wf_last[1][c], bytes) || memcmp(wf_also[0][c], wf_also[1][c], bytes))
+      return 0;
+  return 1;
+}
+
+/* Every tap order, both kernels, with and without validity, both loops, 2
+ * and 3 threads (rows split in parts) on a small frame whose width is no
+ * multiple of 32 (taps past every border); then svgf_atrous_levels above
+ * SVGF_WAVEFRONT_MIN_PIXELS, where it takes the wavefront. */
+static void test_wavefront(hush_device dev) {
+  const int w = 150, h = 100;
+  svgf_guide g = wavefront_frame(dev, w, h);
   for (int order = 0; order < 4; order++)
     for (int valid = 0; valid <= 1; valid++)
-      for (int portable = 0; portable <= 1; portable++)
-        for (int run = 0; run < 3; run++) {
-          /* run 0: one level at a time (2 threads); 1, 2: the wavefront, 2 and 3 threads */
-          const int n = levels[order], threads = run == 2 ? 3 : 2;
-          for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
-            memcpy(buf[0].mem[c], init.mem[c], buf[0].stride * WFH * sizeof(float));
-          svgf_level_params lp[6];
-          svgf_level_out out[6];
-          const svgf_padded *in[6];
-          const svgf_level_out *outp[6];
-          float(*const fin)[WFW * WFH] = run ? last : last_ref;
-          float(*const fb)[WFW * WFH] = run ? also : also_ref;
-          for (int k = 0; k < n; k++) {
-            lp[k].kernel = order == 3 ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
-            lp[k].step = steps[order][k];
-            lp[k].sigma_l = 4.0f;
-            lp[k].eps_l = NULL;
-            lp[k].validity = valid;
-            lp[k].normal_exp = 1;
-            lp[k].portable = portable;
-            in[k] = &buf[k & 1];
-            out[k] = svgf_level_out_padded(&buf[1 - (k & 1)]);
-            if (k == 0)
-              for (int c = 0; c < 3; c++) out[k].also[c] = fb[c];
-            if (k == n - 1) {
-              for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) out[k].plane[c] = NULL;
-              for (int c = 0; c < 3; c++) out[k].plane[c] = fin[c];
-              out[k].stride = WFW;
-              out[k].pad = 0;
-            }
-            outp[k] = &out[k];
-          }
-          if (run == 0)
-            for (int k = 0; k < n; k++) svgf_atrous_level(&g, &lp[k], in[k], outp[k], threads);
-          else
-            svgf_atrous_levels(&g, lp, in, outp, n, threads);
-          if (run == 0) continue;
-          int same = 1;
-          for (int c = 0; c < 3; c++)
-            same = same && !memcmp(last[c], last_ref[c], sizeof last[c]) &&
-                   !memcmp(also[c], also_ref[c], sizeof also[c]);
-          CHECK_MSG(same, "wavefront order %d%s%s, %d threads: not the bits of one level at a time",
+      for (int portable = 0; portable <= 1; portable++) {
+        wavefront_run(&g, order, valid, portable, 0, 2, 0);
+        for (int threads = 2; threads <= 3; threads++) {
+          wavefront_run(&g, order, valid, portable, 1, threads, 1);
+          CHECK_MSG(wavefront_same(w, h),
+                    "wavefront order %d%s%s, %d threads: not the bits of one level at a time",
                     order, valid ? " validity" : "", portable ? " portable" : "", threads);
         }
+      }
+  REQUIRE((long long)WFW * WFH >= SVGF_WAVEFRONT_MIN_PIXELS);
+  g = wavefront_frame(dev, WFW, WFH);
+  wavefront_run(&g, 0, 0, 0, 0, 2, 0);
+  wavefront_run(&g, 0, 0, 0, 2, 2, 1);
+  CHECK_MSG(wavefront_same(WFW, WFH), "svgf_atrous_levels at %dx%d: not the bits of one level at a time",
+            WFW, WFH);
+  svgf_padded_free(&wf_zn);
+  svgf_padded_free(&wf_init);
+  for (int b = 0; b < 2; b++) svgf_padded_free(&wf_buf[b]);
 }
 /* A lamp's edge at 1 spp: the column just right of the lamp sees the lamp
  * (its emission and its id) on even frames and the wall on odd ones, as a

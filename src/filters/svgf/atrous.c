@@ -594,20 +594,9 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
  * one column part per thread, thread i always taking part i (it keeps its
  * part's rows in its own L2). One barrier per time.
  */
-void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
-                        const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                        int threads) {
-  for (; n > SVGF_WAVEFRONT_LEVELS; n -= SVGF_WAVEFRONT_LEVELS) {
-    svgf_atrous_levels(g, lp, in, out, SVGF_WAVEFRONT_LEVELS, threads);
-    lp += SVGF_WAVEFRONT_LEVELS;
-    in += SVGF_WAVEFRONT_LEVELS;
-    out += SVGF_WAVEFRONT_LEVELS;
-  }
-  if (n <= 0) return;
-  if ((long long)g->width * g->height < SVGF_WAVEFRONT_MIN_PIXELS) {
-    for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], out[k], threads);
-    return;
-  }
+static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
+                      const svgf_padded *const *in, const svgf_level_out *const *out, int n,
+                      int threads) {
   level_ctx c[SVGF_WAVEFRONT_LEVELS];
   row_fn row[SVGF_WAVEFRONT_LEVELS];
   int lag[SVGF_WAVEFRONT_LEVELS];
@@ -636,4 +625,22 @@ void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
       }
     }
   }
+}
+
+void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
+                           const svgf_padded *const *in, const svgf_level_out *const *out, int n,
+                           int threads) {
+  for (int k = 0; k < n; k += SVGF_WAVEFRONT_LEVELS)
+    wavefront(g, lp + k, in + k, out + k,
+              n - k < SVGF_WAVEFRONT_LEVELS ? n - k : SVGF_WAVEFRONT_LEVELS, threads);
+}
+
+void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
+                        const svgf_padded *const *in, const svgf_level_out *const *out, int n,
+                        int threads) {
+  if ((long long)g->width * g->height >= SVGF_WAVEFRONT_MIN_PIXELS) {
+    svgf_atrous_wavefront(g, lp, in, out, n, threads);
+    return;
+  }
+  for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], out[k], threads);
 }

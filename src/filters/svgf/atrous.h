@@ -95,4 +95,10 @@ void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads);
 
+/* The wavefront whatever the frame's size (svgf_atrous_levels keeps one
+ * level at a time below SVGF_WAVEFRONT_MIN_PIXELS); for tests. */
+void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
+                           const svgf_padded *const *in, const svgf_level_out *const *out, int n,
+                           int threads);
+
 #endif
