@@ -929,7 +929,10 @@ static void test_level_formula(hush_device dev) {
     for (int step = 1; step <= 16; step *= 4)
       for (int nexp = 0; nexp <= 1; nexp++)
         for (int valid = 0; valid <= 1; valid++)
-          for (int portable = 0; portable <= 1; portable++) {
+          for (int loop = 0; loop < 3; loop++) {
+            /* loop 0, 1: the AVX-512 loop (where built) with one and two
+             * vectors at a time, the same bits; 2: the portable loop */
+            const int portable = loop == 2;
             const svgf_guide g = test_guide(&zn, gx, gy, zon);
             svgf_level_params lp;
             lp.kernel = kernels[kk];
@@ -939,8 +942,20 @@ static void test_level_formula(hush_device dev) {
             lp.validity = valid;
             lp.normal_exp = nexp;
             lp.portable = portable;
+            lp.vectors = loop == 1 ? 2 : 1;
             const svgf_level_out o = svgf_level_out_padded(&out);
             svgf_atrous_level(&g, &lp, &in, &o, 2);
+            static float one[SVGF_SIGNAL_CHANNELS][LW * LH];
+            int same = 1;
+            for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
+              for (int y = 0; y < LH; y++) {
+                const float *row = out.plane[c] + (size_t)y * out.stride;
+                if (c == SVGF_VALID && !valid) continue;
+                if (loop == 0) memcpy(one[c] + y * LW, row, LW * sizeof(float));
+                if (loop == 1) same &= !memcmp(one[c] + y * LW, row, LW * sizeof(float));
+              }
+            CHECK_MSG(same, "level %s step %d: two vectors at a time differ from one",
+                      kk ? "3x3" : "5x5", step);
             level_reference(&g, &in, kernels[kk], step, 4.0f, lp.eps_l, nexp, valid, ref);
             double worst = 0.0;
             int holes_ok = 1;
@@ -1172,6 +1187,7 @@ static void wavefront_run(const svgf_guide *g, int order, int valid, int portabl
     lp[k].validity = valid;
     lp[k].normal_exp = 1;
     lp[k].portable = portable;
+    lp[k].vectors = 1 + ((order + valid) & 1);
     in[k] = &wf_buf[k & 1];
     out[k] = svgf_level_out_padded(&wf_buf[1 - (k & 1)]);
     if (k == 0)

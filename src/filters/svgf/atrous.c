@@ -59,6 +59,7 @@ typedef struct level_ctx {
   float nscale;      /* exp normal weight: sigma_n log2 e; else 1 */
   tap_pair pairs[MAX_PAIRS];
   int npairs;
+  int two; /* AVX-512 loop: two vectors of pixels at a time (avx_vectors) */
 } level_ctx;
 
 /* Pixels per pass of the portable row loop (its stack buffers). */
@@ -404,6 +405,9 @@ static HUSH_ALWAYS_INLINE avx_row avx_row_at(const avx_row *r, int x, const int 
  * taps interleaved pair by pair: each tap is a chain of about 15 dependent
  * operations, and two independent vectors in flight keep more of them
  * ready for the two vector ports (same operations per lane: same bits).
+ * That pays on Intel's cores with two 512-bit FMA ports; on AMD's Zen 4,
+ * which runs a 512-bit operation on both halves of its 256-bit pipes, one
+ * vector at a time is faster (avx_two_vectors).
  * Else the 16 pixels at x (n of them, n < 16 only at the row's end).
  * A vector with no surface under any pixel (the sky: normal 0) skips its
  * taps when sigma_n log2 e >= S_FLOOR (sigma_n >= 20): each tap's exponent
@@ -487,9 +491,10 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, 
   float *also[3];
   for (int ch = 0; ch < 3; ch++) also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
   int x = xa;
-  for (; x + 32 <= xb; x += 32)
-    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 32, out, also, 1, 1, VALIDITY,
-                WITH_VAR);
+  if (c->two)
+    for (; x + 32 <= xb; x += 32)
+      avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 32, out, also, 1, 1,
+                  VALIDITY, WITH_VAR);
   for (; x + 16 <= xb; x += 16)
     avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, also, 0, 1, VALIDITY,
                 WITH_VAR);
@@ -497,6 +502,14 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, 
     avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, xb - x, out, also, 0, 0,
                 VALIDITY, WITH_VAR);
   pad_written(c->out, o, W, xa, xb);
+}
+
+/* Whether the AVX-512 loop takes two vectors of pixels at a time (lp's
+ * vectors: 0 this CPU's choice). On Intel's Sapphire Rapids two were 3 %
+ * faster (docs/svgf-speed.md, sixth round); on AMD's Zen 4 one at a time
+ * is 18-25 % faster (eighth round). The result is the same bits. */
+static int avx_two_vectors(int vectors) {
+  return vectors ? vectors == 2 : !__builtin_cpu_is("amd");
 }
 
 /* the variance is carried only where the level writes it (not the last) */
@@ -554,12 +567,14 @@ static row_fn level_init(level_ctx *c, const svgf_guide *g, const svgf_level_par
   c->h0 = hc * hc;
   const int npairs = tap_pairs(lp->kernel, lp->step, c->pairs);
   c->npairs = npairs;
+  c->two = 0;
   const int exp_form = lp->normal_exp;
   c->bias = exp_form ? g->np.sigma_n_log2e : 0.0f;
   c->nscale = exp_form ? g->np.sigma_n_log2e : 1.0f;
   const int pow128 = g->np.squarings == 7, v = lp->validity;
 #if HAVE_AVX_LEVEL
   if (exp_form && !lp->portable) {
+    c->two = avx_two_vectors(lp->vectors);
     if (out->plane[SVGF_VAR]) return v ? avx_row_valid : avx_row_plain;
     return v ? avx_row_valid_novar : avx_row_novar;
   }

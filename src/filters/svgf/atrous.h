@@ -64,6 +64,7 @@ typedef struct svgf_level_params {
   int validity;       /* taps and centre weighted by VALID (progressive, Dundr §4.2) */
   int normal_exp;     /* normal weight 2^(-sigma_n log2 e (1 - dot)), else max(0, dot)^sigma_n */
   int portable;       /* 1: never the AVX-512 loop (tests compare the two) */
+  int vectors;        /* AVX-512 loop: 0 this CPU's choice, 1 or 2 vectors of pixels at a time */
 } svgf_level_params;
 
 /* in (padded, SVGF_SIGNAL_CHANNELS planes) -> out. in and out must not

@@ -326,6 +326,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   lp.validity = fc->holes;
   lp.normal_exp = hush__param_i(f, P_NORMAL_WEIGHT) == 0;
   lp.portable = 0;
+  lp.vectors = 0;
   if (fc->holes) {
     svgf_progressive_epsilon(samples, hush__param_f(f, P_PROGRESSIVE_EPSILON), st->eps.plane[0],
                              hush__planar_pixels(&st->eps), threads);
