@@ -98,10 +98,11 @@ static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const
 
 /* Columns per group of householder_r's update passes (reflect_group takes
  * up to 4). Two: on an AMD Zen 4 (32 KiB L1, the block's 52 KiB matrix
- * streamed from L2) the fit stage is 9 % faster than with groups of four
- * (1280x720, 1 thread, p5 of three alternated pairs 20.2-21.3 -> 18.4-19.3
- * ms), and one column is no better. Same bits: each column's update and
- * dot product are the same operations in the same order. */
+ * streamed from L2) the fit stage is 5-9 % faster than with groups of four
+ * (1280x720, p5 of three alternated pairs: 1 thread 19.5 -> 17.6-18.3 ms,
+ * 2 threads 9.7-10.7 -> 9.4-9.5), and one column is no better. Same bits:
+ * each column's update and dot product are the same operations in the same
+ * order. */
 #define REFLECT_GROUP 2
 
 /* d[c] = sum_i t[i] r_c[i] over the ld rows for the three residuals, one
