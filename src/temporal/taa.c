@@ -194,9 +194,50 @@ static HUSH_ALWAYS_INLINE void span_run(const taa_row *t, const hush_reproject_p
   }
 }
 
+#ifdef HUSH_HAVE_WINDOW
+/* TAA_RUN columns from x0 whose 2x2 blocks form a window (reproject.h):
+ * the history's taps read with vector loads and permutes (tb[c][tap][l])
+ * instead of gathers. The same arithmetic as span_gather (a pixel without
+ * history, has 0, weighs its window value by 0 as span_gather its tap at
+ * index 0, and resolve_pixel ignores it), so the same result bit for bit. */
+static HUSH_ALWAYS_INLINE void span_window(const taa_row *t, const hush_reproject_plan *plan,
+                                           size_t row, int x0, const float (*tb)[4][TAA_RUN],
+                                           const int32_t *restrict has, const int clip,
+                                           const int tonemap) {
+  const float *w0 = plan->w[0] + row + x0, *w1 = plan->w[1] + row + x0,
+              *w2 = plan->w[2] + row + x0, *w3 = plan->w[3] + row + x0;
+#pragma omp simd
+  for (int l = 0; l < TAA_RUN; l++) {
+    const float hr = w0[l] * tb[0][0][l] + w1[l] * tb[0][1][l] + w2[l] * tb[0][2][l] + w3[l] * tb[0][3][l];
+    const float hg = w0[l] * tb[1][0][l] + w1[l] * tb[1][1][l] + w2[l] * tb[1][2][l] + w3[l] * tb[1][3][l];
+    const float hb = w0[l] * tb[2][0][l] + w1[l] * tb[2][1][l] + w2[l] * tb[2][2][l] + w3[l] * tb[2][3][l];
+    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, has[l], hr, hg, hb);
+  }
+}
+
+/* Whether the chunk at x0 forms a window; then its taps of the 3 history
+ * planes into tb. */
+static int window_taps(const hush_reproject_plan *plan, const float *const *prev, size_t row,
+                       int W, int x0, const int32_t *has, float (*tb)[4][TAA_RUN]) {
+  uint8_t use[TAA_RUN];
+  int32_t e[TAA_RUN], dy[TAA_RUN], base;
+  for (int l = 0; l < TAA_RUN; l++) use[l] = (uint8_t)has[l];
+  const size_t size = (size_t)W * plan->height;
+  const int rows =
+      hush__reproject_window(plan->origin + row + x0, use, TAA_RUN, W, size, &base, e, dy);
+  for (int c = 0; c < 3 && rows; c++) {
+    if (rows == 1)
+      hush__window_taps(prev[c], base, W, e, dy, 1, tb[c]);
+    else
+      hush__window_taps(prev[c], base, W, e, dy, 2, tb[c]);
+  }
+  return rows != 0;
+}
+#endif
+
 /* The interior columns 1..W-2 of a row, in chunks of TAA_RUN: a chunk
- * whose block origins run consecutively takes span_run, the others
- * span_gather. */
+ * whose block origins run consecutively takes span_run, one whose blocks
+ * form a window span_window, the others span_gather. */
 static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproject_plan *plan,
                                              const float *const *prev, size_t row, int W,
                                              const int clip, const int tonemap) {
@@ -211,9 +252,22 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
       j[l] = origin[x + l] & -has[l];
       run &= has[l] & (j[l] == origin[x] + l);
     }
-    if (run) span_run(t, plan, prev, row, W, x, j[0], clip, tonemap);
-    else if (n == TAA_RUN) span_gather(t, plan, prev, row, W, x, TAA_RUN, j, has, clip, tonemap);
-    else span_gather(t, plan, prev, row, W, x, n, j, has, clip, tonemap);
+    if (run) {
+      span_run(t, plan, prev, row, W, x, j[0], clip, tonemap);
+      continue;
+    }
+    if (n < TAA_RUN) {
+      span_gather(t, plan, prev, row, W, x, n, j, has, clip, tonemap);
+      continue;
+    }
+#ifdef HUSH_HAVE_WINDOW
+    float tb[3][4][TAA_RUN] __attribute__((aligned(64)));
+    if (window_taps(plan, prev, row, W, x, has, tb)) {
+      span_window(t, plan, row, x, (const float(*)[4][TAA_RUN])tb, has, clip, tonemap);
+      continue;
+    }
+#endif
+    span_gather(t, plan, prev, row, W, x, TAA_RUN, j, has, clip, tonemap);
   }
 }
 
