@@ -1,5 +1,5 @@
 /*
- * atrous.h — one level of the edge-avoiding a-trous wavelet filter of SVGF
+ * atrous.h — the levels of the edge-avoiding a-trous wavelet filter of SVGF
  * (Dundr 2018 §4.1.4.6; Schied et al. 2017 in papers/NOTES.md): a B-spline
  * kernel with taps 2^i pixels apart, every tap weighted by weights.h, the
  * colour normalised by the sum of weights and the variance filtered along
@@ -7,12 +7,14 @@
  * luminance weight's variance is the 3x3 Gaussian of the input variance
  * (fused into the level; Dundr §4.1.3.1).
  *
- * One pass per level: per row, per vector of pixels, every tap with the
- * sums in registers (mirrored tap pairs share the depth-gradient
- * denominator); borders handled by the input's row padding (x) and one row
- * clamp per tap row (y). AVX-512 intrinsics where the build has them, else
- * a portable loop the compiler vectorises (docs/svgf-speed.md). Every pixel
- * is computed on its own: the result does not depend on the thread count.
+ * Per row of a level, per vector of pixels, every tap with the sums in
+ * registers (mirrored tap pairs share the depth-gradient denominator);
+ * borders handled by the input's row padding (x) and one row clamp per tap
+ * row (y). AVX-512 intrinsics where the build has them, else a portable
+ * loop the compiler vectorises (docs/svgf-speed.md). A frame's levels run
+ * one after the other or, on larger frames, together as a wavefront down
+ * the rows (svgf_atrous_levels). Every pixel is computed on its own: the
+ * result depends neither on the thread count nor on the schedule.
  */
 #ifndef HUSH_FILTERS_SVGF_ATROUS_H
 #define HUSH_FILTERS_SVGF_ATROUS_H
