@@ -882,6 +882,17 @@ static svgf_guide test_guide(const svgf_padded *zn, const float *gx, const float
   return g;
 }
 
+/* A level's input at index si of the signal planes p: noisy colour
+ * (darker on the right-hand surface), variance, its luminance, and no data
+ * at a rate of hole_rate. */
+static void random_signal(svgf_padded *p, size_t si, int right, float hole_rate) {
+  const float base = right ? 0.2f : 0.7f;
+  for (int c = 0; c < 3; c++) p->plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());
+  p->plane[SVGF_VAR][si] = 0.05f * rnd();
+  p->plane[SVGF_LUM][si] = hush_luminance(p->plane[0][si], p->plane[1][si], p->plane[2][si]);
+  p->plane[SVGF_VALID][si] = rnd() < hole_rate ? 0.0f : 1.0f;
+}
+
 /* Every variant of svgf_atrous_level (the AVX-512 loop where built, the
  * portable loop, exp and pow normal weights, with and without validity,
  * both kernels, with tap steps past the frame) computes the formula within
@@ -907,13 +918,7 @@ static void test_level_formula(hush_device dev) {
         /* sky (no surface: depth and normal 0): whole vectors and a part of one */
         for (int c = 0; c < 4; c++) zn.plane[c][i] = 0.0f;
       }
-      const size_t si = (size_t)y * in.stride + x;
-      const float base = right ? 0.2f : 0.7f;
-      for (int c = 0; c < 3; c++) in.plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());
-      in.plane[SVGF_VAR][si] = 0.05f * rnd();
-      in.plane[SVGF_LUM][si] =
-          hush_luminance(in.plane[0][si], in.plane[1][si], in.plane[2][si]);
-      in.plane[SVGF_VALID][si] = rnd() < 0.2f ? 0.0f : 1.0f;
+      random_signal(&in, (size_t)y * in.stride + x, right, 0.2f);
       gx[pi] = 0.01f * (rnd() - 0.5f);
       gy[pi] = 0.02f + 0.01f * rnd();
       zon[pi] = rnd() < 0.1f ? 0.0f : 1.0f;
@@ -1134,14 +1139,7 @@ static svgf_guide wavefront_frame(hush_device dev, int w, int h) {
       for (int c = 0; c < 3; c++) wf_zn.plane[1 + c][i] = n[c] / len;
       if (y > h - h / 10 && x < w / 5) /* sky */
         for (int c = 0; c < 4; c++) wf_zn.plane[c][i] = 0.0f;
-      const size_t si = (size_t)y * wf_init.stride + x;
-      const float base = right ? 0.2f : 0.7f;
-      for (int c = 0; c < 3; c++)
-        wf_init.plane[c][si] = base * (1.0f + 0.3f * (float)c) * (0.5f + rnd());
-      wf_init.plane[SVGF_VAR][si] = 0.05f * rnd();
-      wf_init.plane[SVGF_LUM][si] =
-          hush_luminance(wf_init.plane[0][si], wf_init.plane[1][si], wf_init.plane[2][si]);
-      wf_init.plane[SVGF_VALID][si] = rnd() < 0.3f ? 0.0f : 1.0f;
+      random_signal(&wf_init, (size_t)y * wf_init.stride + x, right, 0.3f);
       wf_gx[pi] = 0.01f * (rnd() - 0.5f);
       wf_gy[pi] = 0.01f + 0.01f * rnd();
       wf_zon[pi] = 1.0f;

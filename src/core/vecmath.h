@@ -33,6 +33,23 @@ static inline float hush__select_bits(int cond, float x, float y) {
   return x;
 }
 
+/* d^(2^n) by n squarings, n 0..10 (no more are done). Spelled out, not a
+ * loop: gcc vectorises no loop around an inner loop; with n a constant or
+ * invariant in the caller's loop the tests fold or hoist. */
+static HUSH_ALWAYS_INLINE float hush__pow2_squarings(float d, int n) {
+  if (n > 0) d *= d;
+  if (n > 1) d *= d;
+  if (n > 2) d *= d;
+  if (n > 3) d *= d;
+  if (n > 4) d *= d;
+  if (n > 5) d *= d;
+  if (n > 6) d *= d;
+  if (n > 7) d *= d;
+  if (n > 8) d *= d;
+  if (n > 9) d *= d;
+  return d;
+}
+
 /* floorf(s), bit for bit (also -0, infinities and NaN): a truncating
  * conversion of s where |s| < 2^23 (else s is an integer, inf or NaN), one
  * less when that rounded up, and the sign of s kept on a zero. */

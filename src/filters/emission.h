@@ -26,14 +26,14 @@ void hush__emission_add(hush_planar *out, const hush_planar *emission, const hus
 
 /*
  * Marks this frame's ids (hush__reprojector_next(rp), before the plan is
- * built; nothing without ids) as matching any id (NaN, hush__id_match) where the pixel sees a
- * light (some emission channel > 0). With the emission kept out of the
- * filtered signal, a light's pixel and the surface beside it differ only in
- * what the emission history carries, and that history must mix them: at 1
- * spp a light's edge pixel sees the light or the surface, and only an
- * average over frames gives its coverage. With the id test both kept
- * their own histories and the edge stayed aliased (docs/psf.md, "One-sided
- * lights"); depth and normal are still tested.
+ * built; nothing without ids) as matching any id (NaN, hush__id_match)
+ * where the pixel sees a light (some emission channel > 0). With the
+ * emission kept out of the filtered signal, a light's pixel and the surface
+ * beside it differ only in what the emission history carries, and that
+ * history must mix them: at 1 spp a light's edge pixel sees the light or
+ * the surface, and only an average over frames gives its coverage. With the
+ * id test both kept their own histories and the edge stayed aliased
+ * (docs/psf.md, "One-sided lights"); depth and normal are still tested.
  */
 void hush__emission_wildcard_ids(hush_reprojector *rp, const hush_planar *emission, int threads);
 

@@ -261,23 +261,13 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
-    uint8_t use[CHUNK];
-    int32_t e[CHUNK], dy[CHUNK];
-    for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
-    int32_t base;
-    const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, b->size, &base, e, dy);
-    if (rows) {
-      /* the taps of the 7 history planes (colour, moments, age) */
-      float tb[7][4][CHUNK] __attribute__((aligned(64)));
-      const float *planes[7] = {b->pc[0], b->pc[nc > 1], b->pc[nc > 2 ? 2 : 0],
-                                b->pc[nc > 3 ? 3 : 0], b->pm1, b->pm2, b->pa};
-      for (int t = 0; t < 7; t++) {
-        if ((t > 0 && t < 4 && t >= nc) || (!mom && (t == 4 || t == 5))) continue;
-        if (rows == 1)
-          hush__window_taps(planes[t], base, W, e, dy, 1, tb[t]);
-        else
-          hush__window_taps(planes[t], base, W, e, dy, 2, tb[t]);
-      }
+    /* the taps of the 7 history planes (colour, moments, age; NULL: unused) */
+    float tb[7][4][CHUNK] __attribute__((aligned(64)));
+    const float *planes[7] = {b->pc[0],           nc > 1 ? b->pc[1] : NULL,
+                              nc > 2 ? b->pc[2] : NULL, nc > 3 ? b->pc[3] : NULL,
+                              mom ? b->pm1 : NULL, mom ? b->pm2 : NULL,
+                              b->pa};
+    if (hush__window_read(b->plan, row + (size_t)x0, planes, 7, tb)) {
       blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc, mom);
       continue;
     }
@@ -662,19 +652,8 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
-    uint8_t use[CHUNK];
-    int32_t e[CHUNK], dy[CHUNK];
-    for (int k = 0; k < CHUNK; k++) use[k] = kind[x0 + k] == HUSH_FOOTPRINT_BILINEAR;
-    int32_t base;
-    const int rows = hush__reproject_window(origin + x0, use, CHUNK, W, t->size, &base, e, dy);
-    if (rows) {
-      float tb[4][4][CHUNK] __attribute__((aligned(64)));
-      for (int c = 0; c < nc; c++) {
-        if (rows == 1)
-          hush__window_taps(prev[c], base, W, e, dy, 1, tb[c]);
-        else
-          hush__window_taps(prev[c], base, W, e, dy, 2, tb[c]);
-      }
+    float tb[4][4][CHUNK] __attribute__((aligned(64)));
+    if (hush__window_read(plan, row + (size_t)x0, prev, nc, tb)) {
       tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_WINDOW,
                     (const float(*)[4][CHUNK])tb, nc);
       continue;

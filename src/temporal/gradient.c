@@ -174,17 +174,7 @@ static HUSH_ALWAYS_INLINE void level_tap(const level_ctx *L, int sy, int dx, int
     float e = log2h - log2e * (dz / denz + dl * inv_l), wn;
     if (pow2 >= 0) {
       wn = hush__select_bits(dot > dot_min, dot, 0.0f);
-      /* spelled out: gcc vectorises no loop around an inner loop */
-      if (pow2 > 0) wn *= wn;
-      if (pow2 > 1) wn *= wn;
-      if (pow2 > 2) wn *= wn;
-      if (pow2 > 3) wn *= wn;
-      if (pow2 > 4) wn *= wn;
-      if (pow2 > 5) wn *= wn;
-      if (pow2 > 6) wn *= wn;
-      if (pow2 > 7) wn *= wn;
-      if (pow2 > 8) wn *= wn;
-      if (pow2 > 9) wn *= wn;
+      wn = hush__pow2_squarings(wn, pow2);
     } else {
       e += sn * log2_pos(dot);
       wn = hush__select_bits((dot > 0.0f) | sn_off, 1.0f, 0.0f);

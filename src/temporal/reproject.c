@@ -936,6 +936,27 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
   return HUSH_OK;
 }
 
+#ifdef HUSH_HAVE_WINDOW
+int hush__window_read(const hush_reproject_plan *plan, size_t i, const float *const *planes,
+                      int nplanes, float (*out)[4][HUSH_WINDOW_MAX]) {
+  uint8_t use[HUSH_WINDOW_MAX];
+  int32_t e[HUSH_WINDOW_MAX], dy[HUSH_WINDOW_MAX], base = 0;
+  for (int k = 0; k < HUSH_WINDOW_MAX; k++) use[k] = plan->kind[i + k] == HUSH_FOOTPRINT_BILINEAR;
+  const int32_t W = (int32_t)plan->width;
+  const size_t size = (size_t)plan->width * plan->height;
+  const int rows =
+      hush__reproject_window(plan->origin + i, use, HUSH_WINDOW_MAX, W, size, &base, e, dy);
+  for (int p = 0; p < nplanes && rows; p++) {
+    if (!planes[p]) continue;
+    if (rows == 1)
+      hush__window_taps(planes[p], base, W, e, dy, 1, out[p]);
+    else
+      hush__window_taps(planes[p], base, W, e, dy, 2, out[p]);
+  }
+  return rows;
+}
+#endif
+
 /* ---- gathering ----------------------------------------------------------- */
 
 #define GATHER_MAX 8

@@ -54,14 +54,14 @@
 #include <stdint.h>
 #include <string.h>
 
-/* One frame's geometry as planes (width * height floats each, not owned).
- * NULL members are absent. */
 /* Whether two ids match: equal, or either NaN. Imported ids are never NaN
  * (image import rejects NaN); a filter marks pixels whose history may mix
  * across ids with NaN (hush__emission_wildcard_ids: the pixels of a light
  * seen directly, whose emission it accumulates apart). */
 static inline int hush__id_match(float a, float b) { return (a == b) | (a != a) | (b != b); }
 
+/* One frame's geometry as planes (width * height floats each, not owned).
+ * NULL members are absent. */
 typedef struct hush_gbuffer {
   const float *depth;     /* linear view depth; <= 0 is background. Required. */
   const float *normal[3]; /* world-space unit normal. Required. */
@@ -399,6 +399,17 @@ static HUSH_ALWAYS_INLINE void hush__window_taps(const float *p, int32_t base, i
     memcpy(out[ty * 2 + 1], &t1, sizeof t1);
   }
 }
+
+/*
+ * The chunk of HUSH_WINDOW_MAX pixels from index i of plan: when the
+ * footprints of its BILINEAR pixels form a window, the four taps of every
+ * plane that is not NULL into out[p] (hush__window_taps) and the window's
+ * rows (1 or 2) returned; else 0 and nothing read. A function of its own,
+ * not inlined: in the callers' chunk loops its code cost the common
+ * contiguous chunks more than the call costs the window ones.
+ */
+int hush__window_read(const hush_reproject_plan *plan, size_t i, const float *const *planes,
+                      int nplanes, float (*out)[4][HUSH_WINDOW_MAX]);
 #endif
 
 /*

@@ -195,6 +195,7 @@ static HUSH_ALWAYS_INLINE void span_run(const taa_row *t, const hush_reproject_p
 }
 
 #ifdef HUSH_HAVE_WINDOW
+_Static_assert(TAA_RUN == HUSH_WINDOW_MAX, "a TAA chunk is one window");
 /* TAA_RUN columns from x0 whose 2x2 blocks form a window (reproject.h):
  * the history's taps read with vector loads and permutes (tb[c][tap][l])
  * instead of gathers. The same arithmetic as span_gather (a pixel without
@@ -215,24 +216,6 @@ static HUSH_ALWAYS_INLINE void span_window(const taa_row *t, const hush_reprojec
   }
 }
 
-/* Whether the chunk at x0 forms a window; then its taps of the 3 history
- * planes into tb. */
-static int window_taps(const hush_reproject_plan *plan, const float *const *prev, size_t row,
-                       int W, int x0, const int32_t *has, float (*tb)[4][TAA_RUN]) {
-  uint8_t use[TAA_RUN];
-  int32_t e[TAA_RUN], dy[TAA_RUN], base;
-  for (int l = 0; l < TAA_RUN; l++) use[l] = (uint8_t)has[l];
-  const size_t size = (size_t)W * plan->height;
-  const int rows =
-      hush__reproject_window(plan->origin + row + x0, use, TAA_RUN, W, size, &base, e, dy);
-  for (int c = 0; c < 3 && rows; c++) {
-    if (rows == 1)
-      hush__window_taps(prev[c], base, W, e, dy, 1, tb[c]);
-    else
-      hush__window_taps(prev[c], base, W, e, dy, 2, tb[c]);
-  }
-  return rows != 0;
-}
 #endif
 
 /* The interior columns 1..W-2 of a row, in chunks of TAA_RUN: a chunk
@@ -262,7 +245,7 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
     }
 #ifdef HUSH_HAVE_WINDOW
     float tb[3][4][TAA_RUN] __attribute__((aligned(64)));
-    if (window_taps(plan, prev, row, W, x, has, tb)) {
+    if (hush__window_read(plan, row + (size_t)x, prev, 3, tb)) {
       span_window(t, plan, row, x, (const float(*)[4][TAA_RUN])tb, has, clip, tonemap);
       continue;
     }

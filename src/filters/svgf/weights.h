@@ -175,17 +175,7 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
     return hush__select_bits(w > p->floor, w, 0.0f);
   }
   float d = hush__select_bits(dot > dot_floor, dot, dot_floor); /* a max */
-  /* spelled out: gcc does not vectorise a loop around an inner loop */
-  if (squarings > 0) d *= d;
-  if (squarings > 1) d *= d;
-  if (squarings > 2) d *= d;
-  if (squarings > 3) d *= d;
-  if (squarings > 4) d *= d;
-  if (squarings > 5) d *= d;
-  if (squarings > 6) d *= d;
-  if (squarings > 7) d *= d;
-  if (squarings > 8) d *= d;
-  if (squarings > 9) d *= d;
+  d = hush__pow2_squarings(d, squarings);
   w = d * svgf_exp2_neg_h(s_zl, SVGF_S_MAX, p);
   return hush__select_bits(w > p->floor, w, 0.0f);
 }
