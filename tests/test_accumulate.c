@@ -1843,6 +1843,145 @@ static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
 /* Timing note (HUSH_BENCH=1)                                               */
 /* ======================================================================== */
 
+/* A chunk of 16 pixels of a plan row, as the build and the blend take it:
+ * 1 contiguous footprints, 2 a window (reproject.h), 0 neither. */
+static int chunk_class(const hush_reproject_plan *plan, size_t i0) {
+  const int32_t W = (int32_t)plan->width;
+  int contiguous = 1;
+  uint8_t use[HUSH_WINDOW_MAX];
+  for (int k = 0; k < HUSH_WINDOW_MAX; k++) {
+    use[k] = plan->kind[i0 + k] == HUSH_FOOTPRINT_BILINEAR;
+    contiguous &= use[k] && plan->origin[i0 + k] == plan->origin[i0] + k;
+  }
+  if (contiguous) return 1;
+  int32_t base, e[HUSH_WINDOW_MAX], dy[HUSH_WINDOW_MAX];
+  return hush__reproject_window(plan->origin + i0, use, HUSH_WINDOW_MAX, W,
+                                (size_t)W * plan->height, &base, e, dy)
+             ? 2
+             : 0;
+}
+
+/* hush__reproject_window16 (vector operations where the CPU has them) gives
+ * hush__reproject_window's results on origins that form windows, nearly
+ * do, or lie near the plane's ends. */
+static void test_module_window16(void) {
+  uint32_t rng = 3;
+  int same = 1, windows[3] = {0, 0, 0};
+  for (int it = 0; it < 20000; it++) {
+    const int32_t W = 20 + (int32_t)(urand(&rng) * 200.0f);
+    const int32_t H = 3 + (int32_t)(urand(&rng) * 5.0f);
+    const size_t size = (size_t)W * (size_t)H;
+    int32_t origin[HUSH_WINDOW_MAX];
+    uint8_t use[HUSH_WINDOW_MAX];
+    const int32_t start = (int32_t)(urand(&rng) * (float)size) - 8;
+    const float jump = urand(&rng) * 0.4f;
+    for (int k = 0; k < HUSH_WINDOW_MAX; k++) {
+      const float r = urand(&rng);
+      /* one row on, a column either way, or a stray footprint */
+      origin[k] = start + k + (r < jump ? W : 0) + (urand(&rng) < jump ? 1 : 0) -
+                  (urand(&rng) < 0.1f ? 1 : 0) + (urand(&rng) < 0.02f ? 7 : 0);
+      const float u = urand(&rng);
+      use[k] = u < 0.1f ? 0 : u < 0.15f ? 2 : u < 0.2f ? 255 : 1;
+    }
+    if (it % 97 == 0) memset(use, 0, sizeof use);
+    int32_t b1 = -1, b2 = -1, e1[HUSH_WINDOW_MAX], e2[HUSH_WINDOW_MAX], d1[HUSH_WINDOW_MAX],
+            d2[HUSH_WINDOW_MAX];
+    const int r1 = hush__reproject_window(origin, use, HUSH_WINDOW_MAX, W, size, &b1, e1, d1);
+    const int r2 = hush__reproject_window16(origin, use, W, size, &b2, e2, d2);
+    int ok = r1 == r2;
+    if (ok && r1)
+      ok = b1 == b2 && memcmp(e1, e2, sizeof e1) == 0 && memcmp(d1, d2, sizeof d1) == 0;
+    same &= ok;
+    windows[r1]++;
+  }
+  CHECK(same);
+  CHECK_MSG(windows[0] > 1000 && windows[1] > 1000 && windows[2] > 1000,
+            "windows of 0/1/2 rows: %d %d %d", windows[0], windows[1], windows[2]);
+}
+
+static int32_t floor_div(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
+
+/* The plan's tap tests read a chunk's taps as vectors, from a window, or
+ * gathered, by how its footprints lie (reproject.c's test_span): a pixel's
+ * plan must not depend on which. The same frames with s = 1..15 columns
+ * added on the left put every pixel in chunks that read differently (the
+ * chunks start at each row's first pixel); motion in 1/64 pixel and
+ * identity matrices make the back-projection exact, so each interior
+ * pixel's footprint, mask and weights are the same bits in every layout. */
+static void test_module_plan_layouts(hush_device dev) {
+  const int W = 160, H = 40, margin = 6;
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 0.0f, 0.0f);
+  uint32_t rng = 7;
+  for (size_t i = 0; i < n; i++) {
+    const float x = (float)(i % (size_t)W), y = (float)(i / (size_t)W);
+    const float r = urand(&rng);
+    g.cz[i] = 5.0f + 0.02f * x + 0.01f * y + (urand(&rng) < 0.1f ? 2.0f : 0.0f);
+    g.pz[i] = g.cz[i] * (r < 0.1f ? 1.3f : r < 0.2f ? 1.12f : r < 0.3f ? 1.03f : 1.0f);
+    if (urand(&rng) < 0.03f) g.cz[i] = 0.0f; /* background */
+    if (urand(&rng) < 0.03f) g.pz[i] = 0.0f;
+    if (urand(&rng) < 0.04f) g.pid[i] = 2.0f;
+    if (urand(&rng) < 0.05f) { /* a normal the test rejects */
+      g.pn[0][i] = 0.6f;
+      g.pn[2][i] = 0.8f;
+    }
+    /* a zoom with a slight rotation, in steps of 1/64 pixel */
+    const float dx = x - 0.5f * (float)W, dy = y - 0.5f * (float)H;
+    g.mot[0][i] = roundf(64.0f * (0.3f + 0.03f * dx - 0.02f * dy)) / 64.0f;
+    g.mot[1][i] = roundf(64.0f * (0.2f + 0.03f * dy + 0.02f * dx)) / 64.0f;
+  }
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  int same = 1, differently = 0;
+  for (int s = 1; s < 16; s++) {
+    const int W2 = W + s;
+    gpair g2;
+    gpair_init(&g2, W2, H, 0.0f, 0.0f);
+    float *from[12] = {g.cz, g.cn[0], g.cn[1], g.cn[2], g.cid, g.pz,
+                       g.pn[0], g.pn[1], g.pn[2], g.pid, g.mot[0], g.mot[1]};
+    float *to[12] = {g2.cz, g2.cn[0], g2.cn[1], g2.cn[2], g2.cid, g2.pz,
+                     g2.pn[0], g2.pn[1], g2.pn[2], g2.pid, g2.mot[0], g2.mot[1]};
+    for (int k = 0; k < 12; k++)
+      for (int y = 0; y < H; y++)
+        for (int x = 0; x < W2; x++) /* the added columns repeat column 0 */
+          to[k][(size_t)y * W2 + x] = from[k][(size_t)y * W + (x < s ? 0 : x - s)];
+    hush_reproject_plan plan2;
+    REQUIRE(hush__reproject_plan_init(dev, &plan2, (uint32_t)W2, (uint32_t)H) == HUSH_OK);
+    REQUIRE(gpair_build(dev, &g2, &plan2, &p) == HUSH_OK);
+    for (int y = margin; y < H - margin; y++)
+      for (int x = margin; x < W - margin; x++) {
+        const size_t i = (size_t)y * W + x, i2 = (size_t)y * W2 + x + s;
+        int ok = plan.kind[i] == plan2.kind[i2] && plan.mask[i] == plan2.mask[i2];
+        for (int t = 0; t < 4; t++) ok &= fbits(plan.w[t][i]) == fbits(plan2.w[t][i2]);
+        if (plan.kind[i] != HUSH_FOOTPRINT_NONE) {
+          const int32_t oy = floor_div(plan.origin[i], W), ox = plan.origin[i] - oy * W;
+          ok &= plan2.origin[i2] == oy * W2 + ox + s;
+        }
+        if (!ok && same)
+          fprintf(stderr, "layout %d: pixel (%d, %d) differs: kind %d/%d mask %x/%x\n", s, x,
+                  y, plan.kind[i], plan2.kind[i2], plan.mask[i], plan2.mask[i2]);
+        same &= ok;
+        /* (W is a multiple of 16: every chunk of plan is whole) */
+        const int start2 = (x + s) / 16 * 16;
+        const int c1 = chunk_class(&plan, (size_t)y * W + (size_t)(x / 16 * 16));
+        const int c2 = start2 + 16 <= W2 ? chunk_class(&plan2, (size_t)y * W2 + (size_t)start2) : 0;
+        differently += c1 != c2 && c1 && c2;
+      }
+    hush__reproject_plan_free(&plan2);
+    gpair_free(&g2);
+  }
+  CHECK(same);
+  /* the layouts did read the same pixels both ways */
+  CHECK_MSG(differently > 1000, "%d pixels in a contiguous chunk in one layout and a window in "
+            "another", differently);
+  hush__reproject_plan_free(&plan);
+  gpair_free(&g);
+}
+
 static int cmp_double(const void *a, const void *b) {
   const double x = *(const double *)a, y = *(const double *)b;
   return x < y ? -1 : x > y;
@@ -1904,6 +2043,8 @@ int main(void) {
   test_module_fast_paths(dev, 1, 7, 0);
   test_module_fast_paths(dev, 2, 2, 0);
   test_module_fast_paths(dev, 160, 48, 1);
+  test_module_plan_layouts(dev);
+  test_module_window16();
   test_convergence(dev);
   test_static_jitter(dev);
   test_camera_move(dev);

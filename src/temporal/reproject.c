@@ -563,20 +563,20 @@ typedef struct tap_ref {
 } tap_ref;
 
 /*
- * The test of tap j with bilinear weight wt at offset (ox, oy) pixels from
- * the back-projected point, for a footprint inside the image: 1 if it is in
+ * The test of a tap (depth zt, normal nt, id idt of the previous frame)
+ * with bilinear weight wt at offset (ox, oy) pixels from the back-projected
+ * point, for a footprint inside the image: 1 if it is in
  * plan_pixel's mask. With grad_test (depth_gradient > 0) that is exactly
  * tap_ok, comparisons included (NaN fails or passes as there); without,
  * the plain test (tap_ok's result when the gradient retry is off). Every
  * value is loaded and computed unconditionally and combined with & and |,
  * so the span loop has no control flow (which would stop vectorisation).
  */
-static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, int32_t j, float wt, float ox,
-                                            float oy, const tap_ref *r, const int use_id,
+static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, float zt, float nt0, float nt1,
+                                            float nt2, float idt, float wt, float ox, float oy,
+                                            const tap_ref *r, const int use_id,
                                             const int grad_test, unsigned *retry) {
-  const float zt = p->depth[j];
-  const float d = r->n0 * p->normal[0][j] + r->n1 * p->normal[1][j] + r->n2 * p->normal[2][j];
-  const float idt = p->id[j];
+  const float d = r->n0 * nt0 + r->n1 * nt1 + r->n2 * nt2;
   const float dz = fabsf(zt - r->ze);
   const int surface = zt > 0.0f;
   int surface_ok;
@@ -689,20 +689,32 @@ static void span_footprints(int W, int H, const float *restrict spx, const float
   }
 }
 
+/* How test_pixels reads a chunk's taps: gathered one by one, as vectors
+ * (the footprints follow each other), or from a window (reproject.h). */
+enum { TAPS_GATHER, TAPS_CONTIGUOUS, TAPS_WINDOW };
+
+/* The planes a window of the tap tests reads: depth, normal, id. */
+#define WINDOW_PLANES 5
+
 /*
  * plan_pixel's common case for pixels k_begin .. k_begin + len - 1 of a span,
  * without branches (vectorised): a footprint lying wholly inside the image
  * with at least one consistent tap. Then the result is final (done); else
- * plan_pixel decides (the border, the 3x3 fallback). With contiguous the
- * footprint of pixel k starts at base + k (plain vector loads), else at
- * o->origin[k] (gathers). contiguous, use_id and grad_test are constants at
- * each call, so the loop has no branch on them (and reads no id plane
- * without use_id).
+ * plan_pixel decides (the border, the 3x3 fallback). TAPS_CONTIGUOUS: the
+ * footprint of pixel k starts at base + k (plain vector loads);
+ * TAPS_WINDOW: its taps were read from a window (tb[plane][tap][k -
+ * k_begin], planes as WINDOW_PLANES; a pixel whose footprint is not inside
+ * the image got some tap of the window, as a gather reads index 0 for it:
+ * plan_pixel redoes it); TAPS_GATHER: at o->origin[k] (gathers). mode,
+ * use_id and grad_test are constants at each call, so the loop has no
+ * branch on them (and reads no id plane without use_id).
  */
 static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k_begin, int len,
                                            const float *restrict sze, span_taps *restrict o,
-                                           int32_t base, const int contiguous, const int use_id,
+                                           int32_t base, const int mode,
+                                           const float (*restrict tb)[4][CHUNK], const int use_id,
                                            const int grad_test) {
+  const int contiguous = mode == TAPS_CONTIGUOUS, window = mode == TAPS_WINDOW;
   const int k_end = k_begin + len;
   const hush_gbuffer *cur = &c->in->cur, *pg = c->prev;
   const int W = c->W;
@@ -728,30 +740,89 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
     float bw[4];
     hush__reproject_bilinear(fx, fy, bw);
     const int32_t j0 = contiguous ? base + k : o->origin[k];
+    const int kk = k - k_begin;
     unsigned q0 = 0, q1 = 0, q2 = 0, q3 = 0;
-    const unsigned m =
-        span_tap(&pv, j0, bw[0], 0.0f - fx, 0.0f - fy, &r, use_id, grad_test, &q0) |
-        span_tap(&pv, j0 + 1, bw[1], 1.0f - fx, 0.0f - fy, &r, use_id, grad_test, &q1) << 1 |
-        span_tap(&pv, j0 + W, bw[2], 0.0f - fx, 1.0f - fy, &r, use_id, grad_test, &q2) << 2 |
-        span_tap(&pv, j0 + W + 1, bw[3], 1.0f - fx, 1.0f - fy, &r, use_id, grad_test, &q3) << 3;
+    /* tap t (0..3: top left, top right, bottom left, bottom right) of the
+     * window's plane pi, or at index J of plane P */
+#define TAP(P, pi, t, J) (window ? tb[pi][t][kk] : (P)[J])
+#define SPAN_TAP(t, J, ox, oy, q)                                                               \
+  span_tap(&pv, TAP(pv.depth, 0, t, J), TAP(pv.normal[0], 1, t, J), TAP(pv.normal[1], 2, t, J), \
+           TAP(pv.normal[2], 3, t, J), use_id ? TAP(pv.id, 4, t, J) : 0.0f, bw[t], ox, oy, &r,   \
+           use_id, grad_test, q)
+    const unsigned m = SPAN_TAP(0, j0, 0.0f - fx, 0.0f - fy, &q0) |
+                       SPAN_TAP(1, j0 + 1, 1.0f - fx, 0.0f - fy, &q1) << 1 |
+                       SPAN_TAP(2, j0 + W, 0.0f - fx, 1.0f - fy, &q2) << 2 |
+                       SPAN_TAP(3, j0 + W + 1, 1.0f - fx, 1.0f - fy, &q3) << 3;
+#undef SPAN_TAP
+#undef TAP
     if (!grad_test) o->retry[k] = (int32_t)(q0 | q1 | q2 | q3);
     o->mask[k] = (int32_t)m;
     o->kind[k] = (o->inside[k] & (m != 0u)) ? HUSH_FOOTPRINT_BILINEAR : HUSH_FOOTPRINT_NONE;
   }
 }
 
-/* The tap tests of pixels k0..k1-1 of a span (one chunk). */
+/* The tap tests of pixels k0..k1-1 of a span (one chunk), the taps read as
+ * mode says (TAPS_WINDOW: from tb). */
 static HUSH_ALWAYS_INLINE void test_chunk(const build_ctx *c, size_t row, int k0, int k1,
                                           const float *restrict sze, span_taps *restrict o,
-                                          int contiguous, const int use_id, const int grad_test) {
+                                          int mode, const float (*restrict tb)[4][CHUNK],
+                                          const int use_id, const int grad_test) {
   /* a constant length for full chunks: one vector iteration, no
    * alignment peeling or scalar epilogue */
   if (k1 - k0 < CHUNK)
-    test_pixels(c, row, k0, k1 - k0, sze, o, 0, 0, use_id, grad_test);
-  else if (contiguous)
-    test_pixels(c, row, k0, CHUNK, sze, o, o->origin[k0] - k0, 1, use_id, grad_test);
+    test_pixels(c, row, k0, k1 - k0, sze, o, 0, TAPS_GATHER, NULL, use_id, grad_test);
+  else if (mode == TAPS_CONTIGUOUS)
+    test_pixels(c, row, k0, CHUNK, sze, o, o->origin[k0] - k0, TAPS_CONTIGUOUS, NULL, use_id,
+                grad_test);
+  else if (mode == TAPS_WINDOW)
+    test_pixels(c, row, k0, CHUNK, sze, o, 0, TAPS_WINDOW, tb, use_id, grad_test);
   else
-    test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, use_id, grad_test);
+    test_pixels(c, row, k0, CHUNK, sze, o, 0, TAPS_GATHER, NULL, use_id, grad_test);
+}
+
+#ifdef HUSH_HAVE_WINDOW
+/* hush__window_read's work for the footprints origin[0..HUSH_WINDOW_MAX-1]
+ * of the pixels with use[k], in planes of W x (size / W) floats. */
+static int window_read(const int32_t *origin, const uint8_t *use, int32_t W, size_t size,
+                       const float *const *planes, int nplanes,
+                       float (*out)[4][HUSH_WINDOW_MAX]) {
+  int32_t e[HUSH_WINDOW_MAX], dy[HUSH_WINDOW_MAX], base = 0;
+  const int rows = hush__reproject_window16(origin, use, W, size, &base, e, dy);
+  for (int p = 0; p < nplanes && rows; p++) {
+    if (!planes[p]) continue;
+    if (rows == 1)
+      hush__window_taps(planes[p], base, W, e, dy, 1, out[p]);
+    else
+      hush__window_taps(planes[p], base, W, e, dy, 2, out[p]);
+  }
+  return rows;
+}
+#endif
+
+/* The mode a chunk's taps are read in: contiguous, else TAPS_WINDOW when the
+ * footprints inside the image form a window, which is then read into tb
+ * (depth, normal, and the ids with use_id), else TAPS_GATHER. Out of line:
+ * its code in test_span's loop would cost the common contiguous chunks
+ * more than the call costs the others. On Zen 4 a window chunk's tests
+ * take about half the time of a gathered one's. */
+static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contiguous,
+                      const int use_id, float (*tb)[4][CHUNK]) {
+  if (contiguous) return TAPS_CONTIGUOUS;
+#ifdef HUSH_HAVE_WINDOW
+  _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
+  uint8_t use[CHUNK];
+  for (int k = 0; k < CHUNK; k++) use[k] = o->inside[k0 + k] != 0;
+  const hush_gbuffer *pg = c->prev;
+  const float *const planes[WINDOW_PLANES] = {pg->depth, pg->normal[0], pg->normal[1],
+                                              pg->normal[2], use_id ? pg->id : NULL};
+  return window_read(o->origin + k0, use, c->W, (size_t)c->W * (size_t)c->H, planes,
+                     WINDOW_PLANES, tb)
+             ? TAPS_WINDOW
+             : TAPS_GATHER;
+#else
+  (void)c, (void)o, (void)k0, (void)use_id, (void)tb;
+  return TAPS_GATHER;
+#endif
 }
 
 /* The span test: footprints, then the tap tests chunk by chunk (with the
@@ -771,13 +842,16 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
      * gradient could change a tap (one only its depth test failed) or
      * plan_pixel will need them (a pixel left open). The gradient test
      * passes every tap the plain one does, so elsewhere both agree. */
-    test_chunk(c, row, k0, k1, sze, o, contiguous, use_id, 0);
+    float tb[WINDOW_PLANES][4][CHUNK] __attribute__((aligned(64)));
+    /* (a partial chunk gathers: the window has 16 pixels) */
+    const int mode = k1 - k0 < CHUNK ? TAPS_GATHER : chunk_mode(c, o, k0, contiguous, use_id, tb);
+    test_chunk(c, row, k0, k1, sze, o, mode, (const float(*)[4][CHUNK])tb, use_id, 0);
     if (!grad_test) continue;
     int again = 0;
     for (int k = k0; k < k1; k++) again |= o->retry[k] | (o->kind[k] != HUSH_FOOTPRINT_BILINEAR);
     if (!again) continue;
     span_slopes(c, y, x_begin + k0, k1 - k0, sze + k0, o->gx + k0, o->gy + k0, use_id);
-    test_chunk(c, row, k0, k1, sze, o, contiguous, use_id, 1);
+    test_chunk(c, row, k0, k1, sze, o, mode, (const float(*)[4][CHUNK])tb, use_id, 1);
   }
 }
 
@@ -940,20 +1014,9 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
 int hush__window_read(const hush_reproject_plan *plan, size_t i, const float *const *planes,
                       int nplanes, float (*out)[4][HUSH_WINDOW_MAX]) {
   uint8_t use[HUSH_WINDOW_MAX];
-  int32_t e[HUSH_WINDOW_MAX], dy[HUSH_WINDOW_MAX], base = 0;
   for (int k = 0; k < HUSH_WINDOW_MAX; k++) use[k] = plan->kind[i + k] == HUSH_FOOTPRINT_BILINEAR;
-  const int32_t W = (int32_t)plan->width;
-  const size_t size = (size_t)plan->width * plan->height;
-  const int rows =
-      hush__reproject_window(plan->origin + i, use, HUSH_WINDOW_MAX, W, size, &base, e, dy);
-  for (int p = 0; p < nplanes && rows; p++) {
-    if (!planes[p]) continue;
-    if (rows == 1)
-      hush__window_taps(planes[p], base, W, e, dy, 1, out[p]);
-    else
-      hush__window_taps(planes[p], base, W, e, dy, 2, out[p]);
-  }
-  return rows;
+  return window_read(plan->origin + i, use, (int32_t)plan->width,
+                     (size_t)plan->width * plan->height, planes, nplanes, out);
 }
 #endif
 
