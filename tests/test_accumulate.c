@@ -1901,9 +1901,9 @@ static void test_module_window16(void) {
 
 static int32_t floor_div(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
-/* The plan's tap tests read a chunk's taps as vectors, from a window, or
- * gathered, by how its footprints lie (reproject.c's test_span): a pixel's
- * plan must not depend on which. The same frames with s = 1..15 columns
+/* The plan's tap tests read a chunk's taps as vectors (from one base or in
+ * two passes from two), from a window, or gathered, by how its footprints
+ * lie (reproject.c's chunk_mode): a pixel's plan must not depend on which. The same frames with s = 1..15 columns
  * added on the left put every pixel in chunks that read differently (the
  * chunks start at each row's first pixel); motion in 1/64 pixel and
  * identity matrices make the back-projection exact, so each interior
