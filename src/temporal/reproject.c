@@ -850,8 +850,6 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
   /* (with 8-float vectors, x86-64-v3, two passes measured no faster than
    * the gathers: accumulate's reproject stage 17.2-17.8 -> 18.0 ms) */
   if (in_planes) return TAPS_TWO;
-#endif
-#ifdef HUSH_HAVE_WINDOW
   _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
   uint8_t use[CHUNK];
   for (int k = 0; k < CHUNK; k++) use[k] = o->inside[k0 + k] != 0;
@@ -863,7 +861,7 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
              ? TAPS_WINDOW
              : TAPS_GATHER;
 #else
-  (void)c, (void)o, (void)k0, (void)use_id, (void)tb;
+  (void)use_id, (void)tb;
   return TAPS_GATHER;
 #endif
 }

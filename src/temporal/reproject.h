@@ -406,7 +406,6 @@ static inline int hush__reproject_window16(const int32_t *origin, const uint8_t 
 typedef float hush_v16f __attribute__((vector_size(64)));
 typedef int32_t hush_v16i __attribute__((vector_size(64)));
 
-
 /*
  * The four taps of every pixel k of a window of HUSH_WINDOW_MAX pixels
  * (hush__reproject_window's base, e, dy; rows 1 or 2, a constant at each
