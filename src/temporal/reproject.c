@@ -814,22 +814,21 @@ static int window_read(const int32_t *origin, const uint8_t *use, int32_t W, siz
   }
   return rows;
 }
-#endif
 
 /*
  * How the full chunk of pixels k0.. reads its taps, and from where (base,
- * test_chunk). The footprints inside the image (plan_pixel redoes the
+ * test_chunk; base[0] is origin[k0] - k0 on entry). AVX-512 builds. The
+ * footprints inside the image (plan_pixel redoes the
  * others) at base + k for one base: TAPS_CONTIGUOUS; for two: TAPS_TWO,
- * when every pixel's taps at either base lie inside the planes (AVX-512:
- * two vector passes cost a chunk ~15 % less than a window's reads and
- * tests on Zen 4); else TAPS_WINDOW when they form a window, read into tb
+ * when every pixel's taps at either base lie inside the planes (two vector
+ * passes cost a chunk ~15 % less than a window's reads and tests on Zen
+ * 4); else TAPS_WINDOW when they form a window, read into tb
  * (depth, normal, and the ids with use_id); else TAPS_GATHER. Out of line:
  * its code in test_span's loop would cost the common contiguous chunks
  * more than the call costs the others.
  */
 static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contiguous,
                       const int use_id, int32_t base[2], float (*tb)[4][CHUNK]) {
-  base[0] = o->origin[k0] - k0;
   if (contiguous) return TAPS_CONTIGUOUS;
   int bases = 0;
   for (int k = k0; k < k0 + CHUNK && bases < 3; k++) {
@@ -845,11 +844,7 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
   int in_planes = bases > 0 && bases < 3;
   for (int t = 0; t < bases && t < 2; t++)
     in_planes &= (int64_t)base[t] + k0 >= 0 && (int64_t)base[t] < last;
-  if (in_planes && bases == 1) return TAPS_CONTIGUOUS;
-#ifdef HUSH_HAVE_WINDOW
-  /* (with 8-float vectors, x86-64-v3, two passes measured no faster than
-   * the gathers: accumulate's reproject stage 17.2-17.8 -> 18.0 ms) */
-  if (in_planes) return TAPS_TWO;
+  if (in_planes) return bases == 1 ? TAPS_CONTIGUOUS : TAPS_TWO;
   _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
   uint8_t use[CHUNK];
   for (int k = 0; k < CHUNK; k++) use[k] = o->inside[k0 + k] != 0;
@@ -860,11 +855,8 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
                      WINDOW_PLANES, tb)
              ? TAPS_WINDOW
              : TAPS_GATHER;
-#else
-  (void)use_id, (void)tb;
-  return TAPS_GATHER;
-#endif
 }
+#endif
 
 /* The span test: footprints, then the tap tests chunk by chunk (with the
  * depth slopes where they can matter). */
@@ -884,10 +876,17 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
      * plan_pixel will need them (a pixel left open). The gradient test
      * passes every tap the plain one does, so elsewhere both agree. */
     float tb[WINDOW_PLANES][4][CHUNK] __attribute__((aligned(64)));
-    int32_t base[2];
+    int32_t base[2] = {o->origin[k0] - k0, 0};
     /* (a partial chunk gathers: it is not a whole vector) */
+#ifdef HUSH_HAVE_WINDOW
     const int mode =
         k1 - k0 < CHUNK ? TAPS_GATHER : chunk_mode(c, o, k0, contiguous, use_id, base, tb);
+#else
+    /* (x86-64-v3, 8-float vectors: two passes, and even the search for the
+     * bases, were slower than the gathers: reproject stage 16.6-16.8 ->
+     * 17.3-17.4 ms with the search alone) */
+    const int mode = k1 - k0 < CHUNK || !contiguous ? TAPS_GATHER : TAPS_CONTIGUOUS;
+#endif
     test_chunk(c, row, k0, k1, sze, o, mode, base, (const float(*)[4][CHUNK])tb, use_id, 0);
     if (!grad_test) continue;
     int again = 0;
