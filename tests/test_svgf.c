@@ -867,12 +867,13 @@ static void level_reference(const svgf_guide *g, const svgf_padded *in, const sv
 #undef AT
 }
 
-/* The guide of the level tests: zn and the gradient planes of the test. */
+/* The guide of the level and wavefront tests: a w x h frame's zn and
+ * gradient planes, sigma_z 1, sigma_n 128. */
 static svgf_guide test_guide(const svgf_padded *zn, const float *gx, const float *gy,
-                             const float *zon) {
+                             const float *zon, int w, int h) {
   svgf_guide g;
-  g.width = LW;
-  g.height = LH;
+  g.width = w;
+  g.height = h;
   g.zn = zn;
   g.gx = gx;
   g.gy = gy;
@@ -938,7 +939,7 @@ static void test_level_formula(hush_device dev) {
             /* loop 0, 1: the AVX-512 loop (where built) with one and two
              * vectors at a time, the same bits; 2: the portable loop */
             const int portable = loop == 2;
-            const svgf_guide g = test_guide(&zn, gx, gy, zon);
+            const svgf_guide g = test_guide(&zn, gx, gy, zon, LW, LH);
             svgf_level_params lp;
             lp.kernel = kernels[kk];
             lp.step = step;
@@ -1008,7 +1009,7 @@ static void test_level_formula(hush_device dev) {
         }
         for (int c = 0; c < 2; c++) svgf_pad_row(svgf_padded_row(&mom, c, y), LW, mom.pad);
       }
-      const svgf_guide g = test_guide(&zn, gx, gy, zon);
+      const svgf_guide g = test_guide(&zn, gx, gy, zon, LW, LH);
       svgf_spatial_variance(&g, &mom, age, 4.0f, var, nexp, 2);
       double worst = 0.0;
       int kept = 1;
@@ -1148,16 +1149,7 @@ static svgf_guide wavefront_frame(hush_device dev, int w, int h) {
     for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
       svgf_pad_row(svgf_padded_row(&wf_init, c, y), w, wf_init.pad);
   }
-  svgf_guide g;
-  g.width = w;
-  g.height = h;
-  g.zn = &wf_zn;
-  g.gx = wf_gx;
-  g.gy = wf_gy;
-  g.zon = wf_zon;
-  g.sigma_z = 1.0f;
-  g.np = svgf_normal_power_of(128.0f);
-  return g;
+  return test_guide(&wf_zn, wf_gx, wf_gy, wf_zon, w, h);
 }
 
 /* Levels of a tap order on the frame of wavefront_frame, the last one into
