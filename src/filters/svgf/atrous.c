@@ -235,6 +235,78 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, int xa, int 
   pad_written(c->out, o, W, xa, xb);
 }
 
+#if (defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))) && defined(__x86_64__)
+/* What the intrinsic loops below (AVX-512, else AVX2) read for a row. */
+#include <immintrin.h>
+
+typedef struct avx_pair {
+  ptrdiff_t a, b;       /* tap offsets in floats (row_offsets) */
+  float fdx, fdy;
+  float nbias, nfloor;  /* -(bias - log2 h), -(S_FLOOR - log2 h) */
+} avx_pair;
+
+/* The planes of a row, at pixel 0 of that row. */
+typedef struct avx_row {
+  const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
+} avx_row;
+
+/* Row y of a level as the vector loops take it. */
+typedef struct avx_args {
+  avx_row r;
+  const float *vu, *vd, *gx, *gy, *zon, *eps;
+  float *out[SVGF_SIGNAL_CHANNELS];
+  float *also[3];
+  size_t o; /* the row's offset in the output planes */
+  avx_pair pairs[MAX_PAIRS];
+  int npairs;
+} avx_args;
+
+static void avx_args_of(const level_ctx *c, int y, int validity, avx_args *a) {
+  const svgf_guide *g = c->g;
+  const svgf_padded *in = c->in;
+  const int W = g->width, H = g->height;
+  a->npairs = c->npairs;
+  row_offsets off;
+  offsets_of(c, a->npairs, y, &off);
+  for (int k = 0; k < a->npairs; k++) {
+    a->pairs[k].a = off.a[k];
+    a->pairs[k].b = off.b[k];
+    a->pairs[k].fdx = c->pairs[k].fdx;
+    a->pairs[k].fdy = c->pairs[k].fdy;
+    a->pairs[k].nbias = -(c->bias + c->pairs[k].nlh);
+    a->pairs[k].nfloor = -(S_FLOOR + c->pairs[k].nlh);
+  }
+  const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
+  a->r.z = g->zn->plane[0] + gi;
+  a->r.n0 = g->zn->plane[1] + gi;
+  a->r.n1 = g->zn->plane[2] + gi;
+  a->r.n2 = g->zn->plane[3] + gi;
+  a->r.l = in->plane[SVGF_LUM] + si;
+  a->r.c0 = in->plane[SVGF_R] + si;
+  a->r.c1 = in->plane[SVGF_G] + si;
+  a->r.c2 = in->plane[SVGF_B] + si;
+  a->r.v = in->plane[SVGF_VAR] + si;
+  a->r.ok = validity ? in->plane[SVGF_VALID] + si : NULL;
+  a->vu = svgf_padded_row(in, SVGF_VAR, y > 0 ? y - 1 : y);
+  a->vd = svgf_padded_row(in, SVGF_VAR, y < H - 1 ? y + 1 : y);
+  const size_t pi = (size_t)y * W;
+  a->gx = g->gx + pi;
+  a->gy = g->gy + pi;
+  a->zon = g->zon + pi;
+  a->eps = c->eps_l ? c->eps_l + pi : NULL;
+  a->o = (size_t)y * c->out->stride;
+  for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
+    a->out[ch] = c->out->plane[ch] ? c->out->plane[ch] + a->o : NULL;
+  for (int ch = 0; ch < 3; ch++) a->also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
+}
+
+/* the variance is carried only where the level writes it (not the last) */
+#define AVX_ROW(NAME, VALIDITY, WITH_VAR)                                                    \
+  static void NAME(const level_ctx *c, int y, int xa, int xb) {                              \
+    avx_level_row(c, y, xa, xb, VALIDITY, WITH_VAR);                                         \
+  }
+#endif
+
 #if defined(__AVX512F__) && defined(__x86_64__)
 /*
  * The default level (exp normal weight) in AVX-512 intrinsics. The portable
@@ -248,23 +320,10 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, int xa, int 
  * negated, t = -s. Same weights as the portable loop within 1e-4 relative
  * (tests/test_svgf.c compares both with the formulas).
  */
-#include <immintrin.h>
-
-typedef struct avx_pair {
-  ptrdiff_t a, b;       /* tap offsets in floats (row_offsets) */
-  float fdx, fdy;
-  float nbias, nfloor;  /* -(bias - log2 h), -(S_FLOOR - log2 h) */
-} avx_pair;
-
 /* The sums of one vector of 16 pixels. */
 typedef struct avx_sums {
   __m512 sw, s0, s1, s2, sv;
 } avx_sums;
-
-/* The planes of a row, at pixel 0 of that row. */
-typedef struct avx_row {
-  const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
-} avx_row;
 
 /* One vector of 16 pixels: what its taps need, and its sums. */
 typedef struct avx_px {
@@ -452,56 +511,21 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
 
 static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, int xb,
                                              const int VALIDITY, const int WITH_VAR) {
-  const svgf_guide *g = c->g;
-  const svgf_padded *in = c->in;
-  const int W = g->width, H = g->height;
-  const int npairs = c->npairs;
-  row_offsets off;
-  offsets_of(c, npairs, y, &off);
-  avx_pair pairs[MAX_PAIRS];
-  for (int k = 0; k < npairs; k++) {
-    pairs[k].a = off.a[k];
-    pairs[k].b = off.b[k];
-    pairs[k].fdx = c->pairs[k].fdx;
-    pairs[k].fdy = c->pairs[k].fdy;
-    pairs[k].nbias = -(c->bias + c->pairs[k].nlh);
-    pairs[k].nfloor = -(S_FLOOR + c->pairs[k].nlh);
-  }
-  const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
-  avx_row r;
-  r.z = g->zn->plane[0] + gi;
-  r.n0 = g->zn->plane[1] + gi;
-  r.n1 = g->zn->plane[2] + gi;
-  r.n2 = g->zn->plane[3] + gi;
-  r.l = in->plane[SVGF_LUM] + si;
-  r.c0 = in->plane[SVGF_R] + si;
-  r.c1 = in->plane[SVGF_G] + si;
-  r.c2 = in->plane[SVGF_B] + si;
-  r.v = in->plane[SVGF_VAR] + si;
-  r.ok = VALIDITY ? in->plane[SVGF_VALID] + si : NULL;
-  const float *vu = svgf_padded_row(in, SVGF_VAR, y > 0 ? y - 1 : y);
-  const float *vd = svgf_padded_row(in, SVGF_VAR, y < H - 1 ? y + 1 : y);
-  const size_t pi = (size_t)y * W;
-  const float *gx = g->gx + pi, *gy = g->gy + pi, *zon = g->zon + pi;
-  const float *eps = c->eps_l ? c->eps_l + pi : NULL;
-  const size_t o = (size_t)y * c->out->stride;
-  float *out[SVGF_SIGNAL_CHANNELS];
-  for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
-    out[ch] = c->out->plane[ch] ? c->out->plane[ch] + o : NULL;
-  float *also[3];
-  for (int ch = 0; ch < 3; ch++) also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
+  avx_args a;
+  avx_args_of(c, y, VALIDITY, &a);
+  const int npairs = a.npairs;
   int x = xa;
   if (c->two)
     for (; x + 32 <= xb; x += 32)
-      avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 32, out, also, 1, 1,
-                  VALIDITY, WITH_VAR);
+      avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, 32, a.out,
+                  a.also, 1, 1, VALIDITY, WITH_VAR);
   for (; x + 16 <= xb; x += 16)
-    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, 16, out, also, 0, 1, VALIDITY,
-                WITH_VAR);
+    avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, 16, a.out,
+                a.also, 0, 1, VALIDITY, WITH_VAR);
   if (x < xb)
-    avx_vectors(c, &r, vu, vd, gx, gy, zon, eps, pairs, npairs, x, xb - x, out, also, 0, 0,
-                VALIDITY, WITH_VAR);
-  pad_written(c->out, o, W, xa, xb);
+    avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, xb - x, a.out,
+                a.also, 0, 0, VALIDITY, WITH_VAR);
+  pad_written(c->out, a.o, c->g->width, xa, xb);
 }
 
 /* Whether the AVX-512 loop takes two vectors of pixels at a time (lp's
@@ -512,11 +536,227 @@ static int avx_two_vectors(int vectors) {
   return vectors ? vectors == 2 : !__builtin_cpu_is("amd");
 }
 
-/* the variance is carried only where the level writes it (not the last) */
-#define AVX_ROW(NAME, VALIDITY, WITH_VAR)                                                    \
-  static void NAME(const level_ctx *c, int y, int xa, int xb) {                              \
-    avx_level_row(c, y, xa, xb, VALIDITY, WITH_VAR);                                         \
+AVX_ROW(avx_row_plain, 0, 1)
+AVX_ROW(avx_row_valid, 1, 1)
+AVX_ROW(avx_row_novar, 0, 0)
+AVX_ROW(avx_row_valid_novar, 1, 0)
+#define HAVE_AVX_LEVEL 1
+#elif defined(__AVX2__) && defined(__FMA__) && defined(__x86_64__)
+/*
+ * The default level (exp normal weight) in AVX2 + FMA intrinsics, for
+ * x86-64-v3 builds (AVX2 CPUs without AVX-512): the AVX-512 loop above on
+ * vectors of 8 pixels, with what AVX2 lacks spelled out: the weight floor
+ * as a compare and an AND, 2^floor(t) added into the exponent bits
+ * (vscalefps), the fraction t - floor(t) by vroundps (vreduceps), vrcpps
+ * (12 bits, where vrcp14ps has 14) with a Newton step for the depth
+ * denominators, masked loads and stores at a row's end. gcc's code for the
+ * portable loop below ran about twice as long on the same CPU
+ * (docs/svgf-speed.md, tenth round). The same formulas as the portable
+ * loop within the tests' tolerance (tests/test_svgf.c), not its bits.
+ */
+/* One vector of 8 pixels: what its taps need, and its sums. */
+typedef struct avx_px {
+  __m256 zp, lp, n0p, n1p, n2p, inv_l, sgx, sgy, zl;
+  int surface; /* some lane has a surface (normal not 0) */
+  __m256 sw, s0, s1, s2, sv;
+} avx_px;
+
+static HUSH_ALWAYS_INLINE __m256 avx2_abs(__m256 x) {
+  return _mm256_and_ps(x, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff)));
+}
+
+/* 1/x by vrcpps and one Newton step (relative error about 2^-22). */
+static HUSH_ALWAYS_INLINE __m256 avx2_rcp(__m256 x) {
+  const __m256 y = _mm256_rcp_ps(x);
+  return _mm256_fmadd_ps(y, _mm256_fnmadd_ps(x, y, _mm256_set1_ps(1.0f)), y);
+}
+
+/* 2^t where t > nfloor, else 0 (NaN: 0): weights.h's svgf_avx_exp2_frac
+ * and the floor of the AVX-512 tap. */
+static HUSH_ALWAYS_INLINE __m256 avx2_exp2_floored(__m256 t, __m256 nfloor) {
+  const __m256 keep = _mm256_cmp_ps(t, nfloor, _CMP_GT_OQ);
+  const __m256 fl = _mm256_round_ps(t, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+  const __m256 f = _mm256_sub_ps(t, fl);
+  __m256 y = _mm256_fmadd_ps(f, _mm256_set1_ps(0.07802491592f), _mm256_set1_ps(0.2260639489f));
+  y = _mm256_fmadd_ps(f, y, _mm256_set1_ps(0.6958361991f));
+  y = _mm256_fmadd_ps(f, y, _mm256_set1_ps(0.9999247990f));
+  /* kept lanes have t > nfloor > -126: the result is normal */
+  const __m256i e = _mm256_slli_epi32(_mm256_cvtps_epi32(fl), 23);
+  const __m256 w = _mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(y), e));
+  return _mm256_and_ps(w, keep);
+}
+
+/* One tap at offset off. FULL: all 8 lanes in the row; else the loads are
+ * masked by m (lanes with the sign bit set). */
+static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m256 rdd, avx_px *p,
+                                       __m256 nbias, __m256 nfloor, __m256i m, const int FULL,
+                                       const int VALIDITY, const int WITH_VAR) {
+#define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
+  const __m256 dz = avx2_abs(_mm256_sub_ps(p->zp, LD(r->z)));
+  const __m256 dl = avx2_abs(_mm256_sub_ps(p->lp, LD(r->l)));
+  __m256 t = _mm256_fnmadd_ps(dl, p->inv_l, nbias);
+  t = _mm256_fnmadd_ps(dz, rdd, t);
+  t = _mm256_fmadd_ps(p->n0p, LD(r->n0), t);
+  t = _mm256_fmadd_ps(p->n1p, LD(r->n1), t);
+  t = _mm256_fmadd_ps(p->n2p, LD(r->n2), t);
+  __m256 w = avx2_exp2_floored(t, nfloor);
+  if (VALIDITY) w = _mm256_mul_ps(w, LD(r->ok));
+  p->sw = _mm256_add_ps(p->sw, w);
+  p->s0 = _mm256_fmadd_ps(w, LD(r->c0), p->s0);
+  p->s1 = _mm256_fmadd_ps(w, LD(r->c1), p->s1);
+  p->s2 = _mm256_fmadd_ps(w, LD(r->c2), p->s2);
+  if (WITH_VAR) p->sv = _mm256_fmadd_ps(_mm256_mul_ps(w, w), LD(r->v), p->sv);
+#undef LD
+}
+
+/* The per-pixel terms of the 8 pixels from x and the centre tap's sums. */
+static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, const float *vu,
+                                         const float *vd, const float *gx, const float *gy,
+                                         const float *zon, const float *eps, int x, __m256i m,
+                                         const int FULL, const int VALIDITY, avx_px *p) {
+#define LDX(P, OFF) (FULL ? _mm256_loadu_ps((P) + x + (OFF)) : _mm256_maskload_ps((P) + x + (OFF), m))
+  const __m256 q = _mm256_set1_ps(0.25f), h = _mm256_set1_ps(0.5f);
+  const __m256 hu = _mm256_fmadd_ps(h, LDX(vu, 0), _mm256_mul_ps(q, _mm256_add_ps(LDX(vu, -1), LDX(vu, 1))));
+  const __m256 hm = _mm256_fmadd_ps(h, LDX(r->v, 0), _mm256_mul_ps(q, _mm256_add_ps(LDX(r->v, -1), LDX(r->v, 1))));
+  const __m256 hd = _mm256_fmadd_ps(h, LDX(vd, 0), _mm256_mul_ps(q, _mm256_add_ps(LDX(vd, -1), LDX(vd, 1))));
+  const __m256 var3 = _mm256_max_ps(_mm256_fmadd_ps(h, hm, _mm256_mul_ps(q, _mm256_add_ps(hu, hd))),
+                                    _mm256_setzero_ps());
+  const __m256 e = eps ? LDX(eps, 0) : _mm256_set1_ps(SVGF_EPS_L);
+  /* sqrt(v) = v / sqrt(v) by vrsqrtps and two Newton steps (0 for 0) */
+  const __m256 vs = _mm256_max_ps(var3, _mm256_set1_ps(1e-30f));
+  __m256 rs = _mm256_rsqrt_ps(vs);
+  rs = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5f), rs),
+                     _mm256_fnmadd_ps(_mm256_mul_ps(vs, rs), rs, _mm256_set1_ps(3.0f)));
+  rs = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5f), rs),
+                     _mm256_fnmadd_ps(_mm256_mul_ps(vs, rs), rs, _mm256_set1_ps(3.0f)));
+  const __m256 sd = _mm256_mul_ps(var3, rs);
+  const __m256 dl = _mm256_min_ps(_mm256_fmadd_ps(_mm256_set1_ps(c->sigma_l), sd, e),
+                                  _mm256_set1_ps(1e30f));
+  p->inv_l = _mm256_mul_ps(_mm256_set1_ps(SVGF_LOG2E), avx2_rcp(dl));
+  if (VALIDITY) p->inv_l = _mm256_mul_ps(p->inv_l, LDX(r->ok, 0));
+  const __m256 sz = _mm256_set1_ps(c->g->sigma_z);
+  p->sgx = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDX(gx, 0)), _mm256_set1_ps(1e20f)),
+                         _mm256_set1_ps(-1e20f));
+  p->sgy = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDX(gy, 0)), _mm256_set1_ps(1e20f)),
+                         _mm256_set1_ps(-1e20f));
+  p->zl = _mm256_mul_ps(LDX(zon, 0), _mm256_set1_ps(SVGF_LOG2E));
+  p->zp = LDX(r->z, 0);
+  p->lp = LDX(r->l, 0);
+  const __m256 ns = _mm256_set1_ps(c->nscale);
+  p->n0p = _mm256_mul_ps(ns, LDX(r->n0, 0));
+  p->n1p = _mm256_mul_ps(ns, LDX(r->n1, 0));
+  p->n2p = _mm256_mul_ps(ns, LDX(r->n2, 0));
+  const __m256 zero = _mm256_setzero_ps();
+  const __m256 surf = _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(p->n0p, zero, _CMP_NEQ_UQ),
+                                                _mm256_cmp_ps(p->n1p, zero, _CMP_NEQ_UQ)),
+                                   _mm256_cmp_ps(p->n2p, zero, _CMP_NEQ_UQ));
+  p->surface = _mm256_movemask_ps(_mm256_and_ps(surf, _mm256_castsi256_ps(m))) != 0;
+  const __m256 h0 = _mm256_set1_ps(c->h0);
+  const __m256 hp = VALIDITY ? _mm256_mul_ps(h0, LDX(r->ok, 0)) : h0;
+  p->sw = hp;
+  p->s0 = _mm256_mul_ps(hp, LDX(r->c0, 0));
+  p->s1 = _mm256_mul_ps(hp, LDX(r->c1, 0));
+  p->s2 = _mm256_mul_ps(hp, LDX(r->c2, 0));
+  p->sv = _mm256_mul_ps(_mm256_mul_ps(hp, hp), LDX(r->v, 0));
+#undef LDX
+}
+
+/* The depth factor of pair t (vrcpps and a Newton step: the depth term of
+ * the exponent within 1e-6 relative). */
+static HUSH_ALWAYS_INLINE __m256 avx_rdd(const avx_px *p, const avx_pair *t) {
+  const __m256 a = _mm256_fmadd_ps(p->sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(p->sgy, _mm256_set1_ps(t->fdy)));
+  return _mm256_mul_ps(p->zl, avx2_rcp(_mm256_add_ps(avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z))));
+}
+
+static HUSH_ALWAYS_INLINE void avx2_store(float *p, __m256 v, __m256i m, const int FULL) {
+  if (FULL)
+    _mm256_storeu_ps(p, v);
+  else
+    _mm256_maskstore_ps(p, m, v);
+}
+
+/* The sums of p normalised and stored for the pixels from x (mask m). */
+static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __m256i m,
+                                          float *const out[SVGF_SIGNAL_CHANNELS],
+                                          float *const also[3], const int FULL,
+                                          const int VALIDITY, const int WITH_VAR) {
+  __m256 sw = p->sw, sv = p->sv;
+  if (VALIDITY) {
+    /* nothing valid in reach: stays a hole (0, not valid) */
+    const __m256 some = _mm256_cmp_ps(sw, _mm256_setzero_ps(), _CMP_GT_OQ);
+    if (out[SVGF_VALID])
+      avx2_store(out[SVGF_VALID] + x, _mm256_and_ps(some, _mm256_set1_ps(1.0f)), m, FULL);
+    sw = _mm256_blendv_ps(_mm256_set1_ps(1.0f), sw, some);
+    sv = _mm256_and_ps(sv, some);
   }
+  const __m256 inv = avx2_rcp(sw);
+  const __m256 rr = _mm256_mul_ps(p->s0, inv), gg = _mm256_mul_ps(p->s1, inv),
+               bb = _mm256_mul_ps(p->s2, inv);
+  avx2_store(out[SVGF_R] + x, rr, m, FULL);
+  avx2_store(out[SVGF_G] + x, gg, m, FULL);
+  avx2_store(out[SVGF_B] + x, bb, m, FULL);
+  if (also[0]) {
+    avx2_store(also[0] + x, rr, m, FULL);
+    avx2_store(also[1] + x, gg, m, FULL);
+    avx2_store(also[2] + x, bb, m, FULL);
+  }
+  if (WITH_VAR) avx2_store(out[SVGF_VAR] + x, _mm256_mul_ps(_mm256_mul_ps(sv, inv), inv), m, FULL);
+  if (out[SVGF_LUM]) {
+    const __m256 lum = _mm256_add_ps(
+        _mm256_add_ps(_mm256_mul_ps(_mm256_set1_ps(0.2126f), rr), _mm256_mul_ps(_mm256_set1_ps(0.7152f), gg)),
+        _mm256_mul_ps(_mm256_set1_ps(0.0722f), bb));
+    avx2_store(out[SVGF_LUM] + x, lum, m, FULL);
+  }
+}
+
+/* The 8 pixels from x (n of them, n < 8 only at the row's end). A vector
+ * without a surface skips its taps as the AVX-512 loop's does. */
+static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, const float *vu,
+                                          const float *vd, const float *gx, const float *gy,
+                                          const float *zon, const float *eps,
+                                          const avx_pair *pairs, int npairs, int x, int n,
+                                          float *const out[SVGF_SIGNAL_CHANNELS],
+                                          float *const also[3], const int FULL,
+                                          const int VALIDITY, const int WITH_VAR) {
+  const __m256i m = _mm256_cmpgt_epi32(_mm256_set1_epi32(FULL ? 8 : n),
+                                       _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+  avx_px p;
+  avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p);
+  avx_row rx = *r;
+  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
+  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
+  if (VALIDITY) rx.ok += x;
+  if (p.surface || c->bias < S_FLOOR)
+    for (int k = 0; k < npairs; k++) {
+      const avx_pair *t = &pairs[k];
+      const __m256 rdd = avx_rdd(&p, t);
+      const __m256 nb = _mm256_set1_ps(t->nbias), nf = _mm256_set1_ps(t->nfloor);
+      avx_tap(&rx, t->a, rdd, &p, nb, nf, m, FULL, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->b, rdd, &p, nb, nf, m, FULL, VALIDITY, WITH_VAR);
+    }
+  avx_finish(&p, x, m, out, also, FULL, VALIDITY, WITH_VAR);
+}
+
+static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, int xb,
+                                             const int VALIDITY, const int WITH_VAR) {
+  avx_args a;
+  avx_args_of(c, y, VALIDITY, &a);
+  int x = xa;
+  for (; x + 8 <= xb; x += 8)
+    avx_vector(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, a.npairs, x, 8, a.out,
+               a.also, 1, VALIDITY, WITH_VAR);
+  if (x < xb)
+    avx_vector(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, a.npairs, x, xb - x, a.out,
+               a.also, 0, VALIDITY, WITH_VAR);
+  pad_written(c->out, a.o, c->g->width, xa, xb);
+}
+
+/* One vector of pixels at a time (lp's vectors is for the AVX-512 loop). */
+static int avx_two_vectors(int vectors) {
+  (void)vectors;
+  return 0;
+}
+
 AVX_ROW(avx_row_plain, 0, 1)
 AVX_ROW(avx_row_valid, 1, 1)
 AVX_ROW(avx_row_novar, 0, 0)

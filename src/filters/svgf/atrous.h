@@ -10,8 +10,9 @@
  * Per row of a level, per vector of pixels, every tap with the sums in
  * registers (mirrored tap pairs share the depth-gradient denominator);
  * borders handled by the input's row padding (x) and one row clamp per tap
- * row (y). AVX-512 intrinsics where the build has them, else a portable
- * loop the compiler vectorises (docs/svgf-speed.md). A frame's levels run
+ * row (y). AVX-512 intrinsics where the build has them, else AVX2 + FMA
+ * intrinsics (x86-64-v3 builds), else a portable loop the compiler
+ * vectorises (docs/svgf-speed.md). A frame's levels run
  * one after the other or, on larger frames, together as a wavefront down
  * the rows (svgf_atrous_levels). Every pixel is computed on its own: the
  * result depends neither on the thread count nor on the schedule.
@@ -65,7 +66,7 @@ typedef struct svgf_level_params {
   const float *eps_l; /* per-pixel luminance epsilon (unpadded), or NULL: SVGF_EPS_L */
   int validity;       /* taps and centre weighted by VALID (progressive, Dundr §4.2) */
   int normal_exp;     /* normal weight 2^(-sigma_n log2 e (1 - dot)), else max(0, dot)^sigma_n */
-  int portable;       /* 1: never the AVX-512 loop (tests compare the two) */
+  int portable;       /* 1: never the intrinsic (AVX-512 or AVX2) loop (tests compare the two) */
   int vectors;        /* AVX-512 loop: 0 this CPU's choice, 1 or 2 vectors of pixels at a time */
 } svgf_level_params;
 
