@@ -561,45 +561,20 @@ typedef struct avx_px {
   __m256 sw, s0, s1, s2, sv;
 } avx_px;
 
-static HUSH_ALWAYS_INLINE __m256 avx2_abs(__m256 x) {
-  return _mm256_and_ps(x, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff)));
-}
-
-/* 1/x by vrcpps and one Newton step (relative error about 2^-22). */
-static HUSH_ALWAYS_INLINE __m256 avx2_rcp(__m256 x) {
-  const __m256 y = _mm256_rcp_ps(x);
-  return _mm256_fmadd_ps(y, _mm256_fnmadd_ps(x, y, _mm256_set1_ps(1.0f)), y);
-}
-
-/* 2^t where t > nfloor, else 0 (NaN: 0): weights.h's svgf_avx_exp2_frac
- * and the floor of the AVX-512 tap. */
-static HUSH_ALWAYS_INLINE __m256 avx2_exp2_floored(__m256 t, __m256 nfloor) {
-  const __m256 keep = _mm256_cmp_ps(t, nfloor, _CMP_GT_OQ);
-  const __m256 fl = _mm256_round_ps(t, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
-  const __m256 f = _mm256_sub_ps(t, fl);
-  __m256 y = _mm256_fmadd_ps(f, _mm256_set1_ps(0.07802491592f), _mm256_set1_ps(0.2260639489f));
-  y = _mm256_fmadd_ps(f, y, _mm256_set1_ps(0.6958361991f));
-  y = _mm256_fmadd_ps(f, y, _mm256_set1_ps(0.9999247990f));
-  /* kept lanes have t > nfloor > -126: the result is normal */
-  const __m256i e = _mm256_slli_epi32(_mm256_cvtps_epi32(fl), 23);
-  const __m256 w = _mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(y), e));
-  return _mm256_and_ps(w, keep);
-}
-
 /* One tap at offset off. FULL: all 8 lanes in the row; else the loads are
  * masked by m (lanes with the sign bit set). */
 static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m256 rdd, avx_px *p,
                                        __m256 nbias, __m256 nfloor, __m256i m, const int FULL,
                                        const int VALIDITY, const int WITH_VAR) {
 #define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
-  const __m256 dz = avx2_abs(_mm256_sub_ps(p->zp, LD(r->z)));
-  const __m256 dl = avx2_abs(_mm256_sub_ps(p->lp, LD(r->l)));
+  const __m256 dz = svgf_avx2_abs(_mm256_sub_ps(p->zp, LD(r->z)));
+  const __m256 dl = svgf_avx2_abs(_mm256_sub_ps(p->lp, LD(r->l)));
   __m256 t = _mm256_fnmadd_ps(dl, p->inv_l, nbias);
   t = _mm256_fnmadd_ps(dz, rdd, t);
   t = _mm256_fmadd_ps(p->n0p, LD(r->n0), t);
   t = _mm256_fmadd_ps(p->n1p, LD(r->n1), t);
   t = _mm256_fmadd_ps(p->n2p, LD(r->n2), t);
-  __m256 w = avx2_exp2_floored(t, nfloor);
+  __m256 w = svgf_avx2_exp2_floored(t, nfloor);
   if (VALIDITY) w = _mm256_mul_ps(w, LD(r->ok));
   p->sw = _mm256_add_ps(p->sw, w);
   p->s0 = _mm256_fmadd_ps(w, LD(r->c0), p->s0);
@@ -632,7 +607,7 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
   const __m256 sd = _mm256_mul_ps(var3, rs);
   const __m256 dl = _mm256_min_ps(_mm256_fmadd_ps(_mm256_set1_ps(c->sigma_l), sd, e),
                                   _mm256_set1_ps(1e30f));
-  p->inv_l = _mm256_mul_ps(_mm256_set1_ps(SVGF_LOG2E), avx2_rcp(dl));
+  p->inv_l = _mm256_mul_ps(_mm256_set1_ps(SVGF_LOG2E), svgf_avx2_rcp(dl));
   if (VALIDITY) p->inv_l = _mm256_mul_ps(p->inv_l, LDX(r->ok, 0));
   const __m256 sz = _mm256_set1_ps(c->g->sigma_z);
   p->sgx = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDX(gx, 0)), _mm256_set1_ps(1e20f)),
@@ -665,7 +640,7 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
  * the exponent within 1e-6 relative). */
 static HUSH_ALWAYS_INLINE __m256 avx_rdd(const avx_px *p, const avx_pair *t) {
   const __m256 a = _mm256_fmadd_ps(p->sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(p->sgy, _mm256_set1_ps(t->fdy)));
-  return _mm256_mul_ps(p->zl, avx2_rcp(_mm256_add_ps(avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z))));
+  return _mm256_mul_ps(p->zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z))));
 }
 
 static HUSH_ALWAYS_INLINE void avx2_store(float *p, __m256 v, __m256i m, const int FULL) {
@@ -689,7 +664,7 @@ static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __m256i m,
     sw = _mm256_blendv_ps(_mm256_set1_ps(1.0f), sw, some);
     sv = _mm256_and_ps(sv, some);
   }
-  const __m256 inv = avx2_rcp(sw);
+  const __m256 inv = svgf_avx2_rcp(sw);
   const __m256 rr = _mm256_mul_ps(p->s0, inv), gg = _mm256_mul_ps(p->s1, inv),
                bb = _mm256_mul_ps(p->s2, inv);
   avx2_store(out[SVGF_R] + x, rr, m, FULL);

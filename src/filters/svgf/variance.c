@@ -171,14 +171,9 @@ VARIANCE_ROWS(variance_rows_pow128, 7)
 VARIANCE_ROWS(variance_rows_pow256, 8)
 VARIANCE_ROWS(variance_rows_any, -1)
 
-#if defined(__AVX512F__) && defined(__x86_64__)
-/*
- * The exp-normal-weight estimate in AVX-512 intrinsics, as the a-trous
- * (atrous.c): per vector of 16 pixels with a short-history pixel, the 48
- * taps with the sums in registers; a vector whose windows hold a pixel
- * without data goes through variance_row_valid. The weight floor is the
- * zero mask of the exp; the depth denominators use vrcp14ps.
- */
+#if (defined(__AVX512F__) || (defined(__AVX2__) && defined(__FMA__))) && defined(__x86_64__)
+/* What the intrinsic loops below (AVX-512, else AVX2) share: a row's planes
+ * and its 24 tap pairs, rows clamped at the frame's border. */
 #include <immintrin.h>
 
 #define NPAIRS ((2 * R + 1) * (2 * R + 1) / 2)
@@ -187,6 +182,54 @@ typedef struct avx_vpair {
   ptrdiff_t ga, gb, ma, mb; /* tap offsets in the guide and the moments, in floats */
   float fdx, fdy;
 } avx_vpair;
+
+/* Row y as the intrinsic loops take it. */
+typedef struct vrow {
+  avx_vpair pairs[NPAIRS];
+  const float *z, *n0, *n1, *n2, *m1, *m2, *a, *gx, *gy, *zon;
+  float *v;
+} vrow;
+
+static void vrow_of(const svgf_guide *g, const svgf_padded *m, const float *age, float *var,
+                    int y, vrow *r) {
+  const int W = g->width, H = g->height;
+  const size_t gs = g->zn->stride, ms = m->stride;
+  int k = 0;
+  for (int dy = 0; dy <= R; dy++)
+    for (int dx = -R; dx <= R; dx++) {
+      if (dy == 0 && dx <= 0) continue;
+      const int ya = clampi(y + dy, 0, H - 1) - y, yb = clampi(y - dy, 0, H - 1) - y;
+      r->pairs[k].ga = (ptrdiff_t)ya * (ptrdiff_t)gs + dx;
+      r->pairs[k].gb = (ptrdiff_t)yb * (ptrdiff_t)gs - dx;
+      r->pairs[k].ma = (ptrdiff_t)ya * (ptrdiff_t)ms + dx;
+      r->pairs[k].mb = (ptrdiff_t)yb * (ptrdiff_t)ms - dx;
+      r->pairs[k].fdx = (float)dx;
+      r->pairs[k].fdy = (float)dy;
+      k++;
+    }
+  r->z = g->zn->plane[0] + (size_t)y * gs;
+  r->n0 = g->zn->plane[1] + (size_t)y * gs;
+  r->n1 = g->zn->plane[2] + (size_t)y * gs;
+  r->n2 = g->zn->plane[3] + (size_t)y * gs;
+  r->m1 = m->plane[0] + (size_t)y * ms;
+  r->m2 = m->plane[1] + (size_t)y * ms;
+  const size_t pi = (size_t)y * W;
+  r->a = age + pi;
+  r->gx = g->gx + pi;
+  r->gy = g->gy + pi;
+  r->zon = g->zon + pi;
+  r->v = var + pi;
+}
+#endif
+
+#if defined(__AVX512F__) && defined(__x86_64__)
+/*
+ * The exp-normal-weight estimate in AVX-512 intrinsics, as the a-trous
+ * (atrous.c): per vector of 16 pixels with a short-history pixel, the 48
+ * taps with the sums in registers; a vector whose windows hold a pixel
+ * without data goes through variance_row_valid. The weight floor is the
+ * zero mask of the exp; the depth denominators use vrcp14ps.
+ */
 
 static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const float *n1,
                                         const float *n2, const float *m1, const float *m2,
@@ -209,27 +252,12 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
                              float min_age, float *var, int y, int has_empty,
                              const svgf_exp2_poly *poly) {
   const int W = g->width, H = g->height;
-  const size_t gs = g->zn->stride, ms = m->stride;
-  avx_vpair pairs[NPAIRS];
-  int k = 0;
-  for (int dy = 0; dy <= R; dy++)
-    for (int dx = -R; dx <= R; dx++) {
-      if (dy == 0 && dx <= 0) continue;
-      const int ya = clampi(y + dy, 0, H - 1) - y, yb = clampi(y - dy, 0, H - 1) - y;
-      pairs[k].ga = (ptrdiff_t)ya * (ptrdiff_t)gs + dx;
-      pairs[k].gb = (ptrdiff_t)yb * (ptrdiff_t)gs - dx;
-      pairs[k].ma = (ptrdiff_t)ya * (ptrdiff_t)ms + dx;
-      pairs[k].mb = (ptrdiff_t)yb * (ptrdiff_t)ms - dx;
-      pairs[k].fdx = (float)dx;
-      pairs[k].fdy = (float)dy;
-      k++;
-    }
-  const float *z = g->zn->plane[0] + (size_t)y * gs, *n0 = g->zn->plane[1] + (size_t)y * gs,
-              *n1 = g->zn->plane[2] + (size_t)y * gs, *n2 = g->zn->plane[3] + (size_t)y * gs;
-  const float *m1 = m->plane[0] + (size_t)y * ms, *m2 = m->plane[1] + (size_t)y * ms;
-  const size_t pi = (size_t)y * W;
-  const float *a = age + pi, *gx = g->gx + pi, *gy = g->gy + pi, *zon = g->zon + pi;
-  float *v = var + pi;
+  vrow r;
+  vrow_of(g, m, age, var, y, &r);
+  const avx_vpair *pairs = r.pairs;
+  const float *z = r.z, *n0 = r.n0, *n1 = r.n1, *n2 = r.n2, *m1 = r.m1, *m2 = r.m2;
+  const float *a = r.a, *gx = r.gx, *gy = r.gy, *zon = r.zon;
+  float *v = r.v;
   const __m512 sn = _mm512_set1_ps(g->np.sigma_n_log2e), nbias = _mm512_set1_ps(-g->np.sigma_n_log2e);
   const __m512 sz = _mm512_set1_ps(g->sigma_z), eps_z = _mm512_set1_ps(SVGF_EPS_Z);
   const int sky_skip = g->np.sigma_n_log2e >= 20.0f * SVGF_LOG2E;
@@ -283,6 +311,101 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
   }
 }
 
+#define HAVE_AVX_VARIANCE 1
+#elif defined(__AVX2__) && defined(__FMA__) && defined(__x86_64__)
+/*
+ * The same in AVX2 + FMA intrinsics (x86-64-v3 builds), on vectors of 8
+ * pixels: the weight floor as a compare and an AND, vrcpps with a Newton
+ * step for the depth denominators (weights.h), masked loads and stores
+ * where a row ends. The formulas within the tests' tolerance, not the
+ * portable loop's bits.
+ */
+
+static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const float *n1,
+                                        const float *n2, const float *m1, const float *m2,
+                                        ptrdiff_t go, ptrdiff_t mo, __m256 rdd, __m256 zp,
+                                        __m256 n0p, __m256 n1p, __m256 n2p, __m256 nbias,
+                                        __m256 *sw, __m256 *s1, __m256 *s2) {
+  const __m256 dz = svgf_avx2_abs(_mm256_sub_ps(zp, _mm256_loadu_ps(z + go)));
+  __m256 t = _mm256_fnmadd_ps(dz, rdd, nbias);
+  t = _mm256_fmadd_ps(n0p, _mm256_loadu_ps(n0 + go), t);
+  t = _mm256_fmadd_ps(n1p, _mm256_loadu_ps(n1 + go), t);
+  t = _mm256_fmadd_ps(n2p, _mm256_loadu_ps(n2 + go), t);
+  const __m256 w = svgf_avx2_exp2_floored(t, _mm256_set1_ps(-20.0f * SVGF_LOG2E));
+  *sw = _mm256_add_ps(*sw, w);
+  *s1 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m1 + mo), *s1);
+  *s2 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m2 + mo), *s2);
+}
+
+static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const float *age,
+                             float min_age, float *var, int y, int has_empty,
+                             const svgf_exp2_poly *poly) {
+  const int W = g->width, H = g->height;
+  vrow r;
+  vrow_of(g, m, age, var, y, &r);
+  const avx_vpair *pairs = r.pairs;
+  const float *z = r.z, *n0 = r.n0, *n1 = r.n1, *n2 = r.n2, *m1 = r.m1, *m2 = r.m2;
+  const float *a = r.a, *gx = r.gx, *gy = r.gy, *zon = r.zon;
+  float *v = r.v;
+  const __m256 sn = _mm256_set1_ps(g->np.sigma_n_log2e), nbias = _mm256_set1_ps(-g->np.sigma_n_log2e);
+  const __m256 sz = _mm256_set1_ps(g->sigma_z), eps_z = _mm256_set1_ps(SVGF_EPS_Z);
+  const __m256 zero = _mm256_setzero_ps();
+  const int sky_skip = g->np.sigma_n_log2e >= 20.0f * SVGF_LOG2E;
+  for (int x = 0; x < W; x += 8) {
+    const int n = W - x < 8 ? W - x : 8;
+    const __m256i lanes = _mm256_cmpgt_epi32(_mm256_set1_epi32(n), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+#define LDL(P) _mm256_maskload_ps((P) + x, lanes)
+    const __m256 young = _mm256_and_ps(_mm256_cmp_ps(LDL(a), _mm256_set1_ps(min_age), _CMP_LT_OQ),
+                                       _mm256_castsi256_ps(lanes));
+    const int young_bits = _mm256_movemask_ps(young);
+    if (!young_bits) continue;
+    if (has_empty && window_has_empty(age, W, H, y, x, n)) {
+      variance_row_valid(g, m, age, min_age, var, y, x, n, poly, SVGF_NORMAL_EXP);
+      continue;
+    }
+    /* the tail's lanes past the row read the pads and the next row: their
+     * sums are never stored */
+    const __m256 sgx = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDL(gx)), _mm256_set1_ps(1e20f)),
+                                     _mm256_set1_ps(-1e20f));
+    const __m256 sgy = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDL(gy)), _mm256_set1_ps(1e20f)),
+                                     _mm256_set1_ps(-1e20f));
+    const __m256 zl = _mm256_mul_ps(LDL(zon), _mm256_set1_ps(SVGF_LOG2E));
+    const __m256 zp = LDL(z);
+    const __m256 n0p = _mm256_mul_ps(sn, LDL(n0));
+    const __m256 n1p = _mm256_mul_ps(sn, LDL(n1));
+    const __m256 n2p = _mm256_mul_ps(sn, LDL(n2));
+    __m256 sw = _mm256_set1_ps(1.0f);
+    __m256 s1 = LDL(m1), s2 = LDL(m2);
+#undef LDL
+    /* the sky's vectors skip their taps, as the AVX-512 loop's */
+    const __m256 surf = _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(n0p, zero, _CMP_NEQ_UQ),
+                                                  _mm256_cmp_ps(n1p, zero, _CMP_NEQ_UQ)),
+                                     _mm256_cmp_ps(n2p, zero, _CMP_NEQ_UQ));
+    const int surface = _mm256_movemask_ps(_mm256_and_ps(surf, young)) != 0;
+    const int npairs = surface || !sky_skip ? NPAIRS : 0;
+    for (int p = 0; p < npairs; p++) {
+      const avx_vpair *t = &pairs[p];
+      const __m256 d = _mm256_fmadd_ps(sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(sgy, _mm256_set1_ps(t->fdy)));
+      const __m256 rdd = _mm256_mul_ps(zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(d), eps_z)));
+      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->ga, t->ma, rdd, zp, n0p, n1p, n2p,
+               nbias, &sw, &s1, &s2);
+      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->gb, t->mb, rdd, zp, n0p, n1p, n2p,
+               nbias, &sw, &s1, &s2);
+    }
+    const __m256 inv = svgf_avx2_rcp(sw);
+    const __m256 e1 = _mm256_mul_ps(s1, inv), e2 = _mm256_mul_ps(s2, inv);
+    const __m256 est = _mm256_max_ps(_mm256_fnmadd_ps(e1, e1, e2), zero);
+    _mm256_maskstore_ps(v + x, _mm256_castps_si256(young), est);
+  }
+}
+
+#define HAVE_AVX_VARIANCE 1
+#else
+VARIANCE_ROWS(variance_rows_exp, SVGF_NORMAL_EXP)
+#define HAVE_AVX_VARIANCE 0
+#endif
+
+#if HAVE_AVX_VARIANCE
 static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, const float *age,
                                   float min_age, float *var, int threads) {
   const svgf_exp2_poly poly = svgf_exp2_poly_scaled(1.0f);
@@ -294,10 +417,6 @@ static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, con
   for (int y = 0; y < g->height; y++)
     avx_variance_row(g, m, age, min_age, var, y, has_empty, &poly);
 }
-#define HAVE_AVX_VARIANCE 1
-#else
-VARIANCE_ROWS(variance_rows_exp, SVGF_NORMAL_EXP)
-#define HAVE_AVX_VARIANCE 0
 #endif
 
 void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,

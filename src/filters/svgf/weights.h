@@ -221,6 +221,36 @@ static HUSH_ALWAYS_INLINE __m512 svgf_avx_rcp(__m512 x) {
   return _mm512_fmadd_ps(y, _mm512_fnmadd_ps(x, y, _mm512_set1_ps(1.0f)), y);
 }
 
+#elif defined(__AVX2__) && defined(__FMA__) && defined(__x86_64__)
+/* The AVX2 loops' (x86-64-v3 builds: atrous.c, variance.c) pieces: the
+ * AVX-512 ones above with what AVX2 lacks spelled out. */
+#include <immintrin.h>
+
+static HUSH_ALWAYS_INLINE __m256 svgf_avx2_abs(__m256 x) {
+  return _mm256_and_ps(x, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff)));
+}
+
+/* 1/x by vrcpps and one Newton step (relative error about 2^-22). */
+static HUSH_ALWAYS_INLINE __m256 svgf_avx2_rcp(__m256 x) {
+  const __m256 y = _mm256_rcp_ps(x);
+  return _mm256_fmadd_ps(y, _mm256_fnmadd_ps(x, y, _mm256_set1_ps(1.0f)), y);
+}
+
+/* 2^t where t > nfloor, else 0 (NaN: 0): svgf_avx_exp2_frac's polynomial
+ * and the floor of the AVX-512 tap. */
+static HUSH_ALWAYS_INLINE __m256 svgf_avx2_exp2_floored(__m256 t, __m256 nfloor) {
+  const __m256 keep = _mm256_cmp_ps(t, nfloor, _CMP_GT_OQ);
+  const __m256 fl = _mm256_round_ps(t, _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC);
+  const __m256 f = _mm256_sub_ps(t, fl);
+  __m256 y = _mm256_fmadd_ps(f, _mm256_set1_ps(0.07802491592f), _mm256_set1_ps(0.2260639489f));
+  y = _mm256_fmadd_ps(f, y, _mm256_set1_ps(0.6958361991f));
+  y = _mm256_fmadd_ps(f, y, _mm256_set1_ps(0.9999247990f));
+  /* kept lanes have t > nfloor > -126: the result is normal */
+  const __m256i e = _mm256_slli_epi32(_mm256_cvtps_epi32(fl), 23);
+  const __m256 w = _mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(y), e));
+  return _mm256_and_ps(w, keep);
+}
+
 #endif
 
 #endif
