@@ -14,7 +14,7 @@
 #include <stdlib.h>
 #include <string.h>
 
-#if defined(__AVX512F__) && defined(__x86_64__)
+#if defined(__x86_64__)
 #include <immintrin.h>
 #endif
 
@@ -304,6 +304,62 @@ static int streamable(const hush_image_view *v, int nc, const float *row, float 
 }
 #endif
 
+#if defined(__x86_64__) && !defined(__AVX512F__)
+/*
+ * stream_row's streaming stores for builds without AVX-512 (x86-64-v3,
+ * the baseline): a row goes through an L1 buffer span by span (the same
+ * import_row, so the same values), its NaN/Inf counted there, optionally
+ * divided by max(divisor, floor) as albedo.c's demodulation divides, then
+ * streamed to the planes: ordinary stores would first read each line for
+ * ownership only to push it out again. Measured on the x86-64-v3 build
+ * (docs/svgf-speed.md, tenth round).
+ */
+#define IMPORT_SPAN 256
+
+static int spans_streamable(const hush_image_view *v, int nc, float *const *out) {
+  if (hush__format_element_size(v->format) != 4 || nc > 3) return 0;
+  for (int c = 0; c < nc; c++)
+    if ((uintptr_t)out[c] % 32 != 0) return 0;
+  return 1;
+}
+
+static void stream_span(float *restrict dst, const float *restrict src, uint32_t n) {
+  uint32_t x = 0;
+#if defined(__AVX__)
+  for (; x + 8 <= n; x += 8) _mm256_stream_ps(dst + x, _mm256_load_ps(src + x));
+#else
+  for (; x + 4 <= n; x += 4) _mm_stream_ps(dst + x, _mm_load_ps(src + x));
+#endif
+  for (; x < n; x++) dst[x] = src[x];
+}
+
+static size_t import_spans(const hush_image_view *v, uint32_t y, int nc, float *const *out,
+                           const float *const *divisor, float floor) {
+  const size_t ps = hush__view_pixel_stride(v), rs = hush__view_row_stride(v);
+  float buf[3][IMPORT_SPAN] __attribute__((aligned(64)));
+  float *const tmp[3] = {buf[0], buf[1], buf[2]};
+  size_t bad = 0;
+  for (uint32_t x0 = 0; x0 < v->width; x0 += IMPORT_SPAN) {
+    const uint32_t n = v->width - x0 < IMPORT_SPAN ? v->width - x0 : IMPORT_SPAN;
+    hush_image_view span = *v;
+    span.width = n;
+    span.byte_offset += (size_t)x0 * ps;
+    import_row(&span, ps, rs, y, nc, tmp);
+    bad += count_nonfinite(tmp, nc, n);
+    for (int c = 0; c < nc; c++) {
+      if (divisor) {
+        const float *restrict d = divisor[c] + x0;
+        float *restrict t = tmp[c];
+        for (uint32_t x = 0; x < n; x++) t[x] = t[x] / (d[x] > floor ? d[x] : floor);
+      }
+      stream_span(out[c] + x0, tmp[c], n);
+    }
+  }
+  _mm_sfence(); /* streamed stores are weakly ordered: visible before the row is done */
+  return bad;
+}
+#endif
+
 static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst,
                               int stream) {
   const int nc = dst->channels;
@@ -317,6 +373,8 @@ static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar 
     _mm_sfence(); /* streamed stores are weakly ordered: visible before the row is done */
     return bad;
   }
+#elif defined(__x86_64__)
+  if (stream && spans_streamable(v, nc, out)) return import_spans(v, y, nc, out, NULL, 0.0f);
 #else
   (void)stream;
 #endif
@@ -369,6 +427,17 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
   }
   _mm_sfence();
   *bad = n;
+  return 1;
+#elif defined(__x86_64__)
+  float *out[3];
+  const float *div[3];
+  if (dst->channels != 3) return 0;
+  for (int c = 0; c < 3; c++) {
+    out[c] = dst->plane[c] + (size_t)y * v->width;
+    div[c] = divisor->plane[c] + (size_t)y * v->width;
+  }
+  if (!spans_streamable(v, 3, out)) return 0;
+  *bad = import_spans(v, y, 3, out, div, floor);
   return 1;
 #else
   (void)v, (void)y, (void)dst, (void)divisor, (void)floor, (void)bad;
