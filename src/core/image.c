@@ -388,7 +388,7 @@ size_t hush__view_import_row(const hush_image_view *v, uint32_t y, hush_planar *
 
 int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_planar *dst,
                                   const hush_planar *divisor, float floor, size_t *bad) {
-#if defined(__AVX512F__) && defined(__x86_64__)
+#if defined(__x86_64__)
   const uint32_t w = v->width;
   float *out[3];
   const float *div[3];
@@ -397,6 +397,8 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
     out[c] = dst->plane[c] + (size_t)y * w;
     div[c] = divisor->plane[c] + (size_t)y * w;
   }
+#endif
+#if defined(__AVX512F__) && defined(__x86_64__)
   const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
   const float *rf = (const float *)(const void *)row;
   if (!streamable(v, 3, rf, out)) return 0;
@@ -429,13 +431,6 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
   *bad = n;
   return 1;
 #elif defined(__x86_64__)
-  float *out[3];
-  const float *div[3];
-  if (dst->channels != 3) return 0;
-  for (int c = 0; c < 3; c++) {
-    out[c] = dst->plane[c] + (size_t)y * v->width;
-    div[c] = divisor->plane[c] + (size_t)y * v->width;
-  }
   if (!spans_streamable(v, 3, out)) return 0;
   *bad = import_spans(v, y, 3, out, div, floor);
   return 1;

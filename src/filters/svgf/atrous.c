@@ -250,6 +250,15 @@ typedef struct avx_row {
   const float *z, *n0, *n1, *n2, *l, *c0, *c1, *c2, *v, *ok;
 } avx_row;
 
+/* The row planes advanced to pixel x. */
+static HUSH_ALWAYS_INLINE avx_row avx_row_at(const avx_row *r, int x, const int VALIDITY) {
+  avx_row rx = *r;
+  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
+  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
+  if (VALIDITY) rx.ok += x;
+  return rx;
+}
+
 /* Row y of a level as the vector loops take it. */
 typedef struct avx_args {
   avx_row r;
@@ -448,15 +457,6 @@ static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __mmask16 m,
         _mm512_mul_ps(_mm512_set1_ps(0.0722f), bb));
     _mm512_mask_storeu_ps(out[SVGF_LUM] + x, m, lum);
   }
-}
-
-/* The row planes advanced to pixel x. */
-static HUSH_ALWAYS_INLINE avx_row avx_row_at(const avx_row *r, int x, const int VALIDITY) {
-  avx_row rx = *r;
-  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
-  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
-  if (VALIDITY) rx.ok += x;
-  return rx;
 }
 
 /*
@@ -699,10 +699,7 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
                                        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   avx_px p;
   avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p);
-  avx_row rx = *r;
-  rx.z += x; rx.n0 += x; rx.n1 += x; rx.n2 += x; rx.l += x;
-  rx.c0 += x; rx.c1 += x; rx.c2 += x; rx.v += x;
-  if (VALIDITY) rx.ok += x;
+  const avx_row rx = avx_row_at(r, x, VALIDITY);
   if (p.surface || c->bias < S_FLOOR)
     for (int k = 0; k < npairs; k++) {
       const avx_pair *t = &pairs[k];
