@@ -59,6 +59,48 @@ static void make_bsdf(const bsdf_case *c, hush_vec3 wo, hush_bsdf *b) {
   hush__bsdf_setup(b, &m, &s, wo);
 }
 
+/* The demodulation albedo stands for what the surface reflects: the filters
+ * divide the radiance by it, so where it is far below the reflectance a
+ * highlight becomes a huge demodulated value (a plastic's black base under
+ * its coat), and where it is far above, the light is lost in the division.
+ * Against the directional albedo sampled at near-normal incidence. */
+static void test_demodulation_albedo(void) {
+  const bsdf_case cases[] = {
+      {"lambert-0.5", HUSH_MAT_DIFFUSE, 0.5f, 0.0f, 0.0f, 0},
+      {"plastic-black-base", HUSH_MAT_PLASTIC, 0.0f, 0.04f, 0.3f, 0},
+      {"plastic-grey-base", HUSH_MAT_PLASTIC, 0.5f, 0.04f, 0.3f, 0},
+      {"plastic-white-base", HUSH_MAT_PLASTIC, 1.0f, 0.04f, 0.3f, 0},
+      {"plastic-shiny-black", HUSH_MAT_PLASTIC, 0.0f, 0.3f, 0.2f, 0},
+  };
+  const hush_vec3 wo = hush_v3(sqrtf(1.0f - 0.95f * 0.95f), 0.0f, 0.95f);
+  for (size_t ci = 0; ci < sizeof cases / sizeof cases[0]; ci++) {
+    const bsdf_case *c = &cases[ci];
+    hush_material m;
+    memset(&m, 0, sizeof m);
+    m.type = c->type;
+    m.specular[0] = m.specular[1] = m.specular[2] = c->specular;
+    hush_surface surf;
+    memset(&surf, 0, sizeof surf);
+    surf.albedo[0] = surf.albedo[1] = surf.albedo[2] = c->diffuse;
+    float alb[3];
+    hush__bsdf_albedo(&m, &surf, alb);
+    hush_bsdf b;
+    make_bsdf(c, wo, &b);
+    double reflected = 0.0;
+    const int n = 40000;
+    for (int i = 0; i < n; i++) {
+      const float u[3] = {rnd(4, i), rnd(5, i), rnd(6, i)};
+      hush_bsdf_sample smp;
+      if (hush__bsdf_sample(&b, wo, u, &smp)) reflected += smp.weight[0];
+    }
+    reflected /= n;
+    CHECK_MSG(alb[0] <= 1.0f && alb[0] == alb[1] && alb[1] == alb[2], "%s: albedo %g %g %g", c->name,
+              alb[0], alb[1], alb[2]);
+    CHECK_MSG(reflected > 0.5 * alb[0] && reflected < 2.0 * alb[0],
+              "%s: demodulation albedo %.4f, reflectance %.4f", c->name, alb[0], reflected);
+  }
+}
+
 static void test_bsdfs(void) {
   const bsdf_case cases[] = {
       {"lambert", HUSH_MAT_DIFFUSE, 1.0f, 0.0f, 0.0f, 0},
@@ -1099,6 +1141,7 @@ int main(void) {
   test_dir_to_uv();
   test_sky_table();
   test_bsdfs();
+  test_demodulation_albedo();
   test_envmap();
   test_envmap_shortcuts();
   test_deferred_light_samples();

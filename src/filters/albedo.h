@@ -8,8 +8,17 @@
 
 #include "core/image.h"
 
-/* Albedo below this counts as this: black texels must not divide by 0. */
-#define HUSH_ALBEDO_EPS 1e-3f
+/*
+ * Albedo below this counts as this. Black texels must not divide by 0, and
+ * a channel a renderer reports as nearly 0 where the surface still reflects
+ * (the blue of an orange plastic under its white coat: albedo 0.001,
+ * radiance 0.1) must not turn that light into a demodulated value 100x
+ * its neighbours', which BMFR's fit and the a-trous weights then spread over
+ * the block (blue halos around the living room's picture frame: bmfr RMSE
+ * 1.83 -> 1.65 at 2e-2, docs/renderer.md "Demodulation albedo"). The same
+ * floor as psf's.
+ */
+#define HUSH_ALBEDO_EPS 2e-2f
 
 /* color[c] /= max(albedo[c], eps), in place (3 channels). */
 void hush__demodulate(hush_planar *color, const hush_planar *albedo, int threads);

@@ -87,7 +87,7 @@ extern const char *const hush__nonfinite_names[];
   "reject history from a pixel with another id (when 'id' is bound)", NULL}
 #define HUSH_PARAM_DEMODULATE_ENTRY \
   {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1, \
-  "with 'albedo' bound: filter color / max(albedo, 1e-3), multiply back after", NULL}
+  "with 'albedo' bound: filter color / max(albedo, 0.02), multiply back after", NULL}
 
 static inline double hush__param(const struct hush_filter_t *f, int index) {
   return f->params[index];

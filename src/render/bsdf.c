@@ -128,13 +128,18 @@ static hush_vec3 cosine_hemisphere(float u1, float u2) {
 
 /* ---- set-up ---------------------------------------------------------------------- */
 
+static float material_ior(const hush_material *m) { return m->ior > 0.0f ? m->ior : 1.5f; }
+
+/* Fresnel reflectance at normal incidence. */
+static float coat_f0(float ior) { return ((ior - 1.0f) * (ior - 1.0f)) / ((ior + 1.0f) * (ior + 1.0f)); }
+
 void hush__bsdf_setup(hush_bsdf *b, const hush_material *m, const hush_surface *s, hush_vec3 wo) {
   memset(b, 0, sizeof *b);
   b->type = m->type;
   memcpy(b->diffuse, s->albedo, sizeof b->diffuse);
   memcpy(b->specular, m->specular, sizeof b->specular);
   b->alpha = m->roughness > 0.0f ? hush_fmaxf(m->roughness, MIN_ALPHA) : 0.0f;
-  const float ior = m->ior > 0.0f ? m->ior : 1.5f;
+  const float ior = material_ior(m);
   b->eta = ior;
   b->n = s->ns;
   b->ng = s->ng;
@@ -149,7 +154,7 @@ void hush__bsdf_setup(hush_bsdf *b, const hush_material *m, const hush_surface *
   if (m->type == HUSH_MAT_DIELECTRIC) b->eta = s->back_face ? 1.0f / ior : ior;
   if (m->type == HUSH_MAT_PLASTIC) {
     /* Ks is the coat's normal-incidence reflectance: Fresnel(ior) scaled to it */
-    const float f0 = ((ior - 1.0f) * (ior - 1.0f)) / ((ior + 1.0f) * (ior + 1.0f));
+    const float f0 = coat_f0(ior);
     for (int k = 0; k < 3; k++) b->specular[k] = hush_fminf(1.0f, hush_fmaxf(0.0f, m->specular[k] / f0));
     b->fdr_int = fresnel_diffuse_reflectance(1.0f / ior);
   }
@@ -177,6 +182,18 @@ void hush__bsdf_albedo(const hush_material *m, const hush_surface *s, float out[
   case HUSH_MAT_DIELECTRIC:
     set3(out, 1.0f, 1.0f, 1.0f);
     break;
+  case HUSH_MAT_PLASTIC: {
+    /* The coat reflects whatever the base's colour: with the base alone,
+     * an orange frame's blue (Kd 0.001) would divide its white highlight by
+     * 0.001. ks + (1 - ks) Kd: the lobes' albedos at normal incidence, ks
+     * the coat's reflectance there (Ks, at most Fresnel's, as set up). */
+    const float f0 = coat_f0(material_ior(m));
+    for (int k = 0; k < 3; k++) {
+      const float ks = hush_fminf(m->specular[k], f0);
+      out[k] = ks + (1.0f - ks) * s->albedo[k];
+    }
+    break;
+  }
   default:
     memcpy(out, s->albedo, 3 * sizeof(float));
     break;

@@ -62,7 +62,7 @@ static const hush_param_info accumulate_params[P_COUNT] = {
     {"fallback_3x3", HUSH_PARAM_BOOL, 1, 0, 1,
      "search the 3x3 neighbourhood when no tap of the bilinear footprint is consistent", NULL},
     {"demodulate", HUSH_PARAM_BOOL, 1, 0, 1,
-     "with 'albedo' bound: accumulate color / max(albedo, 1e-3), multiply back after", NULL},
+     "with 'albedo' bound: accumulate color / max(albedo, 0.02), multiply back after", NULL},
     {"emission_bypass", HUSH_PARAM_BOOL, 1, 0, 1,
      "with 'emission' bound: accumulate color minus emission and add the emission back", NULL},
 };
