@@ -39,8 +39,13 @@
  *     centre c in this frame was at c + motion in the previous frame.
  *   - "id" holds a mesh or material id as an integer-valued float (exact up
  *     to 2^24); history is accepted only from a pixel with the same id.
- *   - "albedo" is the first-hit albedo used for demodulation; radiance is
- *     linear, in scene-referred units (no tone mapping).
+ *   - "albedo" is the first-hit albedo used for demodulation: what the
+ *     surface reflects, per channel in [0, 1]. For a coated or glossy
+ *     material include the specular lobe's reflectance (a plastic:
+ *     ks + (1 - ks) * base), not only the base colour, or its highlights
+ *     are divided by the base's darkest channel. Channels below 0.02 count
+ *     as 0.02. Radiance is linear, in scene-referred units (no tone
+ *     mapping).
  */
 #ifndef HUSH_H
 #define HUSH_H
