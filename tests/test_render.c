@@ -43,19 +43,24 @@ typedef struct bsdf_case {
   int has_delta;
 } bsdf_case;
 
+/* The case's material and a surface of it facing +z. */
+static void case_material(const bsdf_case *c, hush_material *m, hush_surface *s) {
+  memset(m, 0, sizeof *m);
+  m->type = c->type;
+  m->diffuse[0] = m->diffuse[1] = m->diffuse[2] = c->diffuse;
+  m->specular[0] = m->specular[1] = m->specular[2] = c->specular;
+  m->roughness = c->roughness;
+  m->ior = 1.5f;
+  m->diffuse_texture = m->alpha_texture = -1;
+  memset(s, 0, sizeof *s);
+  s->ng = s->ns = hush_v3(0.0f, 0.0f, 1.0f);
+  s->albedo[0] = s->albedo[1] = s->albedo[2] = c->diffuse;
+}
+
 static void make_bsdf(const bsdf_case *c, hush_vec3 wo, hush_bsdf *b) {
   hush_material m;
-  memset(&m, 0, sizeof m);
-  m.type = c->type;
-  m.diffuse[0] = m.diffuse[1] = m.diffuse[2] = c->diffuse;
-  m.specular[0] = m.specular[1] = m.specular[2] = c->specular;
-  m.roughness = c->roughness;
-  m.ior = 1.5f;
-  m.diffuse_texture = m.alpha_texture = -1;
   hush_surface s;
-  memset(&s, 0, sizeof s);
-  s.ng = s.ns = hush_v3(0.0f, 0.0f, 1.0f);
-  s.albedo[0] = s.albedo[1] = s.albedo[2] = c->diffuse;
+  case_material(c, &m, &s);
   hush__bsdf_setup(b, &m, &s, wo);
 }
 
@@ -76,16 +81,12 @@ static void test_demodulation_albedo(void) {
   for (size_t ci = 0; ci < sizeof cases / sizeof cases[0]; ci++) {
     const bsdf_case *c = &cases[ci];
     hush_material m;
-    memset(&m, 0, sizeof m);
-    m.type = c->type;
-    m.specular[0] = m.specular[1] = m.specular[2] = c->specular;
     hush_surface surf;
-    memset(&surf, 0, sizeof surf);
-    surf.albedo[0] = surf.albedo[1] = surf.albedo[2] = c->diffuse;
+    case_material(c, &m, &surf);
     float alb[3];
     hush__bsdf_albedo(&m, &surf, alb);
     hush_bsdf b;
-    make_bsdf(c, wo, &b);
+    hush__bsdf_setup(&b, &m, &surf, wo);
     double reflected = 0.0;
     const int n = 40000;
     for (int i = 0; i < n; i++) {
