@@ -4,7 +4,8 @@
  * environment-map importance sampling; the furnace test; motion vectors
  * against reprojected positions; determinism and per-pixel re-rendering;
  * pixel blocks shaded together equal single paths;
- * G-buffer sanity on the built-in Cornell box.
+ * G-buffer sanity on the built-in Cornell box; primary surface replacement
+ * through its mirrored variant.
  */
 #include "check.h"
 
@@ -949,6 +950,170 @@ static void test_emission_layer(void) {
   }
 }
 
+/* ---- primary surface replacement ------------------------------------------------------- */
+
+static uint32_t material_named(const hush_scene *sc, const char *name) {
+  for (uint32_t i = 0; i < sc->material_count; i++)
+    if (strcmp(sc->materials[i].name, name) == 0) return i;
+  REQUIRE(0);
+  return 0;
+}
+
+/* Bilinear sample of a 3-channel layer at continuous pixel coordinates
+ * (pixel centres at +0.5); -1 when a tap falls outside. */
+static float bilinear(const float *img, uint32_t W, uint32_t H, float fx, float fy, int c) {
+  const float x = fx - 0.5f, y = fy - 0.5f;
+  const int x0 = (int)floorf(x), y0 = (int)floorf(y);
+  if (x0 < 0 || y0 < 0 || x0 + 1 >= (int)W || y0 + 1 >= (int)H) return -1.0f;
+  const float ax = x - (float)x0, ay = y - (float)y0;
+  const float *r0 = img + 3 * ((size_t)y0 * W + (size_t)x0), *r1 = r0 + 3 * (size_t)W;
+  return (1 - ay) * ((1 - ax) * r0[c] + ax * r0[3 + c]) + ay * ((1 - ax) * r1[c] + ax * r1[3 + c]);
+}
+
+/* builtin:cornell-mirror (a mirror on the back wall, z = -0.995): with
+ * mirror_depth, a mirror pixel's G-buffer is the virtual surface behind
+ * the mirror (on the camera ray, the room reflected through the plane),
+ * its albedo the mirror's reflectance times the reflected surface's, its
+ * emission the lamp seen in it; the colour is the same bits as without;
+ * and its motion vectors follow the reflection, which the mirror's own
+ * do not: the previous frame's colour where they point matches the pixel's
+ * far better. Curved (smooth-normal) triangles are not planar mirrors. */
+static void test_mirror_gbuffer(void) {
+  rig r;
+  rig_open(&r, "cornell-mirror");
+  const uint32_t mirror = material_named(&r.scene, "mirror");
+  const uint32_t green = material_named(&r.scene, "green");
+  const uint32_t light = material_named(&r.scene, "light");
+  for (uint32_t t = 0; t < r.scene.triangle_count; t++)
+    CHECK(hush__scene_triangle_flat(&r.scene, t));
+  hush_render_params p;
+  hush__render_defaults(&p);
+  p.width = p.height = 96;
+  p.spp = 4;
+  p.jitter = 0;
+  const uint32_t W = p.width, H = p.height, t1 = 6;
+  hush_frame f[2][2]; /* [mirror_depth on][frame t1 - 1, t1] */
+  hush_render_ctx ctx[2][2];
+  for (int on = 0; on < 2; on++) {
+    p.mirror_depth = on ? HUSH_RENDER_MIRROR_DEPTH_MAX : 0;
+    for (int k = 0; k < 2; k++) f[on][k] = render_at(&r, &p, HUSH_MOVE_ORBIT, t1 - 1 + (uint32_t)k,
+                                                     &ctx[on][k]);
+  }
+  /* only the G-buffer and the emission layer change */
+  for (int k = 0; k < 2; k++)
+    CHECK(memcmp(layer(f[0][k], "color"), layer(f[1][k], "color"), 3 * sizeof(float) * W * H) ==
+          0);
+  const float *vis = layer(f[1][1], "vis"), *pos = layer(f[1][1], "position");
+  const float *pos0 = layer(f[0][1], "position"), *alb = layer(f[1][1], "albedo");
+  const float *id = layer(f[1][1], "id"), *em = layer(f[1][1], "emission");
+  const float *em0 = layer(f[0][1], "emission"), *color = layer(f[1][1], "color");
+  const float *z = layer(f[1][1], "depth");
+  const hush_material *mg = &r.scene.materials[green], *ml = &r.scene.materials[light];
+  int mirrors = 0, behind = 0, off_plane = 0, off_ray = 0, outside = 0, greens = 0, bad_green = 0;
+  int lamps = 0, bad_lamp = 0, lit0 = 0;
+  for (uint32_t y = 0; y < H; y++)
+    for (uint32_t x = 0; x < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      if (vis[3 * i] < 0.0f ||
+          r.scene.triangle_material[(uint32_t)vis[3 * i]] != mirror)
+        continue;
+      mirrors++;
+      if (fabsf(pos0[3 * i + 2] + 0.995f) > 1e-3f) off_plane++;
+      lit0 += em0[3 * i] != 0.0f;
+      if (z[i] == 0.0f) continue; /* the open front of the box, seen in the mirror */
+      behind++;
+      const hush_vec3 v = hush_v3(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]);
+      float cx, cy;
+      if (!hush__camera_project(&ctx[1][1].cam, v, 1.0f, &cx, &cy) ||
+          fabsf(cx - ((float)x + 0.5f)) > 0.01f || fabsf(cy - ((float)y + 0.5f)) > 0.01f)
+        off_ray++;
+      /* reflected back through the plane, the point lies in the room */
+      const float rz = -1.99f - v.z;
+      if (!(v.z < -0.995f + 1e-3f) || fabsf(v.x) > 1.001f || v.y < -1e-3f || v.y > 2.001f ||
+          rz < -1.001f || rz > 1.001f)
+        outside++;
+      const uint32_t m = (uint32_t)id[i] - 1u;
+      if (m == green) {
+        greens++;
+        const float f0 = alb[3 * i] / mg->diffuse[0];
+        for (int k = 0; k < 3; k++)
+          if (!(fabsf(alb[3 * i + k] / mg->diffuse[k] - f0) < 1e-4f) || f0 < 0.89f || f0 > 1.0f)
+            bad_green++;
+      }
+      if (m == light) {
+        lamps++;
+        const float f0 = em[3 * i] / ml->emission[0];
+        for (int k = 0; k < 3; k++)
+          if (!(fabsf(em[3 * i + k] / ml->emission[k] - f0) < 1e-4f) || f0 < 0.89f ||
+              f0 > 1.0f || color[3 * i + k] < em[3 * i + k] * (1.0f - 1e-5f))
+            bad_lamp++;
+      }
+    }
+  printf("mirror: %d pixels, %d with a surface behind (%d green wall, %d lamp)\n", mirrors,
+         behind, greens, lamps);
+  CHECK_MSG(mirrors > 1000 && behind > 500, "%d mirror pixels, %d behind", mirrors, behind);
+  CHECK_MSG(off_plane == 0, "mirror_depth 0: %d mirror positions off the mirror", off_plane);
+  CHECK_MSG(lit0 == 0, "mirror_depth 0: %d mirror pixels with emission", lit0);
+  CHECK_MSG(off_ray == 0 && outside == 0, "%d virtual points off the camera ray, %d not the room's",
+            off_ray, outside);
+  CHECK_MSG(greens > 20 && bad_green == 0, "%d of %d green-wall albedos not reflectance x Kd",
+            bad_green, greens);
+  CHECK_MSG(lamps > 3 && bad_lamp == 0, "%d of %d lamp emissions not reflectance x Le", bad_lamp,
+            lamps);
+
+  /* motion: what the mirror shows (the replaced albedo, noise-free; the
+   * open front of the box is white) in the previous frame where the vector
+   * points, against the pixel's own, over the mirror's interior (a pixel
+   * whose 5x5 neighbourhood is all mirror) */
+  const float *alb_prev = layer(f[1][0], "albedo");
+  double err[2] = {0.0, 0.0};
+  int n = 0;
+  for (uint32_t y = 2; y + 2 < H; y++)
+    for (uint32_t x = 2; x + 2 < W; x++) {
+      int inside = 1;
+      for (int dy = -2; dy <= 2 && inside; dy++)
+        for (int dx = -2; dx <= 2 && inside; dx++) {
+          const size_t j = (size_t)((int)y + dy) * W + (size_t)((int)x + dx);
+          inside =
+              vis[3 * j] >= 0.0f && r.scene.triangle_material[(uint32_t)vis[3 * j]] == mirror;
+        }
+      if (!inside) continue;
+      const size_t i = (size_t)y * W + x;
+      float e[2] = {0.0f, 0.0f};
+      int ok = 1;
+      for (int on = 0; on < 2 && ok; on++) {
+        const float *mot = layer(f[on][1], "motion");
+        for (int c = 0; c < 3; c++) {
+          const float h = bilinear(alb_prev, W, H, (float)x + 0.5f + mot[2 * i],
+                                   (float)y + 0.5f + mot[2 * i + 1], c);
+          if (h < 0.0f) ok = 0;
+          e[on] += fabsf(h - alb[3 * i + c]);
+        }
+      }
+      if (!ok) continue;
+      err[0] += e[0];
+      err[1] += e[1];
+      n++;
+    }
+  printf("mirror: motion over %d pixels: |history - albedo| %.4f along the mirror's own motion, "
+         "%.4f along the reflection's\n",
+         n, err[0] / n, err[1] / n);
+  CHECK(n > 200);
+  CHECK_MSG(err[1] < 0.5 * err[0], "motion through the mirror: %.4f vs %.4f", err[1] / n,
+            err[0] / n);
+  for (int on = 0; on < 2; on++)
+    for (int k = 0; k < 2; k++) hush_frame_release(f[on][k]);
+  rig_close(&r);
+
+  /* the courtyard's spheres have smooth normals: not planar */
+  rig_open(&r, "courtyard");
+  uint32_t curved = 0;
+  for (uint32_t t = 0; t < r.scene.triangle_count; t++)
+    curved += !hush__scene_triangle_flat(&r.scene, t);
+  CHECK_MSG(curved > 1000, "courtyard: %u curved triangles", curved);
+  rig_close(&r);
+}
+
 /* ---- diffuse / specular split ----------------------------------------------------------------- */
 
 /* hush__bsdf_eval_lobes: the lobes add up to hush__bsdf_eval bit for bit,
@@ -1156,6 +1321,7 @@ int main(void) {
   test_cornell_gbuffer();
   test_emission_layer();
   test_one_sided_emitters();
+  test_mirror_gbuffer();
   test_bsdf_lobes();
   test_lobe_layers();
   return check_summary();

@@ -289,6 +289,9 @@ typedef struct path_state {
   float share[3];
   int depth;
   int done;
+  /* the path has met only planar mirrors so far (mirror_depth): the
+   * emission it meets counts as seen directly (hush_path_result) */
+  int chain, chain_next;
   /* the vertex in progress */
   hush_surface later;      /* its surface beyond the first hit */
   const hush_surface *sp;  /* &first->surface or &later */
@@ -323,6 +326,22 @@ static void path_begin(path_state *st, hush_vec3 eye, const hush_first_hit *firs
   st->share[0] = st->share[1] = st->share[2] = 1.0f;
   st->depth = 0;
   st->done = 0;
+  st->chain = 1;
+  st->chain_next = 0;
+}
+
+/* Emission c, just added to the radiance (which held `before`), as the
+ * camera sees it: at the first hit c itself (first_emission); behind planar
+ * mirrors what add() added, the mirrors' reflectance and any clamp
+ * applied. */
+static void seen_emission(const path_state *st, const float before[3], const float c[3]) {
+  hush_path_result *out = st->out;
+  if (st->depth == 0) {
+    first_emission(out, 0, c);
+    return;
+  }
+  if (!st->chain) return;
+  for (int k = 0; k < 3; k++) out->emission[k] += out->radiance[k] - before[k];
 }
 
 /* The vertex st->h: emission, the light sample up to its shadow ray
@@ -341,12 +360,15 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   vsum[0] = vsum[1] = vsum[2] = 0.0f;
   st->nee = 0;
   st->go = 0;
+  st->chain_next = 0;
+  float before[3];
+  memcpy(before, out->radiance, sizeof before);
   if (st->h.kind == HUSH_FIRST_SKY) {
     float le[3];
     const float pdf_env = hush__lights_env_eval(L, d, le);
     const float w = st->prev_delta ? 1.0f : power_heuristic(st->prev_pdf, pdf_env);
     add(it, out, vsum, st->beta, le, w, depth, direct, st->share);
-    first_emission(out, depth, le);
+    seen_emission(st, before, le);
     st->done = 1;
     return;
   }
@@ -356,7 +378,7 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
                                                      hush__lights_sphere_pdf(L, st->h.sphere,
                                                                              st->origin));
     add(it, out, vsum, st->beta, sc->spheres[st->h.sphere].radiance, w, depth, direct, st->share);
-    first_emission(out, depth, sc->spheres[st->h.sphere].radiance);
+    seen_emission(st, before, sc->spheres[st->h.sphere].radiance);
     st->done = 1;
     return;
   }
@@ -381,7 +403,7 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
                           hush__lights_triangle_pdf(L, st->h.hit.triangle, area, st->h.t, cos_l));
     }
     add(it, out, vsum, st->beta, m->emission, w, depth, direct, st->share);
-    first_emission(out, depth, m->emission);
+    seen_emission(st, before, m->emission);
   }
   const hush_vec3 wo = hush_v3_scale(d, -1.0f);
   hush_bsdf b;
@@ -425,6 +447,8 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   }
   st->go = 1;
   st->next_origin = offset_origin(sp->p, b.ng, bs->wi);
+  st->chain_next = st->chain && depth < it->mirror_depth && bs->delta &&
+                   hush__integrator_planar_mirror(it, sp, st->h.hit.triangle);
 }
 
 /* The vertex's rays: the path's next ray first, its hit's shading record
@@ -468,6 +492,7 @@ static void path_resolve(const hush_integrator *it, path_state *st, int occluded
   for (int k = 0; k < 3; k++) st->beta[k] = st->nbeta[k];
   st->prev_pdf = st->bs.pdf;
   st->prev_delta = st->bs.delta;
+  st->chain = st->chain_next;
   st->origin = st->next_origin;
   st->d = st->bs.wi;
   out->rays++;
@@ -548,6 +573,37 @@ static void first_hit_of(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,
     f->p = hush_v3_add(eye, hush_v3_scale(d, h.t));
     f->n = hush_v3_normalize(hush_v3_sub(f->p, hush_v3(c[0], c[1], c[2])));
   }
+}
+
+int hush__integrator_planar_mirror(const hush_integrator *it, const hush_surface *s,
+                                   uint32_t triangle) {
+  const hush_material *m = &it->scene->materials[s->material];
+  return m->type == HUSH_MAT_CONDUCTOR && !(m->roughness > 0.0f) &&
+         hush__scene_triangle_flat(it->scene, triangle);
+}
+
+int hush__integrator_mirror_step(const hush_integrator *it, hush_first_hit *h, float weight[3],
+                                 hush_vec3 *q, hush_vec3 *n) {
+  if (h->kind != HUSH_FIRST_TRIANGLE || !hush__integrator_planar_mirror(it, &h->surface,
+                                                                         h->hit.triangle))
+    return 0;
+  const hush_surface *s = &h->surface;
+  const hush_vec3 wo = hush_v3_scale(h->dir, -1.0f);
+  hush_bsdf b;
+  hush__bsdf_setup(&b, &it->scene->materials[s->material], s, wo);
+  /* the lobe is a delta: the numbers do not matter */
+  const float u[3] = {0.5f, 0.5f, 0.5f};
+  hush_bsdf_sample bs;
+  if (!hush__bsdf_sample(&b, wo, u, &bs) || !bs.delta) return 0;
+  *q = s->p;
+  *n = s->ng;
+  for (int k = 0; k < 3; k++) weight[k] *= bs.weight[k];
+  const hush_vec3 o = offset_origin(s->p, b.ng, bs.wi);
+  const float oo[3] = {o.x, o.y, o.z}, dd[3] = {bs.wi.x, bs.wi.y, bs.wi.z};
+  hush_hit tri;
+  hush__scene_intersect(it->scene, oo, dd, 0.0f, INFINITY, &tri);
+  first_hit_of(it, o, bs.wi, &tri, h);
+  return 1;
 }
 
 void hush__integrator_trace_hit(const hush_integrator *it, hush_vec3 eye, hush_vec3 d,

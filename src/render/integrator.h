@@ -86,6 +86,11 @@ typedef struct hush_integrator {
   hush_path_end_fn path_end_fn; /* called with vertex_user */
   void *vertex_user;
   int split_lobes;         /* also fill hush_path_result's diffuse and specular */
+  /* Primary surface replacement (render.h): a path whose first vertices
+   * are planar mirrors (hush__integrator_planar_mirror), up to this many
+   * (0: off), reports the emission it meets behind them in
+   * hush_path_result's emission, as if seen directly. */
+  int mirror_depth;
 } hush_integrator;
 
 void hush__integrator_defaults(hush_integrator *it, const hush_scene *scene,
@@ -113,7 +118,9 @@ typedef struct hush_path_result {
   float radiance[3];
   float direct[3];         /* emission seen directly + the first hit's shadow ray */
   float emission[3];       /* emission seen directly: what the camera ray's first hit
-                            * emits towards it (emissive triangle, sphere light, sky);
+                            * emits towards it (emissive triangle, sphere light, sky),
+                            * or, with mirror_depth, the first hit behind the planar
+                            * mirrors it meets first, times their reflectance;
                             * radiance - emission is what the surfaces reflect */
   /* With split_lobes (else 0): radiance by the first hit's lobe. Light seen
    * directly is diffuse. The first hit's shadow ray is split by the BSDF's
@@ -125,6 +132,21 @@ typedef struct hush_path_result {
   float diffuse[3], specular[3];
   uint32_t rays;           /* rays traced, primary and shadow included */
 } hush_path_result;
+
+/* Whether the path sees through surface s of `triangle` deterministically
+ * as through a plane: a smooth conductor (a single delta lobe) on a
+ * flat-shaded triangle (hush__scene_triangle_flat). */
+int hush__integrator_planar_mirror(const hush_integrator *it, const hush_surface *s,
+                                   uint32_t triangle);
+
+/* One step of primary surface replacement (render.h): when h is a
+ * triangle hit on a planar mirror that reflects towards h->dir's origin
+ * side, *h becomes the hit of the reflected ray (traced here, from the
+ * same origin as the path's own ray), weight is multiplied by the mirror's
+ * reflectance and (q, n) receive the mirror's plane. Returns 0 and changes
+ * nothing otherwise. */
+int hush__integrator_mirror_step(const hush_integrator *it, hush_first_hit *h, float weight[3],
+                                 hush_vec3 *q, hush_vec3 *n);
 
 /* Traces the camera ray from eye along unit direction d and shades it.
  * first may be NULL. */

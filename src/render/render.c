@@ -24,6 +24,7 @@ void hush__render_defaults(hush_render_params *p) {
   p->seed = 1;
   p->sampler = HUSH_SAMPLER_RANDOM;
   p->jitter = 1;
+  p->mirror_depth = HUSH_RENDER_MIRROR_DEPTH_MAX;
 }
 
 void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const hush_lights *lights,
@@ -45,6 +46,7 @@ void hush__render_ctx_init(hush_render_ctx *ctx, const hush_scene *scene, const 
   ctx->it.path_end_fn = params->path_end_fn;
   ctx->it.vertex_user = params->vertex_user;
   ctx->it.split_lobes = params->split_lobes;
+  ctx->it.mirror_depth = params->mirror_depth;
 }
 
 /* Sample 0's primary rays are traced as packets of BLOCK x BLOCK pixels
@@ -228,9 +230,46 @@ static void depth_gradient(const hush_render_ctx *ctx, float px, float py, hush_
   }
 }
 
+/* The map from the world to the virtual world seen through planar mirrors:
+ * x -> a x + b, the composition of the mirrors' reflections in the order
+ * the camera ray meets them (primary surface replacement). */
+typedef struct mirror_map {
+  hush_vec3 a[3];          /* rows */
+  hush_vec3 b;
+} mirror_map;
+
+static void mirror_map_identity(mirror_map *m) {
+  m->a[0] = hush_v3(1.0f, 0.0f, 0.0f);
+  m->a[1] = hush_v3(0.0f, 1.0f, 0.0f);
+  m->a[2] = hush_v3(0.0f, 0.0f, 1.0f);
+  m->b = hush_v3(0.0f, 0.0f, 0.0f);
+}
+
+static hush_vec3 mirror_map_dir(const mirror_map *m, hush_vec3 v) {
+  return hush_v3(hush_v3_dot(m->a[0], v), hush_v3_dot(m->a[1], v), hush_v3_dot(m->a[2], v));
+}
+
+static hush_vec3 mirror_map_point(const mirror_map *m, hush_vec3 p) {
+  return hush_v3_add(mirror_map_dir(m, p), m->b);
+}
+
+/* m after the reflection about the plane through q with unit normal n:
+ * x -> m(x - 2 ((x - q) . n) n). */
+static void mirror_map_reflect(mirror_map *m, hush_vec3 q, hush_vec3 n) {
+  const hush_vec3 an = mirror_map_dir(m, n);
+  for (int r = 0; r < 3; r++) {
+    const float c = 2.0f * (r == 0 ? an.x : r == 1 ? an.y : an.z);
+    m->a[r] = hush_v3_sub(m->a[r], hush_v3_scale(n, c));
+  }
+  m->b = hush_v3_add(m->b, hush_v3_scale(an, 2.0f * hush_v3_dot(q, n)));
+}
+
 /* Where the first hit was in the previous frame, minus where it is now
- * (both without jitter). Off-screen or behind the camera: (-1, -1) pixel. */
-static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f, float out[2]) {
+ * (both without jitter), both mapped by mm when it is not NULL (a hit seen
+ * through mirrors, which are taken to be still). Off-screen or behind the
+ * camera: (-1, -1) pixel. */
+static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f, const mirror_map *mm,
+                      float out[2]) {
   out[0] = out[1] = 0.0f;
   if (!ctx->have_prev) return;
   const hush_scene *sc = ctx->scene;
@@ -250,6 +289,10 @@ static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f, float
     hush__scene_sphere_at(sc, f->sphere, ctx->frame, c1);
     hush__scene_sphere_at(sc, f->sphere, ctx->frame > 0 ? ctx->frame - 1 : 0, c0);
     prev = hush_v3_sub(now, hush_v3(c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2]));
+  }
+  if (mm) {
+    now = w > 0.0f ? mirror_map_point(mm, now) : mirror_map_dir(mm, now);
+    prev = w > 0.0f ? mirror_map_point(mm, prev) : mirror_map_dir(mm, prev);
   }
   float cx, cy, px, py;
   if (!hush__camera_project(&ctx->cam, now, w, &cx, &cy)) return;
@@ -287,6 +330,26 @@ static void clear_pixel(const layers *L, size_t i) {
   zero(L->emission, 3, i);
 }
 
+/* Primary surface replacement (render.h): the hit g the G-buffer
+ * describes, behind the planar mirrors the first hit f leads to, the
+ * mirrors' reflectance and the map into their virtual world. Returns the
+ * number of mirrors (0: g is f). */
+static int replace_primary(const hush_render_ctx *ctx, const hush_first_hit *f, hush_first_hit *g,
+                           float reflectance[3], mirror_map *mm) {
+  *g = *f;
+  reflectance[0] = reflectance[1] = reflectance[2] = 1.0f;
+  mirror_map_identity(mm);
+  const int limit = ctx->params.mirror_depth < ctx->it.bounces ? ctx->params.mirror_depth
+                                                                : ctx->it.bounces;
+  int k = 0;
+  hush_vec3 q, n;
+  while (k < limit && hush__integrator_mirror_step(&ctx->it, g, reflectance, &q, &n)) {
+    mirror_map_reflect(mm, q, n);
+    k++;
+  }
+  return k;
+}
+
 static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x, uint32_t y,
                         const hush_pixel_result *r) {
   const size_t i = (size_t)y * ctx->params.width + x;
@@ -307,12 +370,25 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   }
   if (L->spp) L->spp[i] = (float)ctx->params.spp;
   if (L->variance) L->variance[i] = r->variance;
-  motion_of(ctx, f, L->motion + 2 * i);
+  /* the visibility buffer names the real first hit (A-SVGF re-shades it);
+   * the rest describes g, the hit behind the mirrors */
+  L->vis[3 * i] = -1.0f;
+  L->vis[3 * i + 1] = L->vis[3 * i + 2] = 0.0f;
+  if (f->kind == HUSH_FIRST_SPHERE) L->vis[3 * i] = -2.0f - (float)f->sphere;
+  if (f->kind == HUSH_FIRST_TRIANGLE) {
+    L->vis[3 * i] = (float)f->hit.triangle;
+    L->vis[3 * i + 1] = f->hit.u;
+    L->vis[3 * i + 2] = f->hit.v;
+  }
+  hush_first_hit replaced;
+  float reflectance[3];
+  mirror_map mm;
+  const int mirrors = replace_primary(ctx, f, &replaced, reflectance, &mm);
+  const hush_first_hit *g = mirrors ? &replaced : f;
+  motion_of(ctx, g, mirrors ? &mm : NULL, L->motion + 2 * i);
   float *alb = L->albedo + 3 * i;
   alb[0] = alb[1] = alb[2] = 1.0f;
-  L->vis[3 * i + 1] = L->vis[3 * i + 2] = 0.0f;
-  if (f->kind == HUSH_FIRST_SKY) {
-    L->vis[3 * i] = -1.0f;
+  if (g->kind == HUSH_FIRST_SKY) {
     zero(L->normal, 3, i);
     zero(L->position, 3, i);
     zero(L->depth, 1, i);
@@ -329,23 +405,25 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
     px = sx;
     py = sy;
   }
-  const float z = view_depth(&ctx->cam, f->p);
+  /* behind mirrors, the virtual hit: where the unfolded camera ray meets
+   * the reflected surface */
+  const hush_vec3 p = mirrors ? mirror_map_point(&mm, g->p) : g->p;
+  const hush_vec3 n = mirrors ? mirror_map_dir(&mm, g->n) : g->n;
+  const float z = view_depth(&ctx->cam, p);
   L->depth[i] = z;
-  memcpy(L->position + 3 * i, &f->p, 3 * sizeof(float));
-  memcpy(L->normal + 3 * i, &f->n, 3 * sizeof(float));
-  if (f->kind == HUSH_FIRST_SPHERE) {
-    L->id[i] = (float)(sc->material_count + 1 + f->sphere);
-    L->vis[3 * i] = -2.0f - (float)f->sphere;
-    depth_gradient(ctx, px, py, f->p, f->n, z, L->dgrad + 2 * i);
+  memcpy(L->position + 3 * i, &p, 3 * sizeof(float));
+  memcpy(L->normal + 3 * i, &n, 3 * sizeof(float));
+  if (g->kind == HUSH_FIRST_SPHERE) {
+    L->id[i] = (float)(sc->material_count + 1 + g->sphere);
+    depth_gradient(ctx, px, py, p, n, z, L->dgrad + 2 * i);
     return;
   }
-  const hush_material *m = &sc->materials[f->surface.material];
-  hush__bsdf_albedo(m, &f->surface, alb);
-  L->id[i] = (float)(f->surface.material + 1);
-  L->vis[3 * i] = (float)f->hit.triangle;
-  L->vis[3 * i + 1] = f->hit.u;
-  L->vis[3 * i + 2] = f->hit.v;
-  depth_gradient(ctx, px, py, f->p, f->surface.ng, z, L->dgrad + 2 * i);
+  const hush_material *m = &sc->materials[g->surface.material];
+  hush__bsdf_albedo(m, &g->surface, alb);
+  for (int k = 0; k < 3; k++) alb[k] *= reflectance[k];
+  L->id[i] = (float)(g->surface.material + 1);
+  const hush_vec3 ng = mirrors ? mirror_map_dir(&mm, g->surface.ng) : g->surface.ng;
+  depth_gradient(ctx, px, py, p, ng, z, L->dgrad + 2 * i);
 }
 
 /* A pixel the progressive pattern skips this frame: every layer 0, spp

@@ -38,7 +38,19 @@
  * other layer 0 except vis, which is -1 (no triangle) as for the sky.
  *
  * The G-buffer comes from the first sample's primary ray, which goes through
- * (x + 0.5 + jitter). Pixels are independent, so the frame is the same for
+ * (x + 0.5 + jitter).
+ *
+ * Primary surface replacement (params.mirror_depth, on by default): where
+ * that ray meets a planar mirror (a smooth conductor on flat-shaded
+ * triangles), the pixel shows what lies behind it, and the G-buffer
+ * describes that instead, as the virtual surface the unfolded ray meets:
+ * position and normal reflected through the mirrors' planes (depth and its
+ * gradient follow), albedo times the mirrors' reflectance, the reflected
+ * surface's id, and motion that follows the reflection (mirrors are taken
+ * to be still); vis keeps the real first hit, emission includes the light
+ * seen in the mirror. Without it a mirror's features are its own flat
+ * plane, and a filter smears the reflection across it. Curved mirrors and
+ * glass keep their own G-buffer (their reflection is not a rigid image). Pixels are independent, so the frame is the same for
  * any thread count; rows are spread over OpenMP threads.
  */
 #ifndef HUSH_RENDER_RENDER_H
@@ -65,6 +77,10 @@ typedef struct hush_render_params {
   float clamp;             /* > 0: firefly clamp of indirect contributions */
   int split;               /* also write "direct" and "indirect" */
   int split_lobes;         /* also write "diffuse" and "specular" (color = their sum) */
+  /* primary surface replacement through up to this many planar mirrors (0:
+   * off; at most HUSH_RENDER_MIRROR_DEPTH_MAX, the default; also at most
+   * bounces, since the path's rays are what the G-buffer describes) */
+  int mirror_depth;
   int threads;             /* 0: the device's */
   const hush_progressive *progressive; /* not NULL: trace only its pixels (progressive.h) */
   hush_path_vertex_fn vertex_fn;
@@ -74,6 +90,10 @@ typedef struct hush_render_params {
    * it and keeps it from frame to frame; needs spp 1 and no progressive */
   struct hush_gradients *gradients;
 } hush_render_params;
+
+/* Russian roulette starts after 3 secondary rays (integrator.h): a mirror
+ * chain deeper than that would not be deterministic. */
+#define HUSH_RENDER_MIRROR_DEPTH_MAX 3
 
 void hush__render_defaults(hush_render_params *p);
 

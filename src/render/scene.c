@@ -596,6 +596,24 @@ void hush__scene_prefetch_surface(const hush_scene *scene, uint32_t triangle) {
   __builtin_prefetch(r + 64, 0, 3);
 }
 
+int hush__scene_triangle_flat(const hush_scene *scene, uint32_t triangle) {
+  if (!scene || triangle >= scene->triangle_count) return 0;
+  if (!scene->normals) return 1;
+  const uint32_t *ix = scene->indices + 3 * (size_t)triangle;
+  const hush_vec3 p0 = vertex(scene, ix[0]);
+  const hush_vec3 face = hush_v3_normalize(
+      hush_v3_cross(hush_v3_sub(vertex(scene, ix[1]), p0), hush_v3_sub(vertex(scene, ix[2]), p0)));
+  for (int k = 0; k < 3; k++) {
+    const float *n = scene->normals + 3 * (size_t)ix[k];
+    const hush_vec3 v = hush_v3(n[0], n[1], n[2]);
+    const float len = hush_v3_length(v);
+    /* 0.9999: within 0.8 degrees of the face; either side (the winding
+     * may disagree with the stored normals, see hush__scene_surface) */
+    if (!(fabsf(hush_v3_dot(face, v)) >= 0.9999f * len)) return 0;
+  }
+  return 1;
+}
+
 hush_vec3 hush__scene_point(const hush_scene *scene, uint32_t triangle, float u, float v,
                             uint32_t frame) {
   if (!scene || triangle >= scene->triangle_count) return hush_v3(0.0f, 0.0f, 0.0f);

@@ -253,6 +253,11 @@ void hush__scene_surface(const hush_scene *scene, const hush_hit *hit, const flo
  * triangle UINT32_MAX (no hit) does nothing. */
 void hush__scene_prefetch_surface(const hush_scene *scene, uint32_t triangle);
 
+/* Whether the triangle is flat-shaded: its stored vertex normals (if any)
+ * are all its face normal, so a mirror on it reflects as a plane (the
+ * renderer's primary surface replacement, render.h). */
+int hush__scene_triangle_flat(const hush_scene *scene, uint32_t triangle);
+
 /* World position of (triangle, u, v) at frame f (forward projection of a
  * visibility-buffer sample into another frame). */
 hush_vec3 hush__scene_point(const hush_scene *scene, uint32_t triangle, float u, float v,

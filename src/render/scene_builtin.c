@@ -14,13 +14,15 @@
 #include <string.h>
 
 const char *const hush__scene_builtin_names[] = {
-    "cornell", "cornell-moving", "courtyard", "moving-light", "light-off", "light-jump", "furnace", "mask", NULL};
+    "cornell", "cornell-moving", "cornell-mirror", "courtyard", "moving-light", "light-off", "light-jump", "furnace", "mask", NULL};
 
 const char *const hush__scene_builtin_docs[] = {
     "the Cornell box: white floor, ceiling and back wall, red left and green right wall, two "
     "boxes, a small emissive quad under the ceiling",
     "the Cornell box with the short box sliding back and forth along x (0.025 m per frame, "
     "period 40 frames)",
+    "cornell-moving with a mirror on the back wall (x -0.2 to 0.9, y 0.15 to 1.85): the "
+    "G-buffer's primary surface replacement sees the room and the lamp in it",
     "a courtyard: checkered ground texture, pillars, glossy plastic, a rough metal sphere, a glass "
     "sphere, a moving box, a small sphere light moving back and forth and a dim sky",
     "the courtyard with nothing moving but the sphere light",
@@ -243,7 +245,7 @@ static void set_camera(hush_scene *s, hush_vec3 pos, hush_vec3 target, float fov
 
 /* The box spans x, z in [-1, 1] and y in [0, 2], open towards +z; the camera
  * looks down -z along x = 0, y = 1, which no box blocks. */
-static void build_cornell(builder *b, int moving) {
+static void build_cornell(builder *b, int moving, int mirror) {
   hush_scene *s = b->s;
   hush_material m = base_material("white", HUSH_MAT_DIFFUSE, 0.725f, 0.71f, 0.68f);
   const uint32_t white = add_material(b, &m);
@@ -267,6 +269,13 @@ static void build_cornell(builder *b, int moving) {
   add_quad(b, hush_v3(1, 0, -1), hush_v3(1, 0, 1), hush_v3(1, 2, 1), hush_v3(1, 2, -1), green, 1,
            1); /* right wall, -x */
   add_box(b, hush_v3(-0.45f, 0.6f, -0.35f), hush_v3(0.28f, 0.6f, 0.28f), 17.0f, white);
+  if (mirror) {
+    m = base_material("mirror", HUSH_MAT_CONDUCTOR, 0.0f, 0.0f, 0.0f);
+    m.specular[0] = m.specular[1] = m.specular[2] = 0.9f;
+    const uint32_t silver = add_material(b, &m);
+    add_quad(b, hush_v3(-0.2f, 0.15f, -0.995f), hush_v3(0.9f, 0.15f, -0.995f),
+             hush_v3(0.9f, 1.85f, -0.995f), hush_v3(-0.2f, 1.85f, -0.995f), silver, 1, 1);
+  }
   if (!moving) add_box(b, hush_v3(0.4f, 0.3f, 0.4f), hush_v3(0.3f, 0.3f, 0.3f), -18.0f, white);
   begin_object(b, "light", NULL);
   add_quad(b, hush_v3(-0.235f, 1.98f, -0.19f), hush_v3(0.235f, 1.98f, -0.19f),
@@ -452,8 +461,9 @@ hush_status hush__scene_builtin(hush_device device, const char *name, hush_scene
   b.s = scene;
   snprintf(scene->name, sizeof scene->name, "%s", name);
   scene->two_sided = 1;
-  if (strcmp(name, "cornell") == 0) build_cornell(&b, 0);
-  else if (strcmp(name, "cornell-moving") == 0) build_cornell(&b, 1);
+  if (strcmp(name, "cornell") == 0) build_cornell(&b, 0, 0);
+  else if (strcmp(name, "cornell-moving") == 0) build_cornell(&b, 1, 0);
+  else if (strcmp(name, "cornell-mirror") == 0) build_cornell(&b, 1, 1);
   else if (strcmp(name, "courtyard") == 0) build_courtyard(&b, COURTYARD_ALL);
   else if (strcmp(name, "moving-light") == 0) build_courtyard(&b, COURTYARD_LIGHT_MOVES);
   else if (strcmp(name, "light-off") == 0) build_courtyard(&b, COURTYARD_LIGHT_OFF);

@@ -55,6 +55,13 @@ static const char *const help_text =
     "                       other layers 0 (vis -1) (docs/renderer.md)\n"
     "  --bounces N          BSDF-sampled secondary rays per path, 0..64 (default 1:\n"
     "                       the papers' configuration; 0: direct light only)\n"
+    "  --mirror-depth N     primary surface replacement: where a pixel's camera ray\n"
+    "                       meets planar mirrors (smooth conductors on flat\n"
+    "                       triangles), the G-buffer describes the surface behind\n"
+    "                       up to N of them, reflected into the mirrors' virtual\n"
+    "                       world, and its emission counts as seen directly;\n"
+    "                       0..3, at most --bounces (default 3; 0: the mirror's\n"
+    "                       own features) (docs/renderer.md)\n"
     "  --seed S             random seed (default 1)\n"
     "  --sampler KIND       random or ld (scrambled Sobol pairs; default random)\n"
     "  --no-jitter          no subpixel jitter (default: Halton(2,3) per frame)\n"
@@ -199,6 +206,9 @@ static void parse_options(int argc, char **argv, render_options *o) {
         o->params.sampler = HUSH_SAMPLER_LD;
       else
         cli_usage_error(a.cmd, "--sampler: unknown sampler '%s' (random or ld)", v);
+    } else if (cli_option(&a, arg, "--mirror-depth", &v)) {
+      o->params.mirror_depth =
+          (int)cli_parse_uint(a.cmd, "--mirror-depth", v, 0, HUSH_RENDER_MIRROR_DEPTH_MAX);
     } else if (cli_switch(&a, arg, "--no-jitter")) {
       o->params.jitter = 0;
     } else if (cli_option(&a, arg, "--clamp", &v)) {
@@ -383,12 +393,12 @@ static int write_render_json(render_run *r, int argc, char **argv, double second
   fprintf(f,
           ",\n  \"width\": %u,\n  \"height\": %u,\n  \"first_frame\": %u,\n  \"frame_count\": %u,\n"
           "  \"spp\": %u,\n  \"bounces\": %d,\n  \"seed\": %u,\n  \"sampler\": \"%s\",\n"
-          "  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n  \"split_lobes\": %s,\n"
+          "  \"mirror_depth\": %d,\n  \"jitter\": %s,\n  \"clamp\": %.9g,\n  \"split\": %s,\n  \"split_lobes\": %s,\n"
           "  \"spp_fraction\": %.9g,\n  \"progressive_block\": [%u, %u],\n  \"export\": %s,\n"
           "  \"psf\": %s,\n  \"gradients\": %s,\n  \"triangles\": %u,\n  \"skipped_triangles\": %u,\n"
           "  \"seconds\": %.3f,\n  \"rays\": %llu,\n  \"command\": [",
           r->seq.width, r->seq.height, r->o->first, r->seq.frame_count, p->spp, p->bounces, p->seed,
-          p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->jitter ? "\"halton23\"" : "null",
+          p->sampler == HUSH_SAMPLER_LD ? "ld" : "random", p->mirror_depth, p->jitter ? "\"halton23\"" : "null",
           (double)p->clamp, p->split ? "true" : "false", p->split_lobes ? "true" : "false",
           r->o->spp_fraction,
           r->o->spp_fraction < 1.0 ? r->o->progressive.k : 1u,
