@@ -1101,6 +1101,22 @@ static void test_mirror_gbuffer(void) {
   CHECK(n > 200);
   CHECK_MSG(err[1] < 0.5 * err[0], "motion through the mirror: %.4f vs %.4f", err[1] / n,
             err[0] / n);
+  /* with the split, the lamp seen in the mirror is direct light: svgf
+   * takes the emission off 'direct' */
+  p.split = 1;
+  hush_render_ctx sctx;
+  hush_frame fs = render_at(&r, &p, HUSH_MOVE_ORBIT, t1, &sctx);
+  const float *dir = layer(fs, "direct"), *ems = layer(fs, "emission");
+  int lit = 0, short_direct = 0;
+  for (size_t i = 0; i < (size_t)W * H; i++) {
+    if (!(ems[3 * i] > 0.0f)) continue;
+    lit++;
+    for (int c = 0; c < 3; c++)
+      if (!(dir[3 * i + c] >= ems[3 * i + c] * (1.0f - 1e-5f))) short_direct++;
+  }
+  CHECK_MSG(lit > 3 && short_direct == 0, "%d of %d lit pixels with less direct than emission",
+            short_direct, lit);
+  hush_frame_release(fs);
   for (int on = 0; on < 2; on++)
     for (int k = 0; k < 2; k++) hush_frame_release(f[on][k]);
   rig_close(&r);

@@ -354,7 +354,9 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   const hush_scene *sc = it->scene;
   const hush_lights *L = it->lights;
   hush_path_result *out = st->out;
-  const int depth = st->depth, direct = depth == 0;
+  /* emission seen directly: at the first hit, or behind planar mirrors
+   * (st->chain is 1 at depth 0) */
+  const int depth = st->depth, direct = st->chain;
   const hush_vec3 d = st->d;
   float *vsum = st->vsum;
   vsum[0] = vsum[1] = vsum[2] = 0.0f;

@@ -116,7 +116,7 @@ typedef struct hush_first_hit {
 
 typedef struct hush_path_result {
   float radiance[3];
-  float direct[3];         /* emission seen directly + the first hit's shadow ray */
+  float direct[3];         /* emission seen directly (as `emission`) + the first hit's shadow ray */
   float emission[3];       /* emission seen directly: what the camera ray's first hit
                             * emits towards it (emissive triangle, sphere light, sky),
                             * or, with mirror_depth, the first hit behind the planar

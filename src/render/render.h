@@ -24,7 +24,8 @@
  *                      first hit (emissive triangle, sphere light, sky),
  *                      averaged as color is: color - emission is what the
  *                      first hits reflect, the part filters should filter
- *   direct, indirect (3) with split: first-hit emission + its shadow ray, and the rest
+ *   direct, indirect (3) with split: emission (as above) + the first hit's shadow ray,
+ *                      and the rest
  *   diffuse, specular (3) with split_lobes: the radiance by the first hit's
  *                      BSDF lobe (integrator.h, hush_path_result); light seen
  *                      directly is diffuse. color is then diffuse + specular,
