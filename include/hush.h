@@ -46,6 +46,13 @@
  *     are divided by the base's darkest channel. Channels below 0.02 count
  *     as 0.02. Radiance is linear, in scene-referred units (no tone
  *     mapping).
+ *   - Mirrors: where the first hit is a planar mirror, describe the surface
+ *     seen in it (primary surface replacement, as hush's renderer does):
+ *     its position and normal reflected through the mirror's plane, its id,
+ *     its albedo times the mirror's reflectance, motion of the reflection,
+ *     and the light seen in the mirror in "emission". A G-buffer of the
+ *     mirror itself works too, but the filters then blur the reflection
+ *     across it (docs/renderer.md).
  */
 #ifndef HUSH_H
 #define HUSH_H
