@@ -336,11 +336,15 @@ static void clear_pixel(const layers *L, size_t i) {
  * number of mirrors (0: g is f). */
 static int replace_primary(const hush_render_ctx *ctx, const hush_first_hit *f, hush_first_hit *g,
                            float reflectance[3], mirror_map *mm) {
+  const int limit = ctx->params.mirror_depth < ctx->it.bounces ? ctx->params.mirror_depth
+                                                                : ctx->it.bounces;
+  /* the usual pixel returns here, before the copy */
+  if (limit <= 0 || f->kind != HUSH_FIRST_TRIANGLE ||
+      !hush__integrator_planar_mirror(&ctx->it, &f->surface, f->hit.triangle))
+    return 0;
   *g = *f;
   reflectance[0] = reflectance[1] = reflectance[2] = 1.0f;
   mirror_map_identity(mm);
-  const int limit = ctx->params.mirror_depth < ctx->it.bounces ? ctx->params.mirror_depth
-                                                                : ctx->it.bounces;
   int k = 0;
   hush_vec3 q, n;
   while (k < limit && hush__integrator_mirror_step(&ctx->it, g, reflectance, &q, &n)) {
@@ -420,7 +424,8 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   }
   const hush_material *m = &sc->materials[g->surface.material];
   hush__bsdf_albedo(m, &g->surface, alb);
-  for (int k = 0; k < 3; k++) alb[k] *= reflectance[k];
+  if (mirrors)
+    for (int k = 0; k < 3; k++) alb[k] *= reflectance[k];
   L->id[i] = (float)(g->surface.material + 1);
   const hush_vec3 ng = mirrors ? mirror_map_dir(&mm, g->surface.ng) : g->surface.ng;
   depth_gradient(ctx, px, py, p, ng, z, L->dgrad + 2 * i);
