@@ -202,6 +202,9 @@ int main(void) {
   expect("--scene builtin:cornell --out " WORK "/x --size 10", 2, "--size");
   expect("--scene builtin:cornell --out " WORK "/x --sampler sobol", 2, "--sampler");
   expect("--scene builtin:cornell --out " WORK "/x --bounces 99", 2, "--bounces");
+  expect2("--scene builtin:cornell --out " WORK "/x --mirror-depth 4", 2, "--mirror-depth",
+          "[0, 3]");
+  expect("--scene builtin:cornell --out " WORK "/x --mirror-depth -1", 2, "--mirror-depth");
   expect("--scene builtin:cornell --out " WORK "/x --path spiral", 2, "--path");
   expect("--scene builtin:cornell --out " WORK "/x --frobnicate", 2, "--frobnicate");
   expect("--scene builtin:cornell --out " WORK "/x extra", 2, "extra");
@@ -237,6 +240,7 @@ int main(void) {
   hush__sequence_free(&seq);
   char json[8192];
   read_file(WORK "/seq/render.json", json, sizeof json);
+  CHECK(strstr(json, "\"mirror_depth\": 3") != NULL);
   CHECK(strstr(json, "\"spp\": 1") && strstr(json, "\"first_frame\": 2") &&
         strstr(json, "\"command\": [\"hush\", \"render\""));
 
