@@ -15,7 +15,8 @@
  *       features (regression.h) — the block never leaves the core's cache;
  *   III second accumulation of the fitted result, cumulative then
  *       exponential at 0.1, through phase I's reprojection plan and sample
- *       counts (§3.5) -> remodulate -> TAA (src/temporal/taa.h, as svgf).
+ *       counts (§3.5) -> remodulate -> TAA (src/temporal/taa.h, as svgf)
+ *       -> the emission added back (emission.h), when it was kept out.
  *
  * Holes (depth <= 0: no surface) take no part in a fit and keep their
  * accumulated radiance.
@@ -205,7 +206,7 @@ static const hush_image_info bmfr_images[I_COUNT] = {
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"},
     {"emission", HUSH_IMAGE_INPUT, 0, 3,
      "radiance the camera sees directly at the first hit (lights, sky): kept out of the fit "
-     "(color - emission), added back before TAA"},
+     "(color - emission), added back after TAA"},
     {"gradient", HUSH_IMAGE_INPUT, 0, 3,
      "temporal gradient samples (`hush render --gradients`), read with temporal_gradients on: "
      "per 3x3 stratum, at its top-left pixel, the current and previous luminance and the "
@@ -697,33 +698,13 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                      hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
   hush__filter_timing_stage(f, "accumulate_fitted");
 
-  /* ---- remodulate, TAA, export: with TAA, the remodulation is fused into
-   * its first pass (one read of the fit and the albedo); without TAA or
-   * emission, into the export */
+  /* ---- remodulate, TAA, emission, export: with TAA, the remodulation is
+   * fused into its first pass (one read of the fit and the albedo); without
+   * TAA or emission, into the export */
   const hush_planar *result = &st->fhist[cur];
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
-  if (emis) {
-    /* the emission goes back before TAA, so the fused remodulation is
-     * done apart: remodulate, add the emission, then TAA the sum */
-    if (demod) {
-      hush__remodulate(&st->albedo, result, threads);
-      result = &st->albedo;
-    }
-    const hush_planar *e = hush__emission_accumulate_holes(
-        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
-        hush__gbuffer_holes_spp(&st->gin), threads);
-    hush__emission_add(&st->emission, e, result, threads);
-    rgb = st->emission;
-    if (with_taa) {
-      hush_taa_params tp;
-      tp.alpha = hush__param_f(f, P_TAA_ALPHA);
-      tp.box = HUSH_TAA_CLAMP;
-      tp.tonemap = 1;
-      hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
-      rgb = *hush__taa_output(&st->taa);
-    }
-  } else if (with_taa) {
+  if (with_taa) {
     hush_taa_params tp;
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;
@@ -732,6 +713,18 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                                 demod ? (const float *const *)st->albedo.plane : NULL, &tp,
                                 threads);
     rgb = *hush__taa_output(&st->taa);
+  } else if (emis && demod) {
+    hush__remodulate(&st->albedo, result, threads);
+    rgb = st->albedo;
+  }
+  if (emis) {
+    /* after TAA: the emission history has already averaged the lights'
+     * edges over frames, and TAA's tone-mapped blend would darken them */
+    const hush_planar *e = hush__emission_accumulate_holes(
+        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
+        hush__gbuffer_holes_spp(&st->gin), threads);
+    hush__emission_add(&st->emission, e, &rgb, threads);
+    rgb = st->emission;
   }
   hush__filter_timing_stage(f, "taa");
   if (!emis && !with_taa && demod) /* nothing else needs the remodulated planes: one pass */

@@ -580,13 +580,6 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     hush__remodulate(&st->albedo, result, threads);
     result = &st->albedo;
   }
-  if (emis) {
-    const hush_planar *e = hush__emission_accumulate_holes(
-        &st->eh, &st->rp.plan, hush__accum_age(&st->comp[0].acc)->plane[0], fc.ap.alpha_min,
-        &st->emission, holes ? st->spp.plane[0] : NULL, threads);
-    hush__emission_add(&st->emission, e, result, threads);
-    result = &st->emission;
-  }
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
   if (with_taa) {
@@ -601,6 +594,15 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     else
       hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
     rgb = *hush__taa_output(&st->taa);
+  }
+  if (emis) {
+    /* after TAA: the emission history has already averaged the lights'
+     * edges over frames, and TAA's tone-mapped blend would darken them */
+    const hush_planar *e = hush__emission_accumulate_holes(
+        &st->eh, &st->rp.plan, hush__accum_age(&st->comp[0].acc)->plane[0], fc.ap.alpha_min,
+        &st->emission, holes ? st->spp.plane[0] : NULL, threads);
+    hush__emission_add(&st->emission, e, &rgb, threads);
+    rgb = st->emission;
   }
   hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);

@@ -166,7 +166,7 @@ enum {
     {"albedo", HUSH_IMAGE_INPUT, 0, 3, "first-hit albedo, for demodulation (else 1)"}, \
     {"emission", HUSH_IMAGE_INPUT, 0, 3, \
      "radiance the camera sees directly at the first hit (lights, sky): kept out of the " \
-     "filtered signal (color, or direct, minus emission), added back before TAA"}, \
+     "filtered signal (color, or direct, minus emission), added back after TAA"}, \
     {"spp", HUSH_IMAGE_INPUT, 0, 1, \
      "samples per pixel of 'color' (else 1; `hush render --spp N`): the variance of a pixel " \
      "value is the per-sample variance / spp"}, \
