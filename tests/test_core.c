@@ -320,6 +320,54 @@ static void demodulated_import(uint32_t W, int with_bad) {
   free(buf);
 }
 
+/* The remodulating export (filters/albedo.c) gives the bits of the
+ * separate passes: remodulate, add the emission (filters/emission.c does
+ * o = filtered + emission), export; with the albedo or the addition left
+ * out, at widths that are and are not a multiple of its span. */
+static void remodulated_export(uint32_t W) {
+  const uint32_t H = 3;
+  const size_t n = (size_t)W * H;
+  hush_planar flt, alb, add, want;
+  REQUIRE(hush__planar_init(NULL, &flt, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &alb, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &add, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &want, 3, W, H) == HUSH_OK);
+  float *got = malloc(sizeof(float) * n * 3), *ref = malloc(sizeof(float) * n * 3);
+  REQUIRE(got && ref);
+  const hush_image_view gv = {got, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
+  const hush_image_view rv = {ref, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
+  for (int mode = 0; mode < 4; mode++) {
+    const int with_alb = mode & 1, with_add = mode & 2;
+    for (int c = 0; c < 3; c++)
+      for (size_t i = 0; i < n; i++) {
+        flt.plane[c][i] = (float)((i * 7 + (size_t)c) % 53) * 0.731f;
+        alb.plane[c][i] = (float)((i + 3 * (size_t)c) % 11) * 0.093f; /* 0 too: the floor */
+        add.plane[c][i] = (float)((i * 5 + (size_t)c) % 17) * 1.37f;
+        want.plane[c][i] = flt.plane[c][i];
+      }
+    if (with_alb) {
+      hush__remodulate(&alb, &flt, 2); /* alb <- flt * max(alb, eps) */
+      for (int c = 0; c < 3; c++) memcpy(want.plane[c], alb.plane[c], sizeof(float) * n);
+      for (int c = 0; c < 3; c++)
+        for (size_t i = 0; i < n; i++) alb.plane[c][i] = (float)((i + 3 * (size_t)c) % 11) * 0.093f;
+    }
+    if (with_add)
+      for (int c = 0; c < 3; c++)
+        for (size_t i = 0; i < n; i++) want.plane[c][i] = want.plane[c][i] + add.plane[c][i];
+    hush__view_export(&want, &rv, 1);
+    hush__export_remodulated(&flt, with_alb ? &alb : NULL, with_add ? &add : NULL, &gv, 2);
+    CHECK_MSG(memcmp(got, ref, sizeof(float) * n * 3) == 0,
+              "width %u, albedo %d, add %d: the fused export differs from the passes", W, with_alb,
+              with_add != 0);
+  }
+  free(got);
+  free(ref);
+  hush__planar_free(&flt);
+  hush__planar_free(&alb);
+  hush__planar_free(&add);
+  hush__planar_free(&want);
+}
+
 static void test_math(void) {
   float v[16], pr[16], m[16], inv[16], id[16];
   hush_m4_look_at(v, hush_v3(1, 2, 3), hush_v3(0, 0, -4), hush_v3(0, 1, 0));
@@ -380,6 +428,8 @@ int main(void) {
     demodulated_import(48, bad);
     demodulated_import(37, bad);
   }
+  remodulated_export(37);
+  remodulated_export(1100);
   test_math();
   test_rng();
   CHECK(callback_calls == 2);

@@ -6,6 +6,8 @@
 
 #include "core/device.h"
 
+#include <string.h>
+
 static inline float albedo_clamped(float a) { return a > HUSH_ALBEDO_EPS ? a : HUSH_ALBEDO_EPS; }
 
 /* col[x] /= max(alb[x], eps) over one row of one channel. */
@@ -70,7 +72,7 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
 #define EXPORT_SPAN 512
 
 void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
-                              const hush_image_view *view, int threads) {
+                              const hush_planar *add, const hush_image_view *view, int threads) {
   const int H = (int)filtered->height;
   const size_t W = filtered->width;
 #pragma omp parallel for schedule(static) num_threads(threads)
@@ -80,10 +82,19 @@ void hush__export_remodulated(const hush_planar *filtered, const hush_planar *al
     for (size_t x0 = 0; x0 < W; x0 += EXPORT_SPAN) {
       const size_t n = W - x0 < EXPORT_SPAN ? W - x0 : EXPORT_SPAN;
       for (int c = 0; c < 3; c++) {
-        const float *restrict flt = filtered->plane[c] + (size_t)y * W + x0;
-        const float *restrict alb = albedo->plane[c] + (size_t)y * W + x0;
+        const size_t at = (size_t)y * W + x0;
+        const float *restrict flt = filtered->plane[c] + at;
         float *restrict o = buf[c];
-        for (size_t x = 0; x < n; x++) o[x] = flt[x] * albedo_clamped(alb[x]);
+        if (albedo) {
+          const float *restrict alb = albedo->plane[c] + at;
+          for (size_t x = 0; x < n; x++) o[x] = flt[x] * albedo_clamped(alb[x]);
+        } else {
+          memcpy(o, flt, n * sizeof(float));
+        }
+        if (add) {
+          const float *restrict a = add->plane[c] + at;
+          for (size_t x = 0; x < n; x++) o[x] = o[x] + a[x];
+        }
       }
       hush__view_export_span(in, 3, view, (uint32_t)y, (uint32_t)x0, (uint32_t)n);
     }

@@ -40,11 +40,12 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
 
 /*
  * The remodulation fused with the export: view <- filtered * max(albedo,
- * eps) (3 channels), bit for bit hush__remodulate then hush__view_export,
- * in one pass and without writing the albedo planes (use it when nothing
- * else needs the remodulated planes).
+ * eps) + add (3 channels), bit for bit hush__remodulate, then
+ * hush__emission_add of `add`, then hush__view_export, in one pass and
+ * without writing the albedo planes (use it when nothing else needs the
+ * remodulated planes). albedo NULL: a factor of 1; add NULL: nothing added.
  */
 void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
-                              const hush_image_view *view, int threads);
+                              const hush_planar *add, const hush_image_view *view, int threads);
 
 #endif

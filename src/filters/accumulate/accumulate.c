@@ -156,6 +156,16 @@ static hush_status accumulate_create(hush_filter f, void **state) {
   return HUSH_OK;
 }
 
+/* This frame's emission blended into its history (emission.h): what goes
+ * back onto the output. */
+static const hush_planar *accumulated_emission(accumulate_state *st, float alpha_min,
+                                               int threads) {
+  return hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
+                                         hush__accum_age(&st->acc)->plane[0], alpha_min,
+                                         &st->emission, hush__gbuffer_holes_spp(&st->gin),
+                                         threads);
+}
+
 static hush_status export_result(hush_filter f, accumulate_state *st, hush_planar *result,
                                  int demod, int emis, const hush_accum_params *ap,
                                  int threads);
@@ -220,9 +230,11 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
 
   /* ---- export */
   hush_planar *result = hush__accum_color(&st->acc);
-  if (demod && !st->acc.empty && !emis) {
+  if (!st->acc.empty && (demod || emis)) {
     /* nothing else needs the remodulated planes: one pass */
-    hush__export_remodulated(result, &st->albedo, hush__filter_view(f, I_OUTPUT), threads);
+    hush__export_remodulated(result, demod ? &st->albedo : NULL,
+                             emis ? accumulated_emission(st, ap.alpha_min, threads) : NULL,
+                             hush__filter_view(f, I_OUTPUT), threads);
   } else if ((s = export_result(f, st, result, demod, emis, &ap, threads))) {
     return s;
   }
@@ -250,10 +262,8 @@ static hush_status export_result(hush_filter f, accumulate_state *st, hush_plana
                      hush__accum_age(&st->acc)->plane[0], result->plane, 3, threads);
   }
   if (emis) {
-    const hush_planar *e = hush__emission_accumulate_holes(
-        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap->alpha_min, &st->emission,
-        hush__gbuffer_holes_spp(&st->gin), threads);
-    hush__emission_add(&st->emission, e, result, threads);
+    hush__emission_add(&st->emission, accumulated_emission(st, ap->alpha_min, threads), result,
+                       threads);
     result = &st->emission;
   }
   hush__view_export(result, hush__filter_view(f, I_OUTPUT), threads);

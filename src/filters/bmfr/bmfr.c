@@ -700,7 +700,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
 
   /* ---- remodulate, TAA, emission, export: with TAA, the remodulation is
    * fused into its first pass (one read of the fit and the albedo); without
-   * TAA or emission, into the export */
+   * TAA, into the export, as is adding the emission back */
   const hush_planar *result = &st->fhist[cur];
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
@@ -713,22 +713,20 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                                 demod ? (const float *const *)st->albedo.plane : NULL, &tp,
                                 threads);
     rgb = *hush__taa_output(&st->taa);
-  } else if (emis && demod) {
-    hush__remodulate(&st->albedo, result, threads);
-    rgb = st->albedo;
   }
-  if (emis) {
-    /* after TAA: the emission history has already averaged the lights'
-     * edges over frames, and TAA's tone-mapped blend would darken them */
-    const hush_planar *e = hush__emission_accumulate_holes(
-        &st->eh, &st->rp.plan, hush__accum_age(&st->acc)->plane[0], ap.alpha_min, &st->emission,
-        hush__gbuffer_holes_spp(&st->gin), threads);
-    hush__emission_add(&st->emission, e, &rgb, threads);
-    rgb = st->emission;
-  }
+  /* the emission after TAA: its history has already averaged the lights'
+   * edges over frames, and TAA's tone-mapped blend would darken them */
+  const hush_planar *e =
+      emis ? hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
+                                             hush__accum_age(&st->acc)->plane[0], ap.alpha_min,
+                                             &st->emission, hush__gbuffer_holes_spp(&st->gin),
+                                             threads)
+           : NULL;
   hush__filter_timing_stage(f, "taa");
-  if (!emis && !with_taa && demod) /* nothing else needs the remodulated planes: one pass */
-    hush__export_remodulated(result, &st->albedo, hush__filter_view(f, I_OUTPUT), threads);
+  /* the remodulation (without TAA) and the emission fused into the export */
+  const hush_planar *albedo = !with_taa && demod ? &st->albedo : NULL;
+  if (albedo || e)
+    hush__export_remodulated(&rgb, albedo, e, hush__filter_view(f, I_OUTPUT), threads);
   else
     hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *fit_view = hush__filter_view(f, I_FITTED);

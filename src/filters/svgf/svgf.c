@@ -569,9 +569,16 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   /* ---- export */
   const hush_planar *result = &st->comp[0].result;
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
-  if (demod && !emis && !with_taa) {
+  const hush_planar *e = NULL; /* the emission to add back */
+  if (emis)
+    e = hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
+                                        hush__accum_age(&st->comp[0].acc)->plane[0],
+                                        fc.ap.alpha_min, &st->emission,
+                                        holes ? st->spp.plane[0] : NULL, threads);
+  if ((demod || emis) && !with_taa) {
     /* nothing else needs the remodulated planes: one pass */
-    hush__export_remodulated(result, &st->albedo, hush__filter_view(f, I_OUTPUT), threads);
+    hush__export_remodulated(result, demod ? &st->albedo : NULL, e,
+                             hush__filter_view(f, I_OUTPUT), threads);
     if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
     hush__filter_timing_stage(f, "export");
     return HUSH_OK;
@@ -595,16 +602,12 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
       hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)rgb.plane, &tp, threads);
     rgb = *hush__taa_output(&st->taa);
   }
-  if (emis) {
-    /* after TAA: the emission history has already averaged the lights'
-     * edges over frames, and TAA's tone-mapped blend would darken them */
-    const hush_planar *e = hush__emission_accumulate_holes(
-        &st->eh, &st->rp.plan, hush__accum_age(&st->comp[0].acc)->plane[0], fc.ap.alpha_min,
-        &st->emission, holes ? st->spp.plane[0] : NULL, threads);
-    hush__emission_add(&st->emission, e, &rgb, threads);
-    rgb = st->emission;
-  }
-  hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
+  /* the emission after TAA: its history has already averaged the lights'
+   * edges over frames, and TAA's tone-mapped blend would darken them */
+  if (e)
+    hush__export_remodulated(&rgb, NULL, e, hush__filter_view(f, I_OUTPUT), threads);
+  else
+    hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
