@@ -114,10 +114,12 @@ static float ray_eps(hush_vec3 p) {
 
 /* Adds beta * c * w to the result; contributions beyond the first hit are
  * clamped when asked. With split_lobes, the share `share` of it (per
- * channel) goes to the diffuse layer and the rest to the specular one. */
+ * channel) goes to the diffuse layer and the rest to the specular one.
+ * `direct`: also to the direct light, and, for emission (`emission` 1), to
+ * the emission seen directly (hush_path_result). */
 static void add(const hush_integrator *it, hush_path_result *out, float vertex_sum[3],
                 const float beta[3], const float c[3], float w, int depth, int direct,
-                const float share[3]) {
+                int emission, const float share[3]) {
   float v[3];
   for (int k = 0; k < 3; k++) v[k] = beta[k] * c[k] * w;
   if (!(isfinite(v[0]) && isfinite(v[1]) && isfinite(v[2]))) return;
@@ -130,6 +132,7 @@ static void add(const hush_integrator *it, hush_path_result *out, float vertex_s
     out->radiance[k] += v[k];
     vertex_sum[k] += v[k];
     if (direct) out->direct[k] += v[k];
+    if (direct && emission) out->emission[k] += v[k];
   }
   if (it->split_lobes)
     for (int k = 0; k < 3; k++) {
@@ -260,14 +263,6 @@ static void complete_hit(const hush_integrator *it, hush_vec3 o, hush_vec3 d, co
 
 /* ---- the path ------------------------------------------------------------------ */
 
-/* The emission the camera ray sees at its first hit (hush_path_result's
- * emission): at depth 0 the throughput and MIS weight are 1, so it is c
- * itself, dropped like add() drops it when not finite. */
-static void first_emission(hush_path_result *out, int depth, const float c[3]) {
-  if (depth != 0 || !(isfinite(c[0]) && isfinite(c[1]) && isfinite(c[2]))) return;
-  for (int k = 0; k < 3; k++) out->emission[k] = c[k];
-}
-
 /* One path in flight, between its vertices. A path is shaded as a loop of
  * path_vertex (the vertex's shading, up to its two rays), path_rays (the
  * path's next ray, then the shadow ray) and path_resolve (the shadow ray's
@@ -330,20 +325,6 @@ static void path_begin(path_state *st, hush_vec3 eye, const hush_first_hit *firs
   st->chain_next = 0;
 }
 
-/* Emission c, just added to the radiance (which held `before`), as the
- * camera sees it: at the first hit c itself (first_emission); behind planar
- * mirrors what add() added, the mirrors' reflectance and any clamp
- * applied. */
-static void seen_emission(const path_state *st, const float before[3], const float c[3]) {
-  hush_path_result *out = st->out;
-  if (st->depth == 0) {
-    first_emission(out, 0, c);
-    return;
-  }
-  if (!st->chain) return;
-  for (int k = 0; k < 3; k++) out->emission[k] += out->radiance[k] - before[k];
-}
-
 /* The vertex st->h: emission, the light sample up to its shadow ray
  * (st->sr, not asked yet), and the BSDF sample up to the path's next ray
  * (st->go, st->bs, st->next_origin, not traced yet). The contributions
@@ -354,8 +335,9 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   const hush_scene *sc = it->scene;
   const hush_lights *L = it->lights;
   hush_path_result *out = st->out;
-  /* emission seen directly: at the first hit, or behind planar mirrors
-   * (st->chain is 1 at depth 0) */
+  /* emission seen directly: at the first hit (throughput and MIS weight
+   * 1, so the emitted radiance itself), or behind planar mirrors (times
+   * their reflectance; st->chain is 1 at depth 0) */
   const int depth = st->depth, direct = st->chain;
   const hush_vec3 d = st->d;
   float *vsum = st->vsum;
@@ -363,14 +345,11 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   st->nee = 0;
   st->go = 0;
   st->chain_next = 0;
-  float before[3];
-  memcpy(before, out->radiance, sizeof before);
   if (st->h.kind == HUSH_FIRST_SKY) {
     float le[3];
     const float pdf_env = hush__lights_env_eval(L, d, le);
     const float w = st->prev_delta ? 1.0f : power_heuristic(st->prev_pdf, pdf_env);
-    add(it, out, vsum, st->beta, le, w, depth, direct, st->share);
-    seen_emission(st, before, le);
+    add(it, out, vsum, st->beta, le, w, depth, direct, 1, st->share);
     st->done = 1;
     return;
   }
@@ -379,8 +358,8 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
                                    : power_heuristic(st->prev_pdf,
                                                      hush__lights_sphere_pdf(L, st->h.sphere,
                                                                              st->origin));
-    add(it, out, vsum, st->beta, sc->spheres[st->h.sphere].radiance, w, depth, direct, st->share);
-    seen_emission(st, before, sc->spheres[st->h.sphere].radiance);
+    add(it, out, vsum, st->beta, sc->spheres[st->h.sphere].radiance, w, depth, direct, 1,
+        st->share);
     st->done = 1;
     return;
   }
@@ -404,8 +383,7 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
       w = power_heuristic(st->prev_pdf,
                           hush__lights_triangle_pdf(L, st->h.hit.triangle, area, st->h.t, cos_l));
     }
-    add(it, out, vsum, st->beta, m->emission, w, depth, direct, st->share);
-    seen_emission(st, before, m->emission);
+    add(it, out, vsum, st->beta, m->emission, w, depth, direct, 1, st->share);
   }
   const hush_vec3 wo = hush_v3_scale(d, -1.0f);
   hush_bsdf b;
@@ -483,7 +461,7 @@ static void path_resolve(const hush_integrator *it, path_state *st, int occluded
     const float one[3] = {1.0f, 1.0f, 1.0f};
     float bc[3];
     for (int k = 0; k < 3; k++) bc[k] = st->beta[k] * c[k];
-    add(it, out, st->vsum, one, bc, 1.0f, depth, depth == 0,
+    add(it, out, st->vsum, one, bc, 1.0f, depth, depth == 0, 0,
         depth == 0 ? st->nee_share : st->share);
   }
   call_hook(it, st->x, st->y, st->rng, depth, st->sp, st->h.hit.triangle, st->beta, st->vsum);
