@@ -5,7 +5,8 @@
  * every other pixel as it was; a light switched off gives a large relative
  * gradient where it lit; forward projection lands on the pixel that sees the
  * sample's surface point under camera motion and object motion, checked
- * against the renderer's own motion vectors; the result does not depend on
+ * against the renderer's own motion vectors; a sample on a planar mirror is
+ * the surface behind it, found again from a moved eye; the result does not depend on
  * the thread count; and `hush render --gradients`
  * writes the layer (half EXRs too) and rejects --spp > 1.
  */
@@ -47,12 +48,13 @@ static void rig_close(rig *r) {
   hush_device_release(r->device);
 }
 
-/* Sets the scene to frame f and renders it into out (reused over a
- * sequence, as hush render does); ctx receives the set-up. */
-static void render_into(rig *r, const hush_render_params *p, hush_camera_move move, uint32_t f,
-                        hush_render_ctx *ctx, hush_frame out) {
-  REQUIRE(hush__scene_set_frame(r->device, &r->scene, f) == HUSH_OK);
-  hush__lights_set_frame(&r->lights, f);
+/* Sets the scene to frame sf and renders frame f of the camera move into
+ * out (reused over a sequence, as hush render does); ctx receives the
+ * set-up. */
+static void render_scene_frame(rig *r, const hush_render_params *p, hush_camera_move move,
+                               uint32_t sf, uint32_t f, hush_render_ctx *ctx, hush_frame out) {
+  REQUIRE(hush__scene_set_frame(r->device, &r->scene, sf) == HUSH_OK);
+  hush__lights_set_frame(&r->lights, sf);
   hush_camera_pose pose;
   int ax;
   float zn, zf;
@@ -68,6 +70,12 @@ static void render_into(rig *r, const hush_render_params *p, hush_camera_move mo
   }
   hush__render_ctx_init(ctx, &r->scene, &r->lights, p, &cam, f > 0 ? &prev : NULL, f);
   REQUIRE(hush__render_frame(r->device, ctx, out, NULL, NULL, NULL) == HUSH_OK);
+}
+
+/* The same with the scene at frame f too. */
+static void render_into(rig *r, const hush_render_params *p, hush_camera_move move, uint32_t f,
+                        hush_render_ctx *ctx, hush_frame out) {
+  render_scene_frame(r, p, move, f, f, ctx, out);
 }
 
 static float *layer(hush_frame f, const char *name) {
@@ -365,6 +373,78 @@ static void test_projection(void) {
   CHECK_MSG(obj >= 10, "moving box: only %d samples moved", obj);
 }
 
+/* ---- behind a planar mirror ----------------------------------------------------------- */
+
+/* A still scene (cornell-mirror held at frame 0) under an orbiting camera:
+ * a sample on the mirror is the wall behind it (primary surface
+ * replacement), so its point in the mirror's virtual world lands where the
+ * new camera sees it in the mirror, its luminance is that wall's diffuse
+ * light (the mirror has no diffuse lobe of its own), and as nothing
+ * changed, its gradient is about 0, as on the surfaces seen directly.
+ * Re-shading the mirror point itself from the moved eye would reflect
+ * elsewhere: a gradient of the view. */
+static void test_mirror(void) {
+  rig r;
+  rig_open(&r, "cornell-mirror");
+  hush_render_params p;
+  params_for(&p, 160, 120);
+  hush_gradients g;
+  REQUIRE(hush__gradients_init(r.device, &g, p.width, p.height) == HUSH_OK);
+  p.gradients = &g;
+  hush_frame out = hush_frame_new(r.device, p.width, p.height);
+  REQUIRE(out);
+  hush_render_ctx ctx;
+  int mirrored = 0, lit = 0, still = 0, landed = 0, near = 0, direct_still = 0, direct = 0;
+  for (uint32_t f = 4; f <= 6; f++) {
+    render_scene_frame(&r, &p, HUSH_MOVE_ORBIT, 0, f, &ctx, out);
+    check_layer(&g, out);
+    if (f == 4) continue;
+    const float *pos = layer(out, "position");
+    for (uint32_t t = 0; t < g.strata_x * g.strata_y; t++) {
+      if (g.accepted[t] < 0) continue;
+      const hush_gradient_source *s = &g.next[g.claim[t]];
+      const float lambda = fabsf(g.current[t] - g.previous[t]) /
+                           fmaxf(1e-6f, fmaxf(g.current[t], g.previous[t]));
+      if (!s->mirrors) {
+        direct++;
+        direct_still += lambda < 1e-2f;
+        continue;
+      }
+      mirrored++;
+      lit += g.previous[t] > 0.0f;
+      still += lambda < 1e-2f;
+      /* the virtual point projects into the landing pixel; the pixel's
+       * own virtual point (the position layer, from its jittered ray) is
+       * mostly near it (not across an edge of what the mirror shows) */
+      uint32_t x, y;
+      landing_xy(&g, t, &x, &y);
+      const hush_vec3 v = hush__mirror_map_point(
+          &s->map, hush__scene_point(&r.scene, s->behind_triangle, s->behind_u, s->behind_v, 0));
+      float cx, cy;
+      if (hush__camera_project(&ctx.cam, v, 1.0f, &cx, &cy) && (uint32_t)floorf(cx) == x &&
+          (uint32_t)floorf(cy) == y)
+        landed++;
+      const size_t i = (size_t)y * p.width + x;
+      const hush_vec3 q = hush_v3(pos[3 * i], pos[3 * i + 1], pos[3 * i + 2]);
+      near += hush_v3_length(hush_v3_sub(q, v)) < 0.03f * hush_v3_length(hush_v3_sub(v, ctx.cam.eye));
+    }
+  }
+  printf("mirror: %d samples behind the mirror (%d lit, %d with gradient < 0.01, %d landed, "
+         "%d near the pixel's point); %d elsewhere (%d with gradient < 0.01)\n",
+         mirrored, lit, still, landed, near, direct, direct_still);
+  CHECK_MSG(mirrored >= 100, "only %d samples behind the mirror", mirrored);
+  CHECK_MSG(lit >= mirrored / 2, "%d of %d samples behind the mirror lit", lit, mirrored);
+  CHECK_MSG(landed == mirrored && near >= mirrored * 3 / 4,
+            "of %d samples behind the mirror %d landed on their point, %d near the pixel's",
+            mirrored, landed, near);
+  CHECK_MSG(still >= mirrored * 9 / 10, "%d of %d samples behind the mirror with a gradient",
+            mirrored - still, mirrored);
+  CHECK(direct_still >= direct * 9 / 10);
+  hush_frame_release(out);
+  hush__gradients_free(&g);
+  rig_close(&r);
+}
+
 /* ---- thread count ------------------------------------------------------------------------ */
 
 /* Which sample a stratum takes and how the pixels are shaded do not depend
@@ -482,6 +562,7 @@ int main(void) {
   test_static_zero(HUSH_GRADIENT_LANDING_FRESH, HUSH_GRADIENT_LOBE_DIFFUSE);
   test_light_off();
   test_projection();
+  test_mirror();
   test_threads(HUSH_GRADIENT_SELECT_BRIGHTEST);
   test_threads(HUSH_GRADIENT_SELECT_RANDOM);
   test_bad_params();

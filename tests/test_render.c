@@ -1116,6 +1116,29 @@ static void test_mirror_gbuffer(void) {
   }
   CHECK_MSG(lit > 3 && short_direct == 0, "%d of %d lit pixels with less direct than emission",
             short_direct, lit);
+  /* and a mirror pixel splits its light as the surface behind it would,
+   * seen directly: every surface behind this mirror is Lambert, so all of
+   * it is diffuse (the mirror's own delta lobe would make it specular), and
+   * the light sample of the wall seen in it is direct light */
+  p.split_lobes = 1;
+  hush_frame fl = render_at(&r, &p, HUSH_MOVE_ORBIT, t1, &sctx);
+  const float *dif = layer(fl, "diffuse"), *spec = layer(fl, "specular");
+  const float *dirl = layer(fl, "direct"), *visl = layer(fl, "vis"), *idl = layer(fl, "id");
+  int seen = 0, specular = 0, walls = 0, wall_direct = 0;
+  for (size_t i = 0; i < (size_t)W * H; i++) {
+    if (visl[3 * i] < 0.0f || r.scene.triangle_material[(uint32_t)visl[3 * i]] != mirror) continue;
+    if (dif[3 * i] + dif[3 * i + 1] + dif[3 * i + 2] > 0.0f) seen++;
+    if (spec[3 * i] != 0.0f || spec[3 * i + 1] != 0.0f || spec[3 * i + 2] != 0.0f) specular++;
+    if ((uint32_t)idl[i] - 1u != green) continue;
+    walls++;
+    wall_direct += dirl[3 * i + 1] > 0.0f;
+  }
+  printf("mirror: split: %d pixels with diffuse light, %d with specular; %d of %d green-wall "
+         "pixels with direct light\n", seen, specular, wall_direct, walls);
+  CHECK_MSG(seen > 300 && specular == 0, "%d mirror pixels with specular light", specular);
+  CHECK_MSG(walls > 20 && wall_direct > walls * 3 / 4, "%d of %d green-wall pixels in the mirror "
+            "with direct light", wall_direct, walls);
+  hush_frame_release(fl);
   hush_frame_release(fs);
   for (int on = 0; on < 2; on++)
     for (int k = 0; k < 2; k++) hush_frame_release(f[on][k]);

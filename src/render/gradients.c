@@ -100,7 +100,13 @@ hush_status hush__gradients_begin(hush_device device, hush_gradients *g,
   for (uint32_t s = 0; s < n; s++) {
     const hush_gradient_source *src = &g->sources[s];
     if (src->triangle >= sc->triangle_count) continue;
-    const hush_vec3 pt = hush__scene_point(sc, src->triangle, src->u, src->v, sc->frame);
+    /* behind planar mirrors: the hit they lead to, in their virtual world */
+    const hush_vec3 pt =
+        src->mirrors ? hush__mirror_map_point(&src->map,
+                                              hush__scene_point(sc, src->behind_triangle,
+                                                                src->behind_u, src->behind_v,
+                                                                sc->frame))
+                     : hush__scene_point(sc, src->triangle, src->u, src->v, sc->frame);
     float cx, cy;
     if (!hush__camera_project(&ctx->cam, pt, 1.0f, &cx, &cy)) continue;
     if (!(cx >= 0.0f && cx < (float)g->width && cy >= 0.0f && cy < (float)g->height)) continue;
@@ -115,24 +121,57 @@ hush_status hush__gradients_begin(hush_device device, hush_gradients *g,
 
 /* ---- during the frame: visibility test and re-shading -------------------------------- */
 
+/* Whether `seen` is the sample's triangle, or a triangle of the same object
+ * whose plane holds the sample's point p (dist away from the eye along the
+ * camera ray, unfolded through mirrors). */
+static int same_surface(const hush_scene *sc, uint32_t seen, uint32_t triangle, hush_vec3 p,
+                        float dist) {
+  if (seen >= sc->triangle_count) return 0;
+  if (seen == triangle) return 1;
+  if (sc->triangle_object[seen] != sc->triangle_object[triangle]) return 0;
+  const hush_vec3 a = hush__scene_point(sc, seen, 0.0f, 0.0f, sc->frame);
+  const hush_vec3 b = hush__scene_point(sc, seen, 1.0f, 0.0f, sc->frame);
+  const hush_vec3 c = hush__scene_point(sc, seen, 0.0f, 1.0f, sc->frame);
+  const hush_vec3 n = hush_v3_cross(hush_v3_sub(b, a), hush_v3_sub(c, a));
+  const float len = hush_v3_length(n);
+  if (!(len > 0.0f)) return 0;
+  return fabsf(hush_v3_dot(n, hush_v3_sub(p, a))) / len <= PLANE_TOLERANCE * dist;
+}
+
 /* Whether the pixel whose primary ray hit `traced` sees the sample's first
  * hit f: nothing (a sphere light) in front of it, and the same triangle or
  * a triangle of the same object whose plane holds the sample. */
 static int sees_sample(const hush_render_ctx *ctx, const hush_hit *traced, const hush_first_hit *f) {
-  const hush_scene *sc = ctx->scene;
-  if (traced->triangle >= sc->triangle_count) return 0;
   float ts;
   if (hush__lights_intersect_sphere(ctx->lights, ctx->cam.eye, f->dir, 0.0f, f->t, &ts)) return 0;
-  if (traced->triangle == f->hit.triangle) return 1;
-  if (sc->triangle_object[traced->triangle] != sc->triangle_object[f->hit.triangle]) return 0;
-  const hush_vec3 a = hush__scene_point(sc, traced->triangle, 0.0f, 0.0f, sc->frame);
-  const hush_vec3 b = hush__scene_point(sc, traced->triangle, 1.0f, 0.0f, sc->frame);
-  const hush_vec3 c = hush__scene_point(sc, traced->triangle, 0.0f, 1.0f, sc->frame);
-  const hush_vec3 n = hush_v3_cross(hush_v3_sub(b, a), hush_v3_sub(c, a));
-  const float len = hush_v3_length(n);
-  if (!(len > 0.0f)) return 0;
-  const float dist = fabsf(hush_v3_dot(n, hush_v3_sub(f->p, a))) / len;
-  return dist <= PLANE_TOLERANCE * f->t;
+  return same_surface(ctx->scene, traced->triangle, f->hit.triangle, f->p, f->t);
+}
+
+/* The first hit of a sample behind planar mirrors (src->mirrors > 0) for
+ * this frame's eye: where the camera ray towards the sample's point in the
+ * mirrors' virtual world meets the first mirror. 0 unless the same number
+ * of mirrors leads from there to the sample's surface (it is not hidden in
+ * the mirror, nor the mirror moved or gone). */
+static int mirror_first_hit(const hush_render_ctx *ctx, const hush_gradient_source *src,
+                            hush_first_hit *f) {
+  const hush_scene *sc = ctx->scene;
+  const hush_vec3 eye = ctx->cam.eye;
+  const hush_vec3 behind =
+      hush__scene_point(sc, src->behind_triangle, src->behind_u, src->behind_v, sc->frame);
+  const hush_vec3 to = hush_v3_sub(hush__mirror_map_point(&src->map, behind), eye);
+  const float dist = hush_v3_length(to);
+  if (!(dist > 0.0f)) return 0;
+  const hush_vec3 d = hush_v3_scale(to, 1.0f / dist);
+  const float o[3] = {eye.x, eye.y, eye.z}, dd[3] = {d.x, d.y, d.z};
+  hush_hit hit;
+  if (!hush__scene_intersect(sc, o, dd, 0.0f, INFINITY, &hit)) return 0;
+  if (!hush__integrator_first_hit(&ctx->it, eye, hit.triangle, hit.u, hit.v, f)) return 0;
+  hush_first_hit g;
+  float reflectance[3];
+  hush_mirror_map mm;
+  if (hush__mirror_replace_primary(ctx, f, &g, reflectance, &mm) != (int)src->mirrors) return 0;
+  return g.kind == HUSH_FIRST_TRIANGLE &&
+         same_surface(sc, g.hit.triangle, src->behind_triangle, behind, dist);
 }
 
 /* The pixel colour of one shaded sample, as render.c's shade_pixel makes it
@@ -166,7 +205,12 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
   if (c < 0 || g->landing[t] != y * g->width + x) return 0;
   const hush_gradient_source *src = &g->sources[c];
   hush_first_hit f;
-  if (!hush__integrator_first_hit(&ctx->it, ctx->cam.eye, src->triangle, src->u, src->v, &f))
+  /* + the primary ray traced for the visibility test; behind mirrors + the
+   * ray to the mirror and one per mirror */
+  const uint32_t test_rays = src->mirrors ? 2u + src->mirrors : 1u;
+  if (src->mirrors ? !mirror_first_hit(ctx, src, &f)
+                   : !hush__integrator_first_hit(&ctx->it, ctx->cam.eye, src->triangle, src->u,
+                                                 src->v, &f))
     return 0;
   if (!sees_sample(ctx, traced, &f)) return 0;
   const hush_render_params *p = &ctx->params;
@@ -179,7 +223,7 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
     g->current[t] = gradient_luminance(g, p->split_lobes, &r);
     g->previous[t] = src->luminance;
     g->accepted[t] = (int32_t)((y % S) * S + x % S);
-    g->reshade_rays[t] = r.rays + 1u; /* + the primary ray of the visibility test */
+    g->reshade_rays[t] = r.rays + test_rays;
     return 0; /* the pixel takes its own fresh sample */
   }
   memset(out, 0, sizeof *out);
@@ -192,7 +236,7 @@ int hush__gradients_shade(hush_gradients *g, const hush_render_ctx *ctx, uint32_
   }
   out->first = f;
   out->gradient_sample = 1;
-  out->rays = (uint64_t)r.rays + 1; /* + the primary ray traced for the visibility test */
+  out->rays = (uint64_t)r.rays + test_rays;
   g->current[t] = gradient_luminance(g, p->split_lobes, &r);
   g->previous[t] = src->luminance;
   g->accepted[t] = (int32_t)((y % S) * S + x % S);
@@ -273,18 +317,29 @@ static uint64_t choose_source(const hush_gradients *g, const hush_render_ctx *ct
   const float u = vis[3 * best_i + 1], v = vis[3 * best_i + 2];
   hush_first_hit f;
   if (!hush__integrator_first_hit(it, ctx->cam.eye, tri, u, v, &f)) return 0;
+  /* on a planar mirror: the hit behind, which the pixel describes */
+  hush_first_hit behind;
+  float reflectance[3];
+  const int mirrors = hush__mirror_replace_primary(ctx, &f, &behind, reflectance, &src->map);
+  if (mirrors && behind.kind != HUSH_FIRST_TRIANGLE) return (uint64_t)mirrors;
   const hush_render_params *p = &ctx->params;
   hush_rand rng;
   hush__rand_init(&rng, p->sampler, p->seed, src->seed_frame, src->seed_x, src->seed_y, 0, 1);
   hush_path_result r;
   hush__integrator_shade(it, ctx->cam.eye, &f, &rng, bx, by, &r);
   const float l = gradient_luminance(g, p->split_lobes, &r);
-  if (!isfinite(l)) return r.rays;
+  if (!isfinite(l)) return r.rays + (uint64_t)mirrors;
+  src->mirrors = (uint32_t)mirrors;
+  if (mirrors) {
+    src->behind_triangle = behind.hit.triangle;
+    src->behind_u = behind.hit.u;
+    src->behind_v = behind.hit.v;
+  }
   src->triangle = tri;
   src->u = u;
   src->v = v;
   src->luminance = l;
-  return r.rays;
+  return r.rays + (uint64_t)mirrors;
 }
 
 hush_status hush__gradients_end(hush_device device, hush_gradients *g, const hush_render_ctx *ctx,

@@ -40,6 +40,12 @@
  * where no sample landed or the visibility test failed. The index is small so
  * that it stays exact in half-float EXRs.
  *
+ * Behind planar mirrors (primary surface replacement, mirror.h) the sample
+ * is the hit the mirrors lead to: forward-projected as a point of their
+ * virtual world, it must be seen again behind the same mirrors, and the
+ * re-shading starts on the mirror where the camera ray to that virtual
+ * point meets it (hush_gradient_source).
+ *
  * Needs 1 sample per pixel on every pixel (no --spp > 1, no --spp-fraction):
  * the sample replaces the pixel's only sample.
  */
@@ -47,6 +53,7 @@
 #define HUSH_RENDER_GRADIENTS_H
 
 #include "hush.h"
+#include "render/mirror.h"
 #include "render/render.h"
 
 #include <stdint.h>
@@ -60,6 +67,17 @@ typedef struct hush_gradient_source {
   uint32_t x, y;           /* the pixel it was chosen at */
   uint32_t seed_frame, seed_x, seed_y; /* the numbers it was shaded with (hush__rand_init) */
   float luminance;         /* re-shaded in its own frame */
+  /* A sample on a planar mirror (primary surface replacement, mirror.h):
+   * the hit behind the mirrors, which the pixel describes, and the map
+   * into their virtual world. It is that hit that is forward-projected
+   * (through the map: mirrors are taken to be still) and must be seen
+   * again behind the same mirrors: re-shading the mirror point itself
+   * from a moved eye would reflect elsewhere, a change of view read as a
+   * gradient. mirrors 0: none (triangle, u, v is the sample). */
+  uint32_t mirrors;
+  uint32_t behind_triangle;
+  float behind_u, behind_v;
+  hush_mirror_map map;
 } hush_gradient_source;
 
 /* State carried from frame to frame. All arrays have one entry per stratum
@@ -89,7 +107,8 @@ typedef enum hush_gradient_lobe {
    * cut the history of every glossy surface on a camera path (classroom
    * RMSE +10% over svgf); the diffuse lobe's share of the same paths
    * changes only with the lighting. Surfaces without a diffuse lobe
-   * (mirror, glass) give no gradient. */
+   * (curved mirror, glass) give no gradient; behind a planar mirror the
+   * lobes are those of the hit it leads to (integrator.h). */
   HUSH_GRADIENT_LOBE_DIFFUSE,
   HUSH_GRADIENT_LOBE_ALL /* the sample's whole colour (the papers) */
 } hush_gradient_lobe;

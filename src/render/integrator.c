@@ -394,10 +394,11 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   st->sr.traced = 0;
   st->nee_share[0] = st->nee_share[1] = st->nee_share[2] = 1.0f;
   if (st->nee)
-    /* at the first hit the light sample is split by lobe; later ones
-     * follow the first hit's split of the path */
+    /* at the first hit (behind planar mirrors: the first hit beyond
+     * them, st->chain) the light sample is split by lobe; later ones
+     * follow that hit's split of the path */
     next_event(it, st->rng, base, &b, sp->p, wo, last, &st->sr,
-               it->split_lobes && depth == 0 ? st->nee_share : NULL);
+               it->split_lobes && st->chain ? st->nee_share : NULL);
   if (last) return;
 
   const float u[3] = {hush__rand(st->rng, base + D_BSDF_LOBE),
@@ -405,11 +406,18 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
                       hush__rand(st->rng, base + D_BSDF_UV + 1)};
   hush_bsdf_sample *bs = &st->bs;
   if (!hush__bsdf_sample(&b, wo, u, bs)) return;
-  if (it->split_lobes && depth == 0) {
+  /* the path goes on through a planar mirror of the chain (primary
+   * surface replacement): the hit behind it counts as the first */
+  const int mirror = st->chain && depth < it->mirror_depth && bs->delta &&
+                     hush__integrator_planar_mirror(it, sp, st->h.hit.triangle);
+  if (it->split_lobes && st->chain && !mirror) {
     /* the rest of the path is split as the first hit's lobes reflect
      * the sampled direction: delta lobes are specular, a smooth
      * direction by the lobes' values there (this vertex's light sample
-     * uses nee_share, not share) */
+     * uses nee_share, not share). Behind planar mirrors the hit they
+     * lead to decides, as if the camera saw it directly: the pixel
+     * describes that hit, and the light seen in the mirror is diffuse
+     * as light seen directly. */
     if (bs->delta) {
       st->share[0] = st->share[1] = st->share[2] = 0.0f;
     } else {
@@ -427,8 +435,7 @@ static void path_vertex(const hush_integrator *it, path_state *st) {
   }
   st->go = 1;
   st->next_origin = offset_origin(sp->p, b.ng, bs->wi);
-  st->chain_next = st->chain && depth < it->mirror_depth && bs->delta &&
-                   hush__integrator_planar_mirror(it, sp, st->h.hit.triangle);
+  st->chain_next = mirror;
 }
 
 /* The vertex's rays: the path's next ray first, its hit's shading record
@@ -461,8 +468,10 @@ static void path_resolve(const hush_integrator *it, path_state *st, int occluded
     const float one[3] = {1.0f, 1.0f, 1.0f};
     float bc[3];
     for (int k = 0; k < 3; k++) bc[k] = st->beta[k] * c[k];
-    add(it, out, st->vsum, one, bc, 1.0f, depth, depth == 0, 0,
-        depth == 0 ? st->nee_share : st->share);
+    /* the light sample of the first hit, or of the hit behind the
+     * planar mirrors, is direct light, as the emission seen there */
+    add(it, out, st->vsum, one, bc, 1.0f, depth, st->chain, 0,
+        st->chain ? st->nee_share : st->share);
   }
   call_hook(it, st->x, st->y, st->rng, depth, st->sp, st->h.hit.triangle, st->beta, st->vsum);
   if (!st->go) {

@@ -116,7 +116,9 @@ typedef struct hush_first_hit {
 
 typedef struct hush_path_result {
   float radiance[3];
-  float direct[3];         /* emission seen directly (as `emission`) + the first hit's shadow ray */
+  float direct[3];         /* emission seen directly (as `emission`) + the first hit's shadow
+                            * ray (with mirror_depth, behind planar mirrors: the shadow ray
+                            * of the first hit beyond them) */
   float emission[3];       /* emission seen directly: what the camera ray's first hit
                             * emits towards it (emissive triangle, sphere light, sky),
                             * or, with mirror_depth, the first hit behind the planar
@@ -128,7 +130,9 @@ typedef struct hush_path_result {
    * after the first hit by the lobes' values in the sampled direction, all
    * specular for a delta lobe (mirror, smooth coat, glass). So each layer's
    * expectation is its lobe's integral, and diffuse + specular = radiance
-   * up to rounding. */
+   * up to rounding. With mirror_depth, "the first hit" of a path through
+   * planar mirrors is the first hit beyond them (primary surface
+   * replacement: the pixel describes it). */
   float diffuse[3], specular[3];
   uint32_t rays;           /* rays traced, primary and shadow included */
 } hush_path_result;

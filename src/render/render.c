@@ -10,6 +10,7 @@
 #include "io/frame.h"
 #include "render/bsdf.h"
 #include "render/gradients.h"
+#include "render/mirror.h"
 
 #include <math.h>
 #include <omp.h>
@@ -230,46 +231,12 @@ static void depth_gradient(const hush_render_ctx *ctx, float px, float py, hush_
   }
 }
 
-/* The map from the world to the virtual world seen through planar mirrors:
- * x -> a x + b, the composition of the mirrors' reflections in the order
- * the camera ray meets them (primary surface replacement). */
-typedef struct mirror_map {
-  hush_vec3 a[3];          /* rows */
-  hush_vec3 b;
-} mirror_map;
-
-static void mirror_map_identity(mirror_map *m) {
-  m->a[0] = hush_v3(1.0f, 0.0f, 0.0f);
-  m->a[1] = hush_v3(0.0f, 1.0f, 0.0f);
-  m->a[2] = hush_v3(0.0f, 0.0f, 1.0f);
-  m->b = hush_v3(0.0f, 0.0f, 0.0f);
-}
-
-static hush_vec3 mirror_map_dir(const mirror_map *m, hush_vec3 v) {
-  return hush_v3(hush_v3_dot(m->a[0], v), hush_v3_dot(m->a[1], v), hush_v3_dot(m->a[2], v));
-}
-
-static hush_vec3 mirror_map_point(const mirror_map *m, hush_vec3 p) {
-  return hush_v3_add(mirror_map_dir(m, p), m->b);
-}
-
-/* m after the reflection about the plane through q with unit normal n:
- * x -> m(x - 2 ((x - q) . n) n). */
-static void mirror_map_reflect(mirror_map *m, hush_vec3 q, hush_vec3 n) {
-  const hush_vec3 an = mirror_map_dir(m, n);
-  for (int r = 0; r < 3; r++) {
-    const float c = 2.0f * (r == 0 ? an.x : r == 1 ? an.y : an.z);
-    m->a[r] = hush_v3_sub(m->a[r], hush_v3_scale(n, c));
-  }
-  m->b = hush_v3_add(m->b, hush_v3_scale(an, 2.0f * hush_v3_dot(q, n)));
-}
-
 /* Where the first hit was in the previous frame, minus where it is now
  * (both without jitter), both mapped by mm when it is not NULL (a hit seen
  * through mirrors, which are taken to be still). Off-screen or behind the
  * camera: (-1, -1) pixel. */
-static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f, const mirror_map *mm,
-                      float out[2]) {
+static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f,
+                      const hush_mirror_map *mm, float out[2]) {
   out[0] = out[1] = 0.0f;
   if (!ctx->have_prev) return;
   const hush_scene *sc = ctx->scene;
@@ -291,8 +258,8 @@ static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f, const
     prev = hush_v3_sub(now, hush_v3(c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2]));
   }
   if (mm) {
-    now = w > 0.0f ? mirror_map_point(mm, now) : mirror_map_dir(mm, now);
-    prev = w > 0.0f ? mirror_map_point(mm, prev) : mirror_map_dir(mm, prev);
+    now = w > 0.0f ? hush__mirror_map_point(mm, now) : hush__mirror_map_dir(mm, now);
+    prev = w > 0.0f ? hush__mirror_map_point(mm, prev) : hush__mirror_map_dir(mm, prev);
   }
   float cx, cy, px, py;
   if (!hush__camera_project(&ctx->cam, now, w, &cx, &cy)) return;
@@ -330,30 +297,6 @@ static void clear_pixel(const layers *L, size_t i) {
   zero(L->emission, 3, i);
 }
 
-/* Primary surface replacement (render.h): the hit g the G-buffer
- * describes, behind the planar mirrors the first hit f leads to, the
- * mirrors' reflectance and the map into their virtual world. Returns the
- * number of mirrors (0: g is f). */
-static int replace_primary(const hush_render_ctx *ctx, const hush_first_hit *f, hush_first_hit *g,
-                           float reflectance[3], mirror_map *mm) {
-  const int limit = ctx->params.mirror_depth < ctx->it.bounces ? ctx->params.mirror_depth
-                                                                : ctx->it.bounces;
-  /* the usual pixel returns here, before the copy */
-  if (limit <= 0 || f->kind != HUSH_FIRST_TRIANGLE ||
-      !hush__integrator_planar_mirror(&ctx->it, &f->surface, f->hit.triangle))
-    return 0;
-  *g = *f;
-  reflectance[0] = reflectance[1] = reflectance[2] = 1.0f;
-  mirror_map_identity(mm);
-  int k = 0;
-  hush_vec3 q, n;
-  while (k < limit && hush__integrator_mirror_step(&ctx->it, g, reflectance, &q, &n)) {
-    mirror_map_reflect(mm, q, n);
-    k++;
-  }
-  return k;
-}
-
 static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x, uint32_t y,
                         const hush_pixel_result *r) {
   const size_t i = (size_t)y * ctx->params.width + x;
@@ -386,8 +329,8 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   }
   hush_first_hit replaced;
   float reflectance[3];
-  mirror_map mm;
-  const int mirrors = replace_primary(ctx, f, &replaced, reflectance, &mm);
+  hush_mirror_map mm;
+  const int mirrors = hush__mirror_replace_primary(ctx, f, &replaced, reflectance, &mm);
   const hush_first_hit *g = mirrors ? &replaced : f;
   motion_of(ctx, g, mirrors ? &mm : NULL, L->motion + 2 * i);
   float *alb = L->albedo + 3 * i;
@@ -411,8 +354,8 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   }
   /* behind mirrors, the virtual hit: where the unfolded camera ray meets
    * the reflected surface */
-  const hush_vec3 p = mirrors ? mirror_map_point(&mm, g->p) : g->p;
-  const hush_vec3 n = mirrors ? mirror_map_dir(&mm, g->n) : g->n;
+  const hush_vec3 p = mirrors ? hush__mirror_map_point(&mm, g->p) : g->p;
+  const hush_vec3 n = mirrors ? hush__mirror_map_dir(&mm, g->n) : g->n;
   const float z = view_depth(&ctx->cam, p);
   L->depth[i] = z;
   memcpy(L->position + 3 * i, &p, 3 * sizeof(float));
@@ -427,7 +370,7 @@ static void write_pixel(const hush_render_ctx *ctx, const layers *L, uint32_t x,
   if (mirrors)
     for (int k = 0; k < 3; k++) alb[k] *= reflectance[k];
   L->id[i] = (float)(g->surface.material + 1);
-  const hush_vec3 ng = mirrors ? mirror_map_dir(&mm, g->surface.ng) : g->surface.ng;
+  const hush_vec3 ng = mirrors ? hush__mirror_map_dir(&mm, g->surface.ng) : g->surface.ng;
   depth_gradient(ctx, px, py, p, ng, z, L->dgrad + 2 * i);
 }
 

@@ -14,7 +14,9 @@
 #include <string.h>
 
 const char *const hush__scene_builtin_names[] = {
-    "cornell", "cornell-moving", "cornell-mirror", "courtyard", "moving-light", "light-off", "light-jump", "furnace", "mask", NULL};
+    "cornell",    "cornell-moving", "cornell-mirror", "courtyard", "moving-light",
+    "light-off",  "mirror-light-off", "light-jump",   "furnace",   "mask",
+    NULL};
 
 const char *const hush__scene_builtin_docs[] = {
     "the Cornell box: white floor, ceiling and back wall, red left and green right wall, two "
@@ -27,6 +29,8 @@ const char *const hush__scene_builtin_docs[] = {
     "sphere, a moving box, a small sphere light moving back and forth and a dim sky",
     "the courtyard with nothing moving but the sphere light",
     "the courtyard with everything still and the sphere light switched off from frame 8",
+    "light-off with a mirror standing behind the last pillars (x -2.6 to 2.6, y 0 to 2.9, z "
+    "-6.6, facing the camera): the light going off, seen in a mirror",
     "the courtyard with everything still and the sphere light jumping at frame 8 from the "
     "left of the roof's middle to its front right (2.2 m right, 2.5 m forward)",
     "a Lambert sphere of albedo 0.8 inside a uniform environment of radiance 1 (the furnace "
@@ -243,6 +247,17 @@ static void set_camera(hush_scene *s, hush_vec3 pos, hush_vec3 target, float fov
 /* The scenes                                                               */
 /* ------------------------------------------------------------------------ */
 
+/* A planar mirror (a smooth conductor of reflectance 0.9, which primary
+ * surface replacement sees through) facing +z: x in [x0, x1], y in [y0, y1]
+ * at z. */
+static void add_mirror(builder *b, float x0, float x1, float y0, float y1, float z) {
+  hush_material m = base_material("mirror", HUSH_MAT_CONDUCTOR, 0.0f, 0.0f, 0.0f);
+  m.specular[0] = m.specular[1] = m.specular[2] = 0.9f;
+  const uint32_t silver = add_material(b, &m);
+  add_quad(b, hush_v3(x0, y0, z), hush_v3(x1, y0, z), hush_v3(x1, y1, z), hush_v3(x0, y1, z),
+           silver, 1, 1);
+}
+
 /* The box spans x, z in [-1, 1] and y in [0, 2], open towards +z; the camera
  * looks down -z along x = 0, y = 1, which no box blocks. */
 static void build_cornell(builder *b, int moving, int mirror) {
@@ -269,13 +284,7 @@ static void build_cornell(builder *b, int moving, int mirror) {
   add_quad(b, hush_v3(1, 0, -1), hush_v3(1, 0, 1), hush_v3(1, 2, 1), hush_v3(1, 2, -1), green, 1,
            1); /* right wall, -x */
   add_box(b, hush_v3(-0.45f, 0.6f, -0.35f), hush_v3(0.28f, 0.6f, 0.28f), 17.0f, white);
-  if (mirror) {
-    m = base_material("mirror", HUSH_MAT_CONDUCTOR, 0.0f, 0.0f, 0.0f);
-    m.specular[0] = m.specular[1] = m.specular[2] = 0.9f;
-    const uint32_t silver = add_material(b, &m);
-    add_quad(b, hush_v3(-0.2f, 0.15f, -0.995f), hush_v3(0.9f, 0.15f, -0.995f),
-             hush_v3(0.9f, 1.85f, -0.995f), hush_v3(-0.2f, 1.85f, -0.995f), silver, 1, 1);
-  }
+  if (mirror) add_mirror(b, -0.2f, 0.9f, 0.15f, 1.85f, -0.995f);
   if (!moving) add_box(b, hush_v3(0.4f, 0.3f, 0.4f), hush_v3(0.3f, 0.3f, 0.3f), -18.0f, white);
   begin_object(b, "light", NULL);
   add_quad(b, hush_v3(-0.235f, 1.98f, -0.19f), hush_v3(0.235f, 1.98f, -0.19f),
@@ -322,7 +331,7 @@ enum {
   COURTYARD_LIGHT_JUMPS = 3
 };
 
-static void build_courtyard(builder *b, int variant) {
+static void build_courtyard(builder *b, int variant, int mirror) {
   hush_scene *s = b->s;
   const int tex = checker_texture(b);
   hush_material m = base_material("ground", HUSH_MAT_DIFFUSE, 0.5f, 0.5f, 0.5f);
@@ -358,6 +367,7 @@ static void build_courtyard(builder *b, int variant) {
   }
   /* a roof over the pillars: light comes in from the sides and bounces */
   add_box(b, hush_v3(0, 3.1f, -1.0f), hush_v3(3.3f, 0.1f, 5.3f), 0.0f, stone);
+  if (mirror) add_mirror(b, -2.6f, 2.6f, 0.02f, 2.9f, -6.6f);
   begin_object(b, "props", NULL);
   add_box(b, hush_v3(-1.2f, 0.4f, -2.0f), hush_v3(0.4f, 0.4f, 0.4f), 25.0f, plastic);
   add_box(b, hush_v3(1.5f, 0.6f, -4.0f), hush_v3(0.5f, 0.6f, 0.3f), -10.0f, smooth_plastic);
@@ -464,10 +474,11 @@ hush_status hush__scene_builtin(hush_device device, const char *name, hush_scene
   if (strcmp(name, "cornell") == 0) build_cornell(&b, 0, 0);
   else if (strcmp(name, "cornell-moving") == 0) build_cornell(&b, 1, 0);
   else if (strcmp(name, "cornell-mirror") == 0) build_cornell(&b, 1, 1);
-  else if (strcmp(name, "courtyard") == 0) build_courtyard(&b, COURTYARD_ALL);
-  else if (strcmp(name, "moving-light") == 0) build_courtyard(&b, COURTYARD_LIGHT_MOVES);
-  else if (strcmp(name, "light-off") == 0) build_courtyard(&b, COURTYARD_LIGHT_OFF);
-  else if (strcmp(name, "light-jump") == 0) build_courtyard(&b, COURTYARD_LIGHT_JUMPS);
+  else if (strcmp(name, "courtyard") == 0) build_courtyard(&b, COURTYARD_ALL, 0);
+  else if (strcmp(name, "moving-light") == 0) build_courtyard(&b, COURTYARD_LIGHT_MOVES, 0);
+  else if (strcmp(name, "light-off") == 0) build_courtyard(&b, COURTYARD_LIGHT_OFF, 0);
+  else if (strcmp(name, "mirror-light-off") == 0) build_courtyard(&b, COURTYARD_LIGHT_OFF, 1);
+  else if (strcmp(name, "light-jump") == 0) build_courtyard(&b, COURTYARD_LIGHT_JUMPS, 0);
   else if (strcmp(name, "furnace") == 0) build_furnace(&b);
   else if (strcmp(name, "mask") == 0) build_mask(&b);
   else {

@@ -131,13 +131,15 @@ typedef struct render_options {
 static void list_builtins(void) {
   printf("built-in scenes (--scene builtin:NAME):\n");
   for (int i = 0; hush__scene_builtin_names[i]; i++)
-    printf("  %-14s %s\n", hush__scene_builtin_names[i], hush__scene_builtin_docs[i]);
+    printf("  %-16s %s\n", hush__scene_builtin_names[i], hush__scene_builtin_docs[i]);
   printf("\ncamera moves (--path):\n"
-         "  path           the scene's camera path (camera-path.json of the manifest)\n"
-         "  static         the scene's camera, still\n"
-         "  orbit          around the camera's target, %.2g degrees per frame\n"
-         "  dolly          towards the target to %.0f%% of the distance and back, every %u frames\n"
-         "  FILE.json      a camera path file: {\"fov_axis\", \"resolution\", \"frames\": [...]}\n",
+         "  path             the scene's camera path (camera-path.json of the manifest)\n"
+         "  static           the scene's camera, still\n"
+         "  orbit            around the camera's target, %.2g degrees per frame\n"
+         "  dolly            towards the target to %.0f%% of the distance and back, every %u "
+         "frames\n"
+         "  FILE.json        a camera path file: {\"fov_axis\", \"resolution\", \"frames\": "
+         "[...]}\n",
          (double)HUSH_ORBIT_DEG_PER_FRAME, (double)(HUSH_DOLLY_MIN * 100.0f), HUSH_DOLLY_PERIOD);
 }
 
