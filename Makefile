@@ -3,7 +3,8 @@
 #   make test   installs what is missing, builds, runs every test
 # (Release, then a Release build for x86-64-v3 (its AVX2 loops) where the CPU
 # has AVX2 and FMA, then AddressSanitizer + UBSan, then the path-space
-# filter's concurrent test under ThreadSanitizer, then 60 s of EXR fuzzing).
+# filter's concurrent test under ThreadSanitizer, then 60 s of EXR fuzzing and
+# 30 s of scene and sequence-file fuzzing).
 
 JOBS      ?= $(shell nproc 2>/dev/null || echo 2)
 BUILD     ?= build
@@ -12,6 +13,7 @@ TSAN      ?= build-tsan
 FUZZ      ?= build-fuzz
 V3        ?= build-v3
 FUZZ_SECS ?= 60
+FUZZ_SCENE_SECS ?= 30
 DEMO_OUT  ?= out/demo
 CMAKE_FLAGS ?=
 
@@ -85,6 +87,12 @@ test-fuzz:
 	ASAN_OPTIONS=detect_leaks=1 $(FUZZ)/fuzz/fuzz_exr -max_total_time=$(FUZZ_SECS) -timeout=10 -rss_limit_mb=2048 \
 	  -print_final_stats=1 $(FUZZ)/fuzz/corpus-run
 	@echo "fuzz_exr: $(FUZZ_SECS) s without a crash or leak"
+	cmake --build $(FUZZ) -j $(JOBS) --target fuzz_scene
+	mkdir -p $(FUZZ)/fuzz/scene-run && cp -n fuzz/scene_seeds/* $(FUZZ)/fuzz/scene-run/ 2>/dev/null || true
+	ASAN_OPTIONS=detect_leaks=1:fast_unwind_on_malloc=0 LSAN_OPTIONS=suppressions=$(CURDIR)/fuzz/lsan-assimp.supp \
+	  $(FUZZ)/fuzz/fuzz_scene -max_total_time=$(FUZZ_SCENE_SECS) -timeout=10 -rss_limit_mb=2048 -keep_seed=1 \
+	  -print_final_stats=1 $(FUZZ)/fuzz/scene-run
+	@echo "fuzz_scene: $(FUZZ_SCENE_SECS) s without a crash or leak"
 
 demo: deps build
 	./tools/demo.sh $(BUILD)/hush $(DEMO_OUT)

@@ -441,6 +441,27 @@ static void test_load_small(void) {
   CHECK_NEAR(sf.uv[1], 0.5f, 1e-5);
   hush__scene_free(&s);
 
+  /* a texture statement before any newmtl: hush's MTL reader skips it;
+   * assimp's own (Debian's 5.2.5) wrote through a null material and
+   * crashed, so assimp is told the MTL is not there (found by fuzzing) */
+  {
+    const char *dir2 = TMP_DIR "/quad_stray";
+    make_quad_scene(dir2);
+    char mtl[2048];
+    snprintf(mtl, sizeof mtl, "map_Kd tex dir/leaf a.png\n%s", quad_mtl);
+    write_file(TMP_DIR "/quad_stray/scene.mtl", mtl);
+    st = hush__scene_load(dev, dir2, &s);
+    msg = last_error(&st);
+    CHECK_MSG(st == HUSH_OK, "stray map_Kd: %s", msg);
+    if (st == HUSH_OK) {
+      int textured = 0;
+      for (uint32_t i = 0; i < s.material_count; i++)
+        textured += strcmp(s.materials[i].name, "leaf") == 0 && s.materials[i].diffuse_texture >= 0;
+      CHECK(textured == 1);
+    }
+    hush__scene_free(&s);
+  }
+
   /* the manifest's file itself works as the path too */
   st = hush__scene_load(dev, TMP_DIR "/quad/scene.json", &s);
   CHECK(st == HUSH_OK);

@@ -14,6 +14,7 @@
 #include "core/device.h"
 #include "core/timer.h"
 
+#include <assimp/cfileio.h>
 #include <assimp/cimport.h>
 #include <assimp/material.h>
 #include <assimp/postprocess.h>
@@ -21,6 +22,7 @@
 #include <cjson/cJSON.h>
 #include <ctype.h>
 #include <errno.h>
+#include <limits.h>
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -703,6 +705,74 @@ static hush_status load_geometry(loader *l, const struct aiScene *ai, uint32_t *
   return HUSH_OK;
 }
 
+/* assimp reads files through these: every file as it is, except an MTL,
+ * which it is told is not there. hush reads the MTL itself (parse_mtl),
+ * and assimp's own MTL reader crashes on some malformed files (found by
+ * fuzzing); without it assimp still names each mesh's material after its
+ * usemtl, which is all load_materials asks of it. */
+static size_t ai_read(struct aiFile *f, char *buf, size_t size, size_t count) {
+  return fread(buf, size, count, (FILE *)f->UserData);
+}
+
+static size_t ai_write(struct aiFile *f, const char *buf, size_t size, size_t count) {
+  (void)f, (void)buf, (void)size, (void)count;
+  return 0;
+}
+
+static size_t ai_tell(struct aiFile *f) {
+  const long at = ftell((FILE *)f->UserData);
+  return at < 0 ? 0 : (size_t)at;
+}
+
+static size_t ai_size(struct aiFile *f) {
+  struct stat st;
+  if (fstat(fileno((FILE *)f->UserData), &st) != 0 || st.st_size < 0) return 0;
+  return (size_t)st.st_size;
+}
+
+static enum aiReturn ai_seek(struct aiFile *f, size_t offset, enum aiOrigin origin) {
+  const int whence =
+      origin == aiOrigin_SET ? SEEK_SET : origin == aiOrigin_CUR ? SEEK_CUR : SEEK_END;
+  if (offset > (size_t)LONG_MAX) return aiReturn_FAILURE;
+  return fseek((FILE *)f->UserData, (long)offset, whence) == 0 ? aiReturn_SUCCESS
+                                                                : aiReturn_FAILURE;
+}
+
+static void ai_flush(struct aiFile *f) { (void)f; }
+
+static int is_mtl(const char *path) {
+  const size_t n = strlen(path);
+  return n >= 4 && path[n - 4] == '.' && tolower((unsigned char)path[n - 3]) == 'm' &&
+         tolower((unsigned char)path[n - 2]) == 't' && tolower((unsigned char)path[n - 1]) == 'l';
+}
+
+static struct aiFile *ai_open(struct aiFileIO *io, const char *path, const char *mode) {
+  (void)io;
+  if (is_mtl(path) || strchr(mode, 'w') || strchr(mode, 'a')) return NULL;
+  FILE *fp = fopen(path, "rb");
+  if (!fp) return NULL;
+  struct aiFile *f = calloc(1, sizeof *f);
+  if (!f) {
+    fclose(fp);
+    return NULL;
+  }
+  f->ReadProc = ai_read;
+  f->WriteProc = ai_write;
+  f->TellProc = ai_tell;
+  f->FileSizeProc = ai_size;
+  f->SeekProc = ai_seek;
+  f->FlushProc = ai_flush;
+  f->UserData = (aiUserData)fp;
+  return f;
+}
+
+static void ai_close(struct aiFileIO *io, struct aiFile *f) {
+  (void)io;
+  if (!f) return;
+  fclose((FILE *)f->UserData);
+  free(f);
+}
+
 static hush_status load_mesh(loader *l, const char *rel) {
   hush_scene *s = l->scene;
   const ctx *c = &l->c;
@@ -732,8 +802,9 @@ static hush_status load_mesh(loader *l, const char *rel) {
    * get the geometric normal at shading time. JoinIdenticalVertices works
    * within one mesh, and assimp's OBJ importer makes a mesh per material,
    * so vertices are never shared across materials. */
+  struct aiFileIO io = {ai_open, ai_close, NULL};
   const struct aiScene *ai =
-      aiImportFile(obj_path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices);
+      aiImportFileEx(obj_path, aiProcess_Triangulate | aiProcess_JoinIdenticalVertices, &io);
   if (!ai) {
     free(mtl.entries);
     return hush__fail(c->device, HUSH_ERROR_CORRUPT, "%s: mesh: cannot read '%s': %s", c->file,
