@@ -100,12 +100,15 @@ hush_status hush__gradients_begin(hush_device device, hush_gradients *g,
   for (uint32_t s = 0; s < n; s++) {
     const hush_gradient_source *src = &g->sources[s];
     if (src->triangle >= sc->triangle_count) continue;
-    /* behind planar mirrors: the hit they lead to, in their virtual world */
+    /* behind planar mirrors: the hit they lead to, in their virtual world
+     * (where the mirrors are now, if they move) */
+    hush_mirror_map now;
+    const hush_mirror_map *map =
+        src->mirrors && hush__mirror_map_at(sc, &src->map, sc->frame, &now) ? &now : &src->map;
     const hush_vec3 pt =
-        src->mirrors ? hush__mirror_map_point(&src->map,
-                                              hush__scene_point(sc, src->behind_triangle,
-                                                                src->behind_u, src->behind_v,
-                                                                sc->frame))
+        src->mirrors ? hush__mirror_map_point(map, hush__scene_point(sc, src->behind_triangle,
+                                                                     src->behind_u, src->behind_v,
+                                                                     sc->frame))
                      : hush__scene_point(sc, src->triangle, src->u, src->v, sc->frame);
     float cx, cy;
     if (!hush__camera_project(&ctx->cam, pt, 1.0f, &cx, &cy)) continue;
@@ -158,7 +161,10 @@ static int mirror_first_hit(const hush_render_ctx *ctx, const hush_gradient_sour
   const hush_vec3 eye = ctx->cam.eye;
   const hush_vec3 behind =
       hush__scene_point(sc, src->behind_triangle, src->behind_u, src->behind_v, sc->frame);
-  const hush_vec3 to = hush_v3_sub(hush__mirror_map_point(&src->map, behind), eye);
+  hush_mirror_map now;
+  const hush_mirror_map *map =
+      hush__mirror_map_at(sc, &src->map, sc->frame, &now) ? &now : &src->map;
+  const hush_vec3 to = hush_v3_sub(hush__mirror_map_point(map, behind), eye);
   const float dist = hush_v3_length(to);
   if (!(dist > 0.0f)) return 0;
   const hush_vec3 d = hush_v3_scale(to, 1.0f / dist);

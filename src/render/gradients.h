@@ -70,7 +70,7 @@ typedef struct hush_gradient_source {
   /* A sample on a planar mirror (primary surface replacement, mirror.h):
    * the hit behind the mirrors, which the pixel describes, and the map
    * into their virtual world. It is that hit that is forward-projected
-   * (through the map: mirrors are taken to be still) and must be seen
+   * (through the mirrors where they are in the new frame) and must be seen
    * again behind the same mirrors: re-shading the mirror point itself
    * from a moved eye would reflect elsewhere, a change of view read as a
    * gradient. mirrors 0: none (triangle, u, v is the sample). */

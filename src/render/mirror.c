@@ -34,11 +34,35 @@ int hush__mirror_replace_primary(const hush_render_ctx *ctx, const hush_first_hi
   *g = *f;
   reflectance[0] = reflectance[1] = reflectance[2] = 1.0f;
   map_identity(mm);
-  int k = 0;
+  mm->count = 0;
   hush_vec3 q, n;
-  while (k < limit && hush__integrator_mirror_step(&ctx->it, g, reflectance, &q, &n)) {
+  for (uint32_t tri = g->hit.triangle;
+       mm->count < limit && hush__integrator_mirror_step(&ctx->it, g, reflectance, &q, &n);
+       tri = g->hit.triangle) {
     map_reflect(mm, q, n);
-    k++;
+    mm->triangle[mm->count++] = tri;
   }
-  return k;
+  return mm->count;
+}
+
+int hush__mirror_map_at(const hush_scene *scene, const hush_mirror_map *mm, uint32_t frame,
+                        hush_mirror_map *out) {
+  int animated = 0;
+  for (int k = 0; k < mm->count; k++)
+    animated |= scene->objects[scene->triangle_object[mm->triangle[k]]].motion.animated;
+  if (!animated) return 0;
+  map_identity(out);
+  for (int k = 0; k < mm->count; k++) {
+    const uint32_t t = mm->triangle[k];
+    const hush_vec3 a = hush__scene_point(scene, t, 0.0f, 0.0f, frame);
+    const hush_vec3 b = hush__scene_point(scene, t, 1.0f, 0.0f, frame);
+    const hush_vec3 c = hush__scene_point(scene, t, 0.0f, 1.0f, frame);
+    const hush_vec3 n = hush_v3_cross(hush_v3_sub(b, a), hush_v3_sub(c, a));
+    const float len = hush_v3_length(n);
+    if (!(len > 0.0f)) return 0;
+    map_reflect(out, a, hush_v3_scale(n, 1.0f / len));
+    out->triangle[k] = t;
+  }
+  out->count = mm->count;
+  return 1;
 }

@@ -233,7 +233,8 @@ static void depth_gradient(const hush_render_ctx *ctx, float px, float py, hush_
 
 /* Where the first hit was in the previous frame, minus where it is now
  * (both without jitter), both mapped by mm when it is not NULL (a hit seen
- * through mirrors, which are taken to be still). Off-screen or behind the
+ * through mirrors; the previous point through the mirrors' previous
+ * places). Off-screen or behind the
  * camera: (-1, -1) pixel. */
 static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f,
                       const hush_mirror_map *mm, float out[2]) {
@@ -258,8 +259,13 @@ static void motion_of(const hush_render_ctx *ctx, const hush_first_hit *f,
     prev = hush_v3_sub(now, hush_v3(c1[0] - c0[0], c1[1] - c0[1], c1[2] - c0[2]));
   }
   if (mm) {
+    /* a moving mirror moves its virtual world: the previous point through
+     * the mirrors where they were then */
+    hush_mirror_map was;
+    const hush_mirror_map *pm =
+        ctx->frame > 0 && hush__mirror_map_at(sc, mm, ctx->frame - 1, &was) ? &was : mm;
     now = w > 0.0f ? hush__mirror_map_point(mm, now) : hush__mirror_map_dir(mm, now);
-    prev = w > 0.0f ? hush__mirror_map_point(mm, prev) : hush__mirror_map_dir(mm, prev);
+    prev = w > 0.0f ? hush__mirror_map_point(pm, prev) : hush__mirror_map_dir(pm, prev);
   }
   float cx, cy, px, py;
   if (!hush__camera_project(&ctx->cam, now, w, &cx, &cy)) return;

@@ -249,8 +249,10 @@ static void set_camera(hush_scene *s, hush_vec3 pos, hush_vec3 target, float fov
 
 /* A planar mirror (a smooth conductor of reflectance 0.9, which primary
  * surface replacement sees through) facing +z: x in [x0, x1], y in [y0, y1]
- * at z. */
+ * at z; its own object "mirror" (static; a test may animate it), so the
+ * caller begins a new object after it. */
 static void add_mirror(builder *b, float x0, float x1, float y0, float y1, float z) {
+  begin_object(b, "mirror", NULL);
   hush_material m = base_material("mirror", HUSH_MAT_CONDUCTOR, 0.0f, 0.0f, 0.0f);
   m.specular[0] = m.specular[1] = m.specular[2] = 0.9f;
   const uint32_t silver = add_material(b, &m);
@@ -284,8 +286,8 @@ static void build_cornell(builder *b, int moving, int mirror) {
   add_quad(b, hush_v3(1, 0, -1), hush_v3(1, 0, 1), hush_v3(1, 2, 1), hush_v3(1, 2, -1), green, 1,
            1); /* right wall, -x */
   add_box(b, hush_v3(-0.45f, 0.6f, -0.35f), hush_v3(0.28f, 0.6f, 0.28f), 17.0f, white);
-  if (mirror) add_mirror(b, -0.2f, 0.9f, 0.15f, 1.85f, -0.995f);
   if (!moving) add_box(b, hush_v3(0.4f, 0.3f, 0.4f), hush_v3(0.3f, 0.3f, 0.3f), -18.0f, white);
+  if (mirror) add_mirror(b, -0.2f, 0.9f, 0.15f, 1.85f, -0.995f);
   begin_object(b, "light", NULL);
   add_quad(b, hush_v3(-0.235f, 1.98f, -0.19f), hush_v3(0.235f, 1.98f, -0.19f),
            hush_v3(0.235f, 1.98f, 0.19f), hush_v3(-0.235f, 1.98f, 0.19f), light, 1, 1);
