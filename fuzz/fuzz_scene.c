@@ -1,7 +1,9 @@
 /*
  * fuzz_scene.c — libFuzzer target for hush's text inputs: a sequence's
- * cameras.json (hush__sequence_read), and a scene folder's scene.json, MTL,
- * camera path and OBJ (hush__scene_load; the OBJ through assimp). The first
+ * cameras.json (hush__sequence_read), a camera path file of `hush render
+ * --path FILE.json` (hush__camera_path_load), and a scene folder's
+ * scene.json, MTL, camera path and OBJ (hush__scene_load; the OBJ through
+ * assimp). The first
  * byte picks the file the rest of the input becomes; the other files of a
  * small valid scene stay as they are, so the loader gets past them. Seeds:
  * fuzz/scene_seeds/ (one per kind).
@@ -11,6 +13,7 @@
  */
 #include "hush.h"
 #include "io/sequence.h"
+#include "render/camera.h"
 #include "render/scene.h"
 
 #include <stdint.h>
@@ -21,7 +24,7 @@
 
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
 
-enum { KIND_CAMERAS, KIND_SCENE, KIND_MTL, KIND_PATH, KIND_OBJ, KINDS };
+enum { KIND_CAMERAS, KIND_SCENE, KIND_MTL, KIND_PATH, KIND_OBJ, KIND_PATH_FILE, KINDS };
 
 static const char OBJ[] = "mtllib s.mtl\n"
                           "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nvn 0 0 1\nvt 0 0\nvt 1 0\nvt 0 1\n"
@@ -85,8 +88,15 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     hush_sequence seq;
     memset(&seq, 0, sizeof seq);
     if (hush__sequence_read(device, dir, &seq) == HUSH_OK) hush__sequence_free(&seq);
+  } else if (kind == KIND_PATH_FILE) {
+    put("p.json", data, size);
+    char p[128];
+    snprintf(p, sizeof p, "%s/p.json", dir);
+    hush_camera_path path;
+    memset(&path, 0, sizeof path);
+    if (hush__camera_path_load(device, p, &path) == HUSH_OK) free(path.frames);
   } else {
-    static const char *const file[KINDS] = {NULL, "scene.json", "s.mtl", "p.json", "s.obj"};
+    static const char *const file[KINDS] = {NULL, "scene.json", "s.mtl", "p.json", "s.obj", NULL};
     put(file[kind], data, size);
     hush_scene scene;
     char p[128];
