@@ -95,6 +95,20 @@ static void params_for(hush_render_params *p, uint32_t w, uint32_t h) {
   p->threads = 2;
 }
 
+/* Opens built-in scene `name` into r, render parameters for w x h with the
+ * gradients g (initialised here, defaults) and a frame to render into
+ * (the caller releases it and frees g). */
+static hush_frame open_with_gradients(rig *r, const char *name, uint32_t w, uint32_t h,
+                                      hush_render_params *p, hush_gradients *g) {
+  rig_open(r, name);
+  params_for(p, w, h);
+  REQUIRE(hush__gradients_init(r->device, g, p->width, p->height) == HUSH_OK);
+  p->gradients = g;
+  hush_frame out = hush_frame_new(r->device, p->width, p->height);
+  REQUIRE(out);
+  return out;
+}
+
 /* The layer "gradient" holds, at every pixel of a stratum, what g says
  * about that stratum. Returns the number of accepted samples. */
 static int check_layer(const hush_gradients *g, hush_frame out) {
@@ -251,14 +265,9 @@ static void test_static_zero(hush_gradient_landing mode, hush_gradient_lobe lobe
 
 static void test_light_off(void) {
   rig r;
-  rig_open(&r, "light-off");
   hush_render_params p;
-  params_for(&p, 120, 68);
   hush_gradients g;
-  REQUIRE(hush__gradients_init(r.device, &g, p.width, p.height) == HUSH_OK);
-  p.gradients = &g;
-  hush_frame out = hush_frame_new(r.device, p.width, p.height);
-  REQUIRE(out);
+  hush_frame out = open_with_gradients(&r, "light-off", 120, 68, &p, &g);
   const uint32_t strata = g.strata_x * g.strata_y;
   for (uint32_t f = 6; f <= 8; f++) {
     hush_render_ctx ctx;
@@ -385,14 +394,9 @@ static void test_projection(void) {
  * elsewhere: a gradient of the view. */
 static void test_mirror(void) {
   rig r;
-  rig_open(&r, "cornell-mirror");
   hush_render_params p;
-  params_for(&p, 160, 120);
   hush_gradients g;
-  REQUIRE(hush__gradients_init(r.device, &g, p.width, p.height) == HUSH_OK);
-  p.gradients = &g;
-  hush_frame out = hush_frame_new(r.device, p.width, p.height);
-  REQUIRE(out);
+  hush_frame out = open_with_gradients(&r, "cornell-mirror", 160, 120, &p, &g);
   hush_render_ctx ctx;
   int mirrored = 0, lit = 0, still = 0, landed = 0, near = 0, direct_still = 0, direct = 0;
   for (uint32_t f = 4; f <= 6; f++) {
