@@ -1866,7 +1866,9 @@ static int chunk_class(const hush_reproject_plan *plan, size_t i0) {
  * do, or lie near the plane's ends. */
 static void test_module_window16(void) {
   uint32_t rng = 3;
-  int same = 1, windows[3] = {0, 0, 0};
+  int same = 1, taps_ok = 1, windows[3] = {0, 0, 0}, wide = 0, widest = 0;
+  float *vals = malloc(220 * 8 * sizeof *vals); /* the largest W x H below */
+  REQUIRE(vals);
   for (int it = 0; it < 20000; it++) {
     const int32_t W = 20 + (int32_t)(urand(&rng) * 200.0f);
     const int32_t H = 3 + (int32_t)(urand(&rng) * 5.0f);
@@ -1877,9 +1879,13 @@ static void test_module_window16(void) {
     const float jump = urand(&rng) * 0.4f;
     for (int k = 0; k < HUSH_WINDOW_MAX; k++) {
       const float r = urand(&rng);
-      /* one row on, a column either way, or a stray footprint */
+      /* one row on, a column either way, or a stray footprint: 7 or 15
+       * columns on (still a window: its two 16-float loads per row reach
+       * 15 columns past a pixel's own), or 16 (none) */
+      const float stray = urand(&rng);
       origin[k] = start + k + (r < jump ? W : 0) + (urand(&rng) < jump ? 1 : 0) -
-                  (urand(&rng) < 0.1f ? 1 : 0) + (urand(&rng) < 0.02f ? 7 : 0);
+                  (urand(&rng) < 0.1f ? 1 : 0) +
+                  (stray < 0.02f ? 7 : stray < 0.03f ? 15 : stray < 0.035f ? 16 : 0);
       const float u = urand(&rng);
       use[k] = u < 0.1f ? 0 : u < 0.15f ? 2 : u < 0.2f ? 255 : 1;
     }
@@ -1892,11 +1898,33 @@ static void test_module_window16(void) {
     if (ok && r1)
       ok = b1 == b2 && memcmp(e1, e2, sizeof e1) == 0 && memcmp(d1, d2, sizeof d1) == 0;
     same &= ok;
+#ifdef HUSH_HAVE_WINDOW
+    if (r2) {
+      /* the taps read from the window are the footprints' own */
+      for (size_t i = 0; i < size; i++) vals[i] = (float)i;
+      float out[4][HUSH_WINDOW_MAX];
+      if (r2 == 1)
+        hush__window_taps(vals, b2, W, e2, d2, 1, out);
+      else
+        hush__window_taps(vals, b2, W, e2, d2, 2, out);
+      for (int k = 0; k < HUSH_WINDOW_MAX; k++)
+        for (int t = 0; t < 4 && use[k]; t++)
+          taps_ok &= out[t][k] == (float)(origin[k] + (t >> 1) * W + (t & 1));
+    }
+#endif
     windows[r1]++;
+    int spread = 0;
+    for (int k = 0; r1 && k < HUSH_WINDOW_MAX; k++) spread = e1[k] > spread ? e1[k] : spread;
+    wide += spread > 2;
+    widest += spread == 15;
   }
   CHECK(same);
+  CHECK(taps_ok);
   CHECK_MSG(windows[0] > 1000 && windows[1] > 1000 && windows[2] > 1000,
             "windows of 0/1/2 rows: %d %d %d", windows[0], windows[1], windows[2]);
+  CHECK_MSG(wide > 1000 && widest > 100, "windows wider than 3 columns: %d, of 16: %d", wide,
+            widest);
+  free(vals);
 }
 
 static int32_t floor_div(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }

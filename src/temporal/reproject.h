@@ -292,11 +292,14 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
  * follow each other exactly (origin + 1 per pixel): the offset drifts by a
  * pixel now and then, or crosses a row. A chunk of n pixels whose footprint
  * origins all lie, relative to the diagonal base + k (k: the pixel in the
- * chunk), within 3 columns of 1 or 2 rows ("a window") reads every tap with
+ * chunk), within 16 columns of 1 or 2 rows ("a window") reads every tap with
  * plain vector loads of the window and a per-pixel selection instead of a
  * gather of scattered floats (which gcc emits as scalar loads here, ~3x the
  * time). The value selected is the tap itself, so results are bit for bit
- * those of a gather. */
+ * those of a gather. The window's two 16-float loads per row reach 15
+ * columns past the diagonal, so 16 columns cost what 3 did; under a fast
+ * camera (the classroom's path at 1280x720) the wider windows took 45 % of
+ * the gathered chunks (docs/svgf-speed.md, twelfth round). */
 
 /* Most pixels a window covers (the chunk size of the callers). */
 #define HUSH_WINDOW_MAX 16
@@ -306,7 +309,7 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
  * the pixels with use[k] != 0 form a window of a plane of `size` floats
  * with rows of W: returns 0 (no), 1 (one row: every footprint's top taps
  * in the same row) or 2 (two rows). Then the top-left tap of pixel k is
- * base + k + dy[k] * W + e[k] (e 0..2, dy 0..1), and every load of
+ * base + k + dy[k] * W + e[k] (e 0..15, dy 0..1), and every load of
  * hush__window_tap lies inside the plane; pixels without use get e = dy =
  * 0 (their loads are inside the window, their values to be ignored).
  */
@@ -337,7 +340,7 @@ static inline int hush__reproject_window(const int32_t *origin, const uint8_t *u
       xmax = ox[k] > xmax ? ox[k] : xmax;
     }
   }
-  if (!ok || ymax - ymin > 1 || xmax - xmin > 2) return 0;
+  if (!ok || ymax - ymin > 1 || xmax - xmin > 15) return 0;
   const int rows = ymax > ymin ? 2 : 1;
   const int64_t b = (int64_t)rowstart + (int64_t)ymin * W + xmin;
   /* the loads of hush__window_taps: base + r * W + 0..31, r 0..rows */
@@ -383,7 +386,7 @@ static HUSH_ALWAYS_INLINE int hush__reproject_window16(const int32_t *origin, co
   const int ymin = _mm512_mask_reduce_min_epi32(u, dk), ymax = _mm512_mask_reduce_max_epi32(u, dk);
   const int32_t xmin = _mm512_mask_reduce_min_epi32(u, ox);
   const int32_t xmax = _mm512_mask_reduce_max_epi32(u, ox);
-  if (ymax - ymin > 1 || xmax - xmin > 2) return 0;
+  if (ymax - ymin > 1 || xmax - xmin > 15) return 0;
   const int rows = ymax > ymin ? 2 : 1;
   const int64_t b = (int64_t)rowstart + (int64_t)ymin * W + xmin;
   if (b < 0 || b + (int64_t)rows * W + 31 >= (int64_t)size) return 0;
@@ -410,7 +413,7 @@ typedef int32_t hush_v16i __attribute__((vector_size(64)));
  * The four taps of every pixel k of a window of HUSH_WINDOW_MAX pixels
  * (hush__reproject_window's base, e, dy; rows 1 or 2, a constant at each
  * call) of plane p: out[ty * 2 + tx][k] = p[base + k + (dy[k] + ty) W +
- * e[k] + tx]. Per row of the window two vector loads hold the 19 floats
+ * e[k] + tx]. Per row of the window two vector loads hold the 32 floats
  * its pixels can need; a two-source permute (vpermt2ps with AVX-512)
  * picks each pixel's tap.
  */
