@@ -15,6 +15,7 @@
 #include "core/hmath.h"
 #include "core/rng.h"
 #include "core/timer.h"
+#include "filters/emission.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
 
@@ -1927,6 +1928,86 @@ static void test_module_window16(void) {
   free(vals);
 }
 
+/* The accumulated emission (filters/emission.c) blends only the rows that
+ * are lit or have a non-zero history within reach of their footprints, and
+ * zeroes the rest once: over frames of a lamp crossing a plane under a
+ * diagonal pan, with holes in some frames, a frame without history and a
+ * -0 emission in an unlit row, it holds the bits of a blend of every row,
+ * and the rows it reports as zero (hush__emission_rows_of) are all +0. */
+static void test_module_emission_rows(hush_device dev) {
+  const int W = 64, H = 48, frames = 14;
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 1.3f, 0.7f); /* every footprint one row down: bottom taps matter */
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_emission_history a, b; /* a: with row flags; b: every row blended */
+  memset(&a, 0, sizeof a);
+  memset(&b, 0, sizeof b);
+  hush_planar em, color;
+  REQUIRE(hush__planar_init(dev, &em, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &color, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  for (int k = 0; k < 2; k++) {
+    REQUIRE(hush__planar_init(dev, &a.hist[k], 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+    REQUIRE(hush__planar_init(dev, &b.hist[k], 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+    for (int c = 0; c < 3; c++)
+      for (size_t i = 0; i < n; i++) a.hist[k].plane[c][i] = b.hist[k].plane[c][i] = 3.0f;
+  }
+  REQUIRE(hush__emission_history_rows(dev, &a, (uint32_t)H) == HUSH_OK);
+  float *age = malloc(n * sizeof *age), *spp = malloc(n * sizeof *spp);
+  REQUIRE(age && spp);
+  int same = 1, zero_rows_ok = 1, skipped = 0, blended = 0;
+  for (int f = 0; f < frames; f++) {
+    if (f == 0 || f == 9)
+      hush__reproject_plan_clear(&plan, 2); /* no history this frame */
+    else
+      REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+    for (size_t i = 0; i < n; i++) {
+      const int x = (int)(i % (size_t)W), y = (int)(i / (size_t)W);
+      const int lamp = x >= 4 + 3 * f && x < 10 + 3 * f && y >= 6 + 2 * f && y < 9 + 2 * f;
+      for (int c = 0; c < 3; c++) {
+        em.plane[c][i] = lamp ? 5.0f + (float)c : 0.0f;
+        color.plane[c][i] = 6.0f;
+      }
+      age[i] = (float)(1 + (f + (int)i) % 9);
+      spp[i] = i % 5 == 0 ? 0.0f : 1.0f;
+    }
+    if (f == 9) /* a row lit only by a -0, which a frame without history copies */
+      em.plane[1][(size_t)(H - 3) * W + 7] = -0.0f;
+    const float *holes = f % 4 == 3 ? spp : NULL;
+    hush__emission_subtract(&color, &em, &a, 2);
+    hush__emission_subtract(&color, &em, &b, 2); /* b has no rows: nothing noted */
+    const hush_planar *ra = hush__emission_accumulate_holes(&a, &plan, age, 0.2f, &em, holes, 2);
+    const hush_planar *rb = hush__emission_accumulate_holes(&b, &plan, age, 0.2f, &em, holes, 2);
+    for (int c = 0; c < 3; c++)
+      same &= memcmp(ra->plane[c], rb->plane[c], n * sizeof(float)) == 0;
+    const float *rows = hush__emission_rows_of(&a);
+    REQUIRE(rows && !hush__emission_rows_of(&b));
+    for (int y = 0; y < H; y++) {
+      for (int c = 0; c < 3 && rows[y] == 0.0f; c++)
+        for (int x = 0; x < W; x++) zero_rows_ok &= fbits(ra->plane[c][(size_t)y * W + x]) == 0u;
+      const int need = a.rows.plane[EMISSION_ROW_NEED][y] != 0.0f;
+      skipped += !need;
+      blended += need;
+    }
+  }
+  CHECK(same);
+  CHECK(zero_rows_ok);
+  /* both ways taken: rows skipped, rows blended */
+  CHECK_MSG(skipped > frames * H / 4 && blended > frames * 4, "rows skipped %d, blended %d",
+            skipped, blended);
+  free(age);
+  free(spp);
+  hush__planar_free(&em);
+  hush__planar_free(&color);
+  hush__emission_history_free(&a);
+  hush__emission_history_free(&b);
+  hush__reproject_plan_free(&plan);
+  gpair_free(&g);
+}
+
 static int32_t floor_div(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 /* The plan's tap tests read a chunk's taps as vectors (from one base or in
@@ -2073,6 +2154,7 @@ int main(void) {
   test_module_fast_paths(dev, 160, 48, 1);
   test_module_plan_layouts(dev);
   test_module_window16();
+  test_module_emission_rows(dev);
   test_convergence(dev);
   test_static_jitter(dev);
   test_camera_move(dev);

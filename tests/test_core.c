@@ -323,7 +323,9 @@ static void demodulated_import(uint32_t W, int with_bad) {
 /* The remodulating export (filters/albedo.c) gives the bits of the
  * separate passes: remodulate, add the emission (filters/emission.c does
  * o = filtered + emission), export; with the albedo or the addition left
- * out, at widths that are and are not a multiple of its span. */
+ * out, at widths that are and are not a multiple of its span; and with
+ * the addition's all-zero middle row flagged as such (not read), also
+ * where the filtered value is -0 (+0 out, as the addition gives). */
 static void remodulated_export(uint32_t W) {
   const uint32_t H = 3;
   const size_t n = (size_t)W * H;
@@ -336,13 +338,15 @@ static void remodulated_export(uint32_t W) {
   REQUIRE(got && ref);
   const hush_image_view gv = {got, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
   const hush_image_view rv = {ref, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
-  for (int mode = 0; mode < 4; mode++) {
-    const int with_alb = mode & 1, with_add = mode & 2;
+  const float add_rows[3] = {1.0f, 0.0f, 1.0f};
+  for (int mode = 0; mode < 6; mode++) {
+    const int with_alb = mode & 1, with_add = mode & 2 || mode >= 4, with_rows = mode >= 4;
     for (int c = 0; c < 3; c++)
       for (size_t i = 0; i < n; i++) {
         flt.plane[c][i] = (float)((i * 7 + (size_t)c) % 53) * 0.731f;
+        if (i % 13 == 0) flt.plane[c][i] = -0.0f;
         alb.plane[c][i] = (float)((i + 3 * (size_t)c) % 11) * 0.093f; /* 0 too: the floor */
-        add.plane[c][i] = (float)((i * 5 + (size_t)c) % 17) * 1.37f;
+        add.plane[c][i] = i / W == 1 && with_rows ? 0.0f : (float)((i * 5 + (size_t)c) % 17) * 1.37f;
         want.plane[c][i] = flt.plane[c][i];
       }
     if (with_alb) {
@@ -355,10 +359,13 @@ static void remodulated_export(uint32_t W) {
       for (int c = 0; c < 3; c++)
         for (size_t i = 0; i < n; i++) want.plane[c][i] = want.plane[c][i] + add.plane[c][i];
     hush__view_export(&want, &rv, 1);
-    hush__export_remodulated(&flt, with_alb ? &alb : NULL, with_add ? &add : NULL, &gv, 2);
+    if (with_rows) /* the flagged row is not read: what it holds must not matter */
+      for (int c = 0; c < 3; c++) add.plane[c][W + 1] = 1.0f;
+    hush__export_remodulated(&flt, with_alb ? &alb : NULL, with_add ? &add : NULL,
+                             with_rows ? add_rows : NULL, &gv, 2);
     CHECK_MSG(memcmp(got, ref, sizeof(float) * n * 3) == 0,
-              "width %u, albedo %d, add %d: the fused export differs from the passes", W, with_alb,
-              with_add != 0);
+              "width %u, albedo %d, add %d, rows %d: the fused export differs from the passes", W,
+              with_alb, with_add != 0, with_rows);
   }
   free(got);
   free(ref);

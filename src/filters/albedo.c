@@ -72,11 +72,13 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
 #define EXPORT_SPAN 512
 
 void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
-                              const hush_planar *add, const hush_image_view *view, int threads) {
+                              const hush_planar *add, const float *add_rows,
+                              const hush_image_view *view, int threads) {
   const int H = (int)filtered->height;
   const size_t W = filtered->width;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
+    const int add_zero = add && add_rows && add_rows[y] == 0.0f;
     float buf[3][EXPORT_SPAN];
     const float *const in[3] = {buf[0], buf[1], buf[2]};
     for (size_t x0 = 0; x0 < W; x0 += EXPORT_SPAN) {
@@ -91,7 +93,10 @@ void hush__export_remodulated(const hush_planar *filtered, const hush_planar *al
         } else {
           memcpy(o, flt, n * sizeof(float));
         }
-        if (add) {
+        if (add_zero) {
+          /* + 0 as the row holds (a -0 becomes +0, as with the load) */
+          for (size_t x = 0; x < n; x++) o[x] = o[x] + 0.0f;
+        } else if (add) {
           const float *restrict a = add->plane[c] + at;
           for (size_t x = 0; x < n; x++) o[x] = o[x] + a[x];
         }

@@ -44,8 +44,12 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
  * hush__emission_add of `add`, then hush__view_export, in one pass and
  * without writing the albedo planes (use it when nothing else needs the
  * remodulated planes). albedo NULL: a factor of 1; add NULL: nothing added.
+ * add_rows (NULL: none) marks the rows of `add` that may hold a non-zero
+ * bit (0: all +0, as hush__emission_rows_of says): those are not read, +0
+ * is added instead (the same bits).
  */
 void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
-                              const hush_planar *add, const hush_image_view *view, int threads);
+                              const hush_planar *add, const float *add_rows,
+                              const hush_image_view *view, int threads);
 
 #endif

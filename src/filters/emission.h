@@ -16,8 +16,14 @@
 #include "core/image.h"
 #include "temporal/reproject.h"
 
-/* color[c] = max(color[c] - emission[c], 0), in place (3 channels). */
-void hush__emission_subtract(hush_planar *color, const hush_planar *emission, int threads);
+typedef struct hush_emission_history hush_emission_history;
+
+/* color[c] = max(color[c] - emission[c], 0), in place (3 channels). With h
+ * (NULL: none) whose rows are allocated (hush__emission_history_rows), also
+ * notes which image rows of emission are not all zero, for h's next
+ * hush__emission_accumulate(_holes). */
+void hush__emission_subtract(hush_planar *color, const hush_planar *emission,
+                             hush_emission_history *h, int threads);
 /* out[c] = emission[c] + filtered[c] (3 channels). out may alias either
  * input; filters write into their imported emission planes so that their
  * own result (often their history) is left untouched. */
@@ -43,12 +49,38 @@ void hush__emission_wildcard_ids(hush_reprojector *rp, const hush_planar *emissi
  * (and the filtered colour) average that coverage over samples; the
  * accumulated emission does the same over frames. The filter owns it and
  * allocates hist with hush__filter_scratch. */
-typedef struct hush_emission_history {
+struct hush_emission_history {
   hush_planar hist[2]; /* ping-pong: the blend reads one and writes the other */
   int latest;          /* index of the last result */
   int valid;           /* 0: no history (first frame, or emission was unbound) */
-} hush_emission_history;
+  /* Lights cover a few percent of a frame (the classroom's windows 5-6 %
+   * of the pixels, 9-15 % of the rows at 1280x720; the Cornell lamp 0.5 %,
+   * 4 %), so most rows of the accumulated emission are exactly 0 and stay
+   * so: they are neither blended nor written. One value per image row
+   * (`height` floats per plane, 0 or 1; NULL planes: every row is
+   * blended): EMISSION_ROW_LIT, this frame's emission has a non-zero bit
+   * there (hush__emission_subtract); EMISSION_ROW_HIST + b, hist[b] has one
+   * there; EMISSION_ROW_NEED, the row is blended this frame. */
+  hush_planar rows;
+  int lit_fresh; /* rows' LIT plane is this frame's (subtract ran since the last accumulate) */
+};
+enum { EMISSION_ROW_LIT, EMISSION_ROW_HIST, EMISSION_ROW_NEED = EMISSION_ROW_HIST + 2 };
 
+/* Per image row of the last accumulated emission (`height` floats): 0
+ * where every value is +0; NULL without row flags. */
+static inline const float *hush__emission_rows_of(const hush_emission_history *h) {
+  return h->rows.plane[0] ? h->rows.plane[EMISSION_ROW_HIST + h->latest] : NULL;
+}
+
+/* The emission planes changed after hush__emission_subtract noted their
+ * lit rows (holes filled from around): the next accumulate blends every
+ * row. */
+static inline void hush__emission_rows_stale(hush_emission_history *h) { h->lit_fresh = 0; }
+
+/* Allocates h->rows for images of `height` rows (once; hist's contents
+ * taken as unknown). */
+hush_status hush__emission_history_rows(hush_device device, hush_emission_history *h,
+                                        uint32_t height);
 void hush__emission_history_free(hush_emission_history *h);
 /* Blends this frame's emission into the history with the filter's plan,
  * ages and alpha (as its colour) and returns the accumulated emission,

@@ -676,6 +676,13 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
 void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *prev,
                           const float *const *sample, int channels, const float *age,
                           float alpha_min, float *const *out, int threads) {
+  hush__temporal_blend_rows(plan, prev, sample, channels, age, alpha_min, out, NULL, threads);
+}
+
+void hush__temporal_blend_rows(const hush_reproject_plan *plan, const float *const *prev,
+                               const float *const *sample, int channels, const float *age,
+                               float alpha_min, float *const *out, const float *rows,
+                               int threads) {
   if (threads < 1) threads = 1;
   if (channels > BLEND_MAX) channels = BLEND_MAX;
   const int H = (int)plan->height;
@@ -685,6 +692,7 @@ void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *p
    * cost ~3x contiguous ones and cluster in bands */
 #pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) {
+    if (rows && rows[y] == 0.0f) continue;
     const size_t row = (size_t)y * W;
     if (!prev) {
       for (int c = 0; c < channels; c++)

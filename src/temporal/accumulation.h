@@ -117,4 +117,11 @@ void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *p
                           const float *const *sample, int channels, const float *age,
                           float alpha_min, float *const *out, int threads);
 
+/* hush__temporal_blend on the rows y with rows[y] != 0 only (rows NULL:
+ * all); the other rows of out are not touched. */
+void hush__temporal_blend_rows(const hush_reproject_plan *plan, const float *const *prev,
+                               const float *const *sample, int channels, const float *age,
+                               float alpha_min, float *const *out, const float *rows,
+                               int threads);
+
 #endif

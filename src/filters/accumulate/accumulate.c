@@ -184,7 +184,8 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   if (!emis) st->eh.valid = 0; /* bound again later: start over */
   if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
                (s = hush__filter_scratch(f, &st->eh.hist[0], 3)) ||
-               (s = hush__filter_scratch(f, &st->eh.hist[1], 3))))
+               (s = hush__filter_scratch(f, &st->eh.hist[1], 3)) ||
+               (s = hush__emission_history_rows(f->device, &st->eh, f->height))))
     return s;
   if (hush__filter_view(f, I_VARIANCE) && (s = hush__filter_scratch(f, &st->variance, 1)))
     return s;
@@ -216,7 +217,7 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- accumulate */
-  if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
+  if (emis) hush__emission_subtract(&st->color, &st->emission, &st->eh, threads);
   if (demod && !fused) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA_MIN);
@@ -232,8 +233,9 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush_planar *result = hush__accum_color(&st->acc);
   if (!st->acc.empty && (demod || emis)) {
     /* nothing else needs the remodulated planes: one pass */
-    hush__export_remodulated(result, demod ? &st->albedo : NULL,
-                             emis ? accumulated_emission(st, ap.alpha_min, threads) : NULL,
+    const hush_planar *e = emis ? accumulated_emission(st, ap.alpha_min, threads) : NULL;
+    hush__export_remodulated(result, demod ? &st->albedo : NULL, e,
+                             e ? hush__emission_rows_of(&st->eh) : NULL,
                              hush__filter_view(f, I_OUTPUT), threads);
   } else if ((s = export_result(f, st, result, demod, emis, &ap, threads))) {
     return s;

@@ -596,7 +596,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if (!emis) st->eh.valid = 0; /* bound again later: start over */
   if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
                (s = hush__filter_scratch(f, &st->eh.hist[0], 3)) ||
-               (s = hush__filter_scratch(f, &st->eh.hist[1], 3))))
+               (s = hush__filter_scratch(f, &st->eh.hist[1], 3)) ||
+               (s = hush__emission_history_rows(f->device, &st->eh, f->height))))
     return s;
   if (with_taa && !st->taa.current.plane[0] &&
       (s = hush__taa_init(f->device, &st->taa, f->width, f->height)))
@@ -627,7 +628,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-  if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
+  if (emis) hush__emission_subtract(&st->color, &st->emission, &st->eh, threads);
   if (demod && !demod_fused) hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA);
@@ -726,7 +727,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   /* the remodulation (without TAA) and the emission fused into the export */
   const hush_planar *albedo = !with_taa && demod ? &st->albedo : NULL;
   if (albedo || e)
-    hush__export_remodulated(&rgb, albedo, e, hush__filter_view(f, I_OUTPUT), threads);
+    hush__export_remodulated(&rgb, albedo, e, e ? hush__emission_rows_of(&st->eh) : NULL,
+                             hush__filter_view(f, I_OUTPUT), threads);
   else
     hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *fit_view = hush__filter_view(f, I_FITTED);

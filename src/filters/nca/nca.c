@@ -150,7 +150,7 @@ static hush_status nca_execute(hush_filter f, void *state, const hush_frame_info
   if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
                (s = hush__filter_import(f, I_EMISSION, &st->emission))))
     return s;
-  if (emis) hush__emission_subtract(&st->color, &st->emission, threads);
+  if (emis) hush__emission_subtract(&st->color, &st->emission, NULL, threads);
   color_to_state(&st->color, wt->color_transform, threads);
   hush__filter_timing_stage(f, "import");
 

@@ -425,7 +425,8 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   if (!emis) st->eh.valid = 0; /* bound again later: start over */
   if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||
                (s = hush__filter_scratch(f, &st->eh.hist[0], 3)) ||
-               (s = hush__filter_scratch(f, &st->eh.hist[1], 3))))
+               (s = hush__filter_scratch(f, &st->eh.hist[1], 3)) ||
+               (s = hush__emission_history_rows(f->device, &st->eh, f->height))))
     return s;
   if (has_spp && (s = hush__filter_scratch(f, &st->spp, 1))) return s;
   if (has_svar && (s = hush__filter_scratch(f, &st->sample_var, 1))) return s;
@@ -466,7 +467,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
        (s = hush__filter_scratch(f, &st->eps, 1))))
     return s;
   /* light seen directly is all direct light: with the split it comes off 'direct' */
-  if (emis) hush__emission_subtract(&st->comp[0].color, &st->emission, threads);
+  if (emis) hush__emission_subtract(&st->comp[0].color, &st->emission, &st->eh, threads);
   hush__filter_timing_stage(f, "import");
 
   /* ---- progressive: the G-buffer holes filled (Dundr §4.2.1) */
@@ -483,6 +484,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     if (emis) /* the lamps too (docs/holes.md) */
       for (int k = 0; k < 3; k++) planes[count++] = st->emission.plane[k];
     svgf_fill_holes(&st->prog, st->spp.plane[0], planes, count, threads);
+    if (emis) hush__emission_rows_stale(&st->eh); /* filled after the subtraction */
     svgf_split_background(&st->prog, st->spp.plane[0], planes, 7, threads); /* docs/holes.md */
     hush__holes_normalize_normals(st->spp.plane[0], next->depth.plane[0], next->normal.plane, npix,
                                   threads);
@@ -578,6 +580,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   if ((demod || emis) && !with_taa) {
     /* nothing else needs the remodulated planes: one pass */
     hush__export_remodulated(result, demod ? &st->albedo : NULL, e,
+                             e ? hush__emission_rows_of(&st->eh) : NULL,
                              hush__filter_view(f, I_OUTPUT), threads);
     if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
     hush__filter_timing_stage(f, "export");
@@ -605,7 +608,8 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   /* the emission after TAA: its history has already averaged the lights'
    * edges over frames, and TAA's tone-mapped blend would darken them */
   if (e)
-    hush__export_remodulated(&rgb, NULL, e, hush__filter_view(f, I_OUTPUT), threads);
+    hush__export_remodulated(&rgb, NULL, e, hush__emission_rows_of(&st->eh),
+                             hush__filter_view(f, I_OUTPUT), threads);
   else
     hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
