@@ -35,6 +35,15 @@ part_speed() {
   local frames=${BENCH_FRAMES:-60}
   "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 1 --csv "$work/t1.csv" >/dev/null
   "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 2 --csv "$work/t2.csv" >/dev/null
+  # the same filters on rendered frames: a real camera path's motion (windows
+  # and gathers instead of contiguous history reads, disocclusions), lights
+  # seen directly (the emission's own blend), no sky to skip
+  local scene=../shared/scenes/classroom
+  [ -f "$scene/scene.json" ] || scene=builtin:cornell-moving
+  local scene_filters
+  scene_filters=$(tr , '\n' <<<"$filters" | grep -vx -e asvgf -e nca | paste -sd, -)
+  "$hush" bench --scene "$scene" --filters "$scene_filters" --size 1280x720 --frames "$frames" \
+    --distinct 8 --threads 2 --csv "$work/scene2.csv" >/dev/null
   # psf filters the path tracer's vertices: a built-in scene, so no ../shared needed
   local t
   for t in 1 2; do
@@ -55,6 +64,19 @@ part_speed() {
       bench_table "$work/t$t.csv"
       echo
     done
+    echo "### Rendered frames, 2 threads"
+    echo
+    echo "\`hush bench --scene $(sed 's|^\.\./shared/|shared/|' <<<"$scene") --filters $scene_filters --size 1280x720 --frames $frames --distinct 8\`:"
+    echo "8 frames of the scene's camera path rendered at 1 spp, played forwards and backwards. Slower"
+    echo "than the synthetic frames above: the path's parallax spreads history reads over windows"
+    echo "and gathers instead of contiguous rows, more pixels lose their history (the 3x3 search, the"
+    echo "spatial variance), the lights' emission has its own temporal blend, and there is no sky to"
+    echo "skip (docs/svgf-speed.md, twelfth round)."
+    echo
+    echo "| filter | stage | median | p5 | p95 |"
+    echo "|---|---|---|---|---|"
+    bench_table "$work/scene2.csv"
+    echo
     echo "### psf (hashed path-space filtering) through its public API"
     echo
     echo "\`hush bench --scene builtin:courtyard --filters psf --size 1280x720 --frames $frames --distinct 8\`:"
