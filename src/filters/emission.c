@@ -188,17 +188,22 @@ const hush_planar *hush__emission_accumulate_holes(hush_emission_history *h,
   hush__temporal_blend_rows(plan, h->valid ? hist : NULL, (const float *const *)emission->plane,
                             3, age, alpha_min, h->hist[cur].plane, need, threads);
   if (spp && h->valid) {
-    /* a hole takes no new sample: the history through the plan, as is */
-    const long long n = (long long)plan->width * plan->height;
-    const long long W = (long long)plan->width;
+    /* a hole takes no new sample: the history through the plan, as is
+     * (rows not blended hold 0, which is what their history gives) */
+    const int H = (int)plan->height;
+    const size_t W = plan->width;
     float *const *out = h->hist[cur].plane;
 #pragma omp parallel for schedule(static) num_threads(threads)
-    for (long long i = 0; i < n; i++) {
-      if (spp[i] > 0.0f || (need && need[i / W] == 0.0f)) continue;
-      int32_t idx[9];
-      float w[9];
-      const int taps = hush__reproject_taps(plan, (size_t)i, idx, w);
-      for (int c = 0; c < 3 && taps; c++) out[c][i] = hush__reproject_apply(hist[c], idx, w, taps);
+    for (int y = 0; y < H; y++) {
+      if (need && need[y] == 0.0f) continue;
+      for (size_t i = (size_t)y * W; i < (size_t)(y + 1) * W; i++) {
+        if (spp[i] > 0.0f) continue;
+        int32_t idx[9];
+        float w[9];
+        const int taps = hush__reproject_taps(plan, i, idx, w);
+        for (int c = 0; c < 3 && taps; c++)
+          out[c][i] = hush__reproject_apply(hist[c], idx, w, taps);
+      }
     }
   }
   if (need) {
