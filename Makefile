@@ -3,8 +3,8 @@
 #   make test   installs what is missing, builds, runs every test
 # (Release, then a Release build for x86-64-v3 (its AVX2 loops) where the CPU
 # has AVX2 and FMA, then AddressSanitizer + UBSan, then the path-space
-# filter's concurrent test under ThreadSanitizer, then 60 s of EXR fuzzing and
-# 30 s of scene and sequence-file fuzzing).
+# filter's concurrent test under ThreadSanitizer, then 60 s of EXR fuzzing,
+# 30 s of scene and sequence-file fuzzing and 45 s of filter-API fuzzing).
 
 JOBS      ?= $(shell nproc 2>/dev/null || echo 2)
 BUILD     ?= build
@@ -14,6 +14,7 @@ FUZZ      ?= build-fuzz
 V3        ?= build-v3
 FUZZ_SECS ?= 60
 FUZZ_SCENE_SECS ?= 30
+FUZZ_FILTER_SECS ?= 45
 DEMO_OUT  ?= out/demo
 CMAKE_FLAGS ?=
 
@@ -93,6 +94,11 @@ test-fuzz:
 	  $(FUZZ)/fuzz/fuzz_scene -max_total_time=$(FUZZ_SCENE_SECS) -timeout=10 -rss_limit_mb=2048 -keep_seed=1 \
 	  -print_final_stats=1 $(FUZZ)/fuzz/scene-run
 	@echo "fuzz_scene: $(FUZZ_SCENE_SECS) s without a crash or leak"
+	cmake --build $(FUZZ) -j $(JOBS) --target fuzz_filter
+	mkdir -p $(FUZZ)/fuzz/filter-run && cp -n fuzz/filter_seeds/* $(FUZZ)/fuzz/filter-run/ 2>/dev/null || true
+	ASAN_OPTIONS=detect_leaks=1 $(FUZZ)/fuzz/fuzz_filter -max_total_time=$(FUZZ_FILTER_SECS) -timeout=60 \
+	  -rss_limit_mb=2048 -keep_seed=1 -print_final_stats=1 $(FUZZ)/fuzz/filter-run
+	@echo "fuzz_filter: $(FUZZ_FILTER_SECS) s without a crash, leak, NaN output or thread-count difference"
 
 demo: deps build
 	./tools/demo.sh $(BUILD)/hush $(DEMO_OUT)

@@ -92,7 +92,7 @@ typedef enum hush_status {
   HUSH_ERROR_NOT_FOUND = 5,         /* unknown filter, parameter or image name */
   HUSH_ERROR_OUT_OF_RANGE = 6,      /* parameter value outside its range */
   HUSH_ERROR_TYPE_MISMATCH = 7,     /* e.g. set_float on an int parameter */
-  HUSH_ERROR_NONFINITE = 8,         /* NaN or Inf in an input image */
+  HUSH_ERROR_NONFINITE = 8,         /* NaN, Inf or a value beyond +-1e15 in an input image */
   HUSH_ERROR_IO = 9,                /* file cannot be opened, read or written */
   HUSH_ERROR_CORRUPT = 10,          /* file is truncated or malformed */
   HUSH_ERROR_UNSUPPORTED = 11       /* valid file or request hush cannot handle */

@@ -3,12 +3,14 @@
  * are well formed, and every kind of misuse returns the documented status
  * with a message that names the culprit (NULL handles, unknown names, type
  * and range errors, missing or mismatched images, execute before commit,
- * bad frame info, overlapping output).
+ * bad frame info, overlapping output), and what every filter makes of odd
+ * but finite input (normals not of unit length, values up to the limit).
  */
 #include "check.h"
 
 #include "hush.h"
 
+#include <math.h>
 #include <string.h>
 
 #define W 16
@@ -257,6 +259,153 @@ static void test_frames(void) {
   CHECK(f2 == NULL);
 }
 
+/* ---- what every filter makes of odd but finite input ----------------- */
+
+#define BW 40
+#define BH 24
+#define BN (BW * BH)
+
+/* A frame every filter takes: a wall with a step in depth and a crease in
+ * its normal, a noisy colour, a grey albedo. */
+typedef struct bench_frame {
+  float color[BN * 3], depth[BN], normal[BN * 3], albedo[BN * 3], position[BN * 3];
+  float motion[BN * 2]; /* 0: a static scene, each pixel its own history */
+  float out[BN * 3];
+} bench_frame;
+
+static float hash01(uint32_t i) {
+  i = i * 0x9e3779b9u ^ (i >> 15);
+  i *= 0x85ebca6bu;
+  i ^= i >> 13;
+  return (float)(i >> 8) / 16777216.0f;
+}
+
+static void bench_fill(bench_frame *b, int k) {
+  for (int i = 0; i < BN; i++) {
+    const int x = i % BW;
+    b->depth[i] = x < BW / 2 ? 3.0f : 5.0f;
+    b->position[3 * i + 0] = 0.1f * (float)x;
+    b->position[3 * i + 1] = 0.1f * (float)(i / BW);
+    b->position[3 * i + 2] = -b->depth[i];
+    b->normal[3 * i + 0] = x < BW / 3 ? 1.0f : 0.0f;
+    b->normal[3 * i + 1] = 0.0f;
+    b->normal[3 * i + 2] = x < BW / 3 ? 0.0f : 1.0f;
+    for (int c = 0; c < 3; c++) {
+      b->color[3 * i + c] = 0.4f + 0.5f * hash01((uint32_t)(i * 3 + c + k * BN * 3));
+      b->albedo[3 * i + c] = 0.5f;
+    }
+  }
+}
+
+static hush_filter bench_filter(const char *cls, bench_frame *b) {
+  hush_filter f = hush_filter_new(dev, cls);
+  REQUIRE(f != NULL);
+  const hush_filter_class_info *ci = hush_filter_get_class(f);
+  for (uint32_t k = 0; k < ci->image_count; k++) {
+    const char *name = ci->images[k].name;
+    hush_image_view v = {0};
+    if (!strcmp(name, "color")) v = view(b->color, HUSH_FORMAT_FLOAT3, BW, BH);
+    else if (!strcmp(name, "depth")) v = view(b->depth, HUSH_FORMAT_FLOAT, BW, BH);
+    else if (!strcmp(name, "normal")) v = view(b->normal, HUSH_FORMAT_FLOAT3, BW, BH);
+    else if (!strcmp(name, "albedo")) v = view(b->albedo, HUSH_FORMAT_FLOAT3, BW, BH);
+    else if (!strcmp(name, "position")) v = view(b->position, HUSH_FORMAT_FLOAT3, BW, BH);
+    else if (!strcmp(name, "motion")) v = view(b->motion, HUSH_FORMAT_FLOAT2, BW, BH);
+    else if (!strcmp(name, "output")) v = view(b->out, HUSH_FORMAT_FLOAT3, BW, BH);
+    else continue;
+    CHECK(hush_filter_set_image(f, name, &v) == HUSH_OK);
+  }
+  CHECK(hush_filter_commit(f) == HUSH_OK);
+  return f;
+}
+
+static int bench_finite(const bench_frame *b) {
+  for (int i = 0; i < BN * 3; i++)
+    if (!(b->out[i] == b->out[i]) || b->out[i] > 3e38f || b->out[i] < -3e38f) return 0;
+  return 1;
+}
+
+/* The filters that take this frame (asvgf needs gradient samples). */
+static const char *const bench_classes[] = {"accumulate", "svgf", "taa", "bmfr", "nca"};
+#define BENCH_CLASSES (sizeof bench_classes / sizeof bench_classes[0])
+
+/*
+ * Normals of any length are taken as their directions: the output of the
+ * unit normals, within the rescaling's rounding. Lengths of 0.9 used to
+ * fail the reprojection's normal test (no history); lengths of 3 made
+ * svgf's normal weight overflow (NaN); 1e-20 and 1e14 do not square in
+ * float.
+ */
+static void test_normal_length(void) {
+  static const float scales[] = {0.5f, 0.9f, 3.0f, 1e-20f, 1e14f, 1.0f};
+  static bench_frame unit, scaled;
+  for (size_t c = 0; c < BENCH_CLASSES; c++) {
+    hush_filter fu = bench_filter(bench_classes[c], &unit);
+    hush_filter fs = bench_filter(bench_classes[c], &scaled);
+    hush_frame_info info;
+    hush_frame_info_init(&info);
+    info.motion = HUSH_MOTION_VECTORS;
+    int same = 1, finite = 1;
+    for (int k = 0; k < 4; k++) {
+      bench_fill(&unit, k);
+      bench_fill(&scaled, k);
+      for (int i = 0; i < BN; i++)
+        for (int j = 0; j < 3; j++) scaled.normal[3 * i + j] *= scales[(i * 7) % 6];
+      info.frame_index = (uint64_t)k;
+      CHECK(hush_filter_execute(fu, &info) == HUSH_OK);
+      CHECK(hush_filter_execute(fs, &info) == HUSH_OK);
+      for (int i = 0; i < BN * 3; i++)
+        same &= fabsf(unit.out[i] - scaled.out[i]) <= 1e-4f * (fabsf(unit.out[i]) + 0.1f);
+      finite &= bench_finite(&scaled);
+    }
+    CHECK_MSG(same && finite, "%s: normals not of unit length change the output (finite %d)",
+              bench_classes[c], finite);
+    hush_filter_release(fu);
+    hush_filter_release(fs);
+  }
+}
+
+/*
+ * Input values are accepted up to 1e15 in magnitude, and the output of
+ * values that large is finite; beyond, the frame fails like NaN/Inf do (the
+ * filters' squares and sums would overflow into NaN), or with
+ * nonfinite=replace they become 0.
+ */
+static void test_input_range(void) {
+  static bench_frame b;
+  for (size_t c = 0; c < BENCH_CLASSES; c++) {
+    hush_filter f = bench_filter(bench_classes[c], &b);
+    hush_frame_info info;
+    hush_frame_info_init(&info);
+    info.motion = HUSH_MOTION_VECTORS;
+    for (int k = 0; k < 3; k++) {
+      bench_fill(&b, k);
+      info.frame_index = (uint64_t)k;
+      /* large but accepted, in every image */
+      for (int i = 5; i < BN; i += 37) {
+        b.color[3 * i] = 9e14f;
+        b.albedo[3 * i + 1] = 9e14f;
+        b.normal[3 * i + 2] = -9e14f;
+        if (i % 2) b.depth[i] = 9e14f;
+      }
+      CHECK_MSG(hush_filter_execute(f, &info) == HUSH_OK, "%s: 9e14 refused", bench_classes[c]);
+      CHECK_MSG(bench_finite(&b), "%s: 9e14 in, NaN/Inf out", bench_classes[c]);
+    }
+    b.color[3 * 17 + 2] = 2e15f;
+    CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_NONFINITE);
+    CHECK(expect_error(dev, HUSH_ERROR_NONFINITE, "beyond"));
+    b.color[3 * 17 + 2] = 0.5f;
+    b.normal[3 * 17] = -3e38f; /* every class here reads the normal */
+    CHECK(hush_filter_execute(f, &info) == HUSH_ERROR_NONFINITE);
+    CHECK(expect_error(dev, HUSH_ERROR_NONFINITE, "(17, 0)"));
+    b.normal[3 * 17] = 0.0f;
+    CHECK(hush_filter_set_string(f, "nonfinite", "replace") == HUSH_OK);
+    b.color[3 * 18] = 1e30f;
+    CHECK(hush_filter_execute(f, &info) == HUSH_OK);
+    CHECK(bench_finite(&b));
+    hush_filter_release(f);
+  }
+}
+
 int main(void) {
   dev = hush_device_new("threads=2");
   REQUIRE(dev != NULL);
@@ -265,6 +414,8 @@ int main(void) {
   test_params();
   test_images_and_commit();
   test_frames();
+  test_normal_length();
+  test_input_range();
   hush_device_release(dev);
   return check_summary();
 }

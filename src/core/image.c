@@ -217,13 +217,13 @@ static void import_row(const hush_image_view *v, size_t ps, size_t rs, uint32_t 
     for (int c = 0; c < nc; c++) memcpy(&out[c][x], row + (size_t)x * ps + 4 * (size_t)c, 4);
 }
 
-/* Non-finite values in one row of planes: a branch-free count (NaN fails
- * the comparison, so it counts too). */
+/* Values beyond HUSH_INPUT_MAX (Inf included) in one row of planes: a
+ * branch-free count (NaN fails the comparison, so it counts too). */
 static size_t count_nonfinite(float *const *planes, int nc, uint32_t w) {
   size_t bad = 0;
   for (int c = 0; c < nc; c++) {
     const float *p = planes[c];
-    for (uint32_t x = 0; x < w; x++) bad += !(fabsf(p[x]) <= FLT_MAX);
+    for (uint32_t x = 0; x < w; x++) bad += !(fabsf(p[x]) <= HUSH_INPUT_MAX);
   }
   return bad;
 }
@@ -231,7 +231,7 @@ static size_t count_nonfinite(float *const *planes, int nc, uint32_t w) {
 #if defined(__AVX512F__) && defined(__x86_64__)
 static HUSH_IMAGE_INLINE size_t count_nonfinite16(__m512 v) {
   /* NaN fails the comparison, so it counts too */
-  const __mmask16 ok = _mm512_cmp_ps_mask(_mm512_abs_ps(v), _mm512_set1_ps(FLT_MAX), _CMP_LE_OQ);
+  const __mmask16 ok = _mm512_cmp_ps_mask(_mm512_abs_ps(v), _mm512_set1_ps(HUSH_INPUT_MAX), _CMP_LE_OQ);
   return (size_t)__builtin_popcount((unsigned)(__mmask16)~ok);
 }
 
@@ -454,15 +454,15 @@ hush_status hush__view_import_nonfinite(hush_device device, const hush_image_vie
   const size_t n = (size_t)w * v->height;
   for (int c = 0; c < dst->channels; c++)
     for (size_t i = 0; i < n; i++)
-      if (!isfinite(dst->plane[c][i])) {
+      if (!(fabsf(dst->plane[c][i]) <= HUSH_INPUT_MAX)) {
         if (i < first_bad) first_bad = i;
         dst->plane[c][i] = 0.0f;
       }
   if (policy == HUSH_NONFINITE_ERROR)
     return hush__fail(device, HUSH_ERROR_NONFINITE,
-                      "%s: %zu NaN/Inf value(s), first at pixel (%zu, %zu); set nonfinite=replace "
-                      "to use 0 instead",
-                      what, bad, first_bad % w, first_bad / w);
+                      "%s: %zu NaN/Inf value(s) or value(s) beyond +-%g, first at pixel (%zu, "
+                      "%zu); set nonfinite=replace to use 0 instead",
+                      what, bad, (double)HUSH_INPUT_MAX, first_bad % w, first_bad / w);
   return HUSH_OK;
 }
 

@@ -53,14 +53,23 @@ hush_status hush__view_validate(hush_device device, const hush_image_view *view,
 size_t hush__view_pixel_stride(const hush_image_view *view);
 size_t hush__view_row_stride(const hush_image_view *view);
 
+/* The largest input magnitude a filter accepts: a value beyond it counts as
+ * NaN and Inf do (the policy below). The filters square and sum their
+ * inputs (luminance moments after a demodulation that may scale by 50,
+ * sums of squares over a 1024-pixel block), which overflow float from
+ * about 1e17; no renderer's radiance, depth or position comes near 1e15. */
+#define HUSH_INPUT_MAX 1e15f
+
 typedef enum hush_nonfinite_policy {
-  HUSH_NONFINITE_ERROR = 0,   /* report HUSH_ERROR_NONFINITE naming the pixel */
+  HUSH_NONFINITE_ERROR = 0,   /* report HUSH_ERROR_NONFINITE naming the pixel (also for
+                                 values beyond HUSH_INPUT_MAX) */
   HUSH_NONFINITE_REPLACE = 1  /* write 0 instead and count it */
 } hush_nonfinite_policy;
 
 /*
  * Copies the first dst->channels channels of a validated view into dst's
- * planes (same size), rows split over the device's threads. NaN/Inf are handled by policy; *replaced (if not NULL)
+ * planes (same size), rows split over the device's threads. NaN/Inf (and values beyond
+ * HUSH_INPUT_MAX) are handled by policy; *replaced (if not NULL)
  * receives how many values were replaced.
  */
 hush_status hush__view_import(hush_device device, const hush_image_view *view, const char *what,
@@ -68,7 +77,8 @@ hush_status hush__view_import(hush_device device, const hush_image_view *view, c
 
 /* hush__view_import in parts, for callers that fuse more work into the row
  * pass (e.g. albedo.h's demodulating import): row y of the view into dst's
- * planes (no threads), returning how many values are NaN/Inf; then, with
+ * planes (no threads), returning how many values are NaN/Inf or beyond
+ * HUSH_INPUT_MAX; then, with
  * the sum over the rows, the policy (zeroes them; the error names the
  * first). hush__view_import_row may write with streaming stores, which
  * leave the row out of the cache (a frame's planes outgrow it anyway, and

@@ -1,7 +1,7 @@
 /*
  * vecmath.h — scalar helpers for loops the compiler must vectorise: a
- * bitwise select, floorf and a natural logarithm that GCC turns into vector
- * code without -ffast-math.
+ * bitwise select, floorf, 1/sqrt and a natural logarithm that GCC turns
+ * into vector code without -ffast-math.
  *
  * The build is -O3 without -ffast-math (results must not depend on the
  * vector width). Under the default -ftrapping-math gcc vectorises floorf
@@ -31,6 +31,22 @@ static inline float hush__select_bits(int cond, float x, float y) {
   bx = (bx & m) | (by & ~m);
   memcpy(&x, &bx, sizeof x);
   return x;
+}
+
+/* 1/sqrt(x) for x in [1e-30, 1e30], without the libm call that gcc keeps
+ * for errno (-fmath-errno), which stops the vectoriser: the bit-level first
+ * guess and three Newton steps (relative error within 3e-7). */
+static inline float hush__rsqrt_vec(float x) {
+  int32_t bits;
+  memcpy(&bits, &x, sizeof bits);
+  bits = 0x5f375a86 - (bits >> 1);
+  float y;
+  memcpy(&y, &bits, sizeof y);
+  const float hx = 0.5f * x;
+  y = y * fmaf(-hx * y, y, 1.5f);
+  y = y * fmaf(-hx * y, y, 1.5f);
+  y = y * fmaf(-hx * y, y, 1.5f);
+  return y;
 }
 
 /* d^(2^n) by n squarings, n 0..10 (no more are done). Spelled out, not a

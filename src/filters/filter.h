@@ -53,7 +53,7 @@ struct hush_filter_t {
 /* The common first parameter of every class table. */
 #define HUSH_PARAM_NONFINITE_ENTRY                                                            \
   {"nonfinite", HUSH_PARAM_ENUM, 0, 0, 1,                                                    \
-   "NaN/Inf input pixels: error (fail the frame) or replace (use 0 and continue)",         \
+   "NaN/Inf input values (or beyond +-1e15): error (fail the frame) or replace (use 0)",   \
    hush__nonfinite_names}
 extern const char *const hush__nonfinite_names[];
 

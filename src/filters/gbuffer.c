@@ -6,6 +6,7 @@
 #include "filters/gbuffer.h"
 
 #include "core/hmath.h"
+#include "core/vecmath.h"
 
 #include <math.h>
 
@@ -20,6 +21,80 @@ static void constant_normal(hush_planar *n) {
     n->plane[0][i] = 0.0f;
     n->plane[1][i] = 0.0f;
     n->plane[2][i] = 1.0f;
+  }
+}
+
+/* A normal whose squared length is this far from 1 is rescaled to unit
+ * length: unit normals keep their bits, and so do half-float ones (off by
+ * up to 1e-3 in the squared length), which are not worth a pass. The dot
+ * product of two normals then exceeds 1 by at most 1e-3: svgf's normal
+ * weight by at most 2^(sigma_n 1e-3 log2 e), 1.14 at sigma_n 128. */
+#define UNIT_TOLERANCE 2e-3f
+
+/* Squared lengths outside this range (|n| below 1e-15 or above 1e15) are
+ * rescaled in double: their float squares may have underflowed or lost
+ * precision. */
+#define UNIT_FLOAT_MIN 1e-30f
+#define UNIT_FLOAT_MAX 1e30f
+
+/* Rescales the row's normals that are not of unit length (0 stays 0; to
+ * within 3e-7: rows of them are common enough, e.g. 8-bit normals, to want
+ * the vectorised reciprocal square root); returns whether one needs the
+ * double-precision path. */
+static int unit_row(float *restrict a, float *restrict b, float *restrict c, size_t w) {
+  int extreme = 0;
+#pragma omp simd reduction(| : extreme)
+  for (size_t x = 0; x < w; x++) {
+    const float d = a[x] * a[x] + b[x] * b[x] + c[x] * c[x];
+    const int rescale = !(fabsf(d - 1.0f) <= UNIT_TOLERANCE) & (d >= UNIT_FLOAT_MIN) &
+                        (d <= UNIT_FLOAT_MAX);
+    const float s = hush__rsqrt_vec(rescale ? d : 1.0f);
+    a[x] = rescale ? a[x] * s : a[x];
+    b[x] = rescale ? b[x] * s : b[x];
+    c[x] = rescale ? c[x] * s : c[x];
+    extreme |= (d < UNIT_FLOAT_MIN) & ((a[x] != 0.0f) | (b[x] != 0.0f) | (c[x] != 0.0f));
+    extreme |= d > UNIT_FLOAT_MAX;
+  }
+  return extreme;
+}
+
+/* The row's normals too short or too long to square in float, in double. */
+static void unit_row_double(float *a, float *b, float *c, size_t w) {
+  for (size_t x = 0; x < w; x++) {
+    const double p = a[x], q = b[x], r = c[x];
+    const double len2 = p * p + q * q + r * r;
+    if (len2 == 0.0 || fabs(len2 - 1.0) <= UNIT_TOLERANCE) continue;
+    const double s = 1.0 / sqrt(len2);
+    a[x] = (float)(p * s);
+    b[x] = (float)(q * s);
+    c[x] = (float)(r * s);
+  }
+}
+
+/*
+ * Normals of any length become unit normals (gbuffer.h). Every consumer
+ * assumes them: the reprojection's normal test compares a dot product with
+ * a cosine (normals of length 0.9 failed it everywhere: no history), and
+ * svgf's normal weight exp(sigma_n (n.n' - 1)) overflowed to Inf, then NaN,
+ * for a dot product of 9. A read-only pass over the three planes; a row
+ * with such a normal is rescaled while it is in L1.
+ */
+void hush__unit_normals(hush_planar *n, int threads) {
+  const int H = (int)n->height;
+  const size_t W = n->width;
+  float *const p[3] = {n->plane[0], n->plane[1], n->plane[2]};
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) {
+    const size_t i0 = (size_t)y * W;
+    float *a = p[0] + i0, *b = p[1] + i0, *c = p[2] + i0;
+    int odd = 0;
+#pragma omp simd reduction(| : odd)
+    for (size_t x = 0; x < W; x++) {
+      const float d = a[x] * a[x] + b[x] * b[x] + c[x] * c[x];
+      const int unit = fabsf(d - 1.0f) <= UNIT_TOLERANCE;
+      odd |= (unit ^ 1) & ((a[x] != 0.0f) | (b[x] != 0.0f) | (c[x] != 0.0f));
+    }
+    if (odd && unit_row(a, b, c, W)) unit_row_double(a, b, c, W);
   }
 }
 
@@ -64,7 +139,10 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, i
     dst[count++] = &in->motion;
   }
   if ((s = hush__filter_import_many(f, count, images, dst))) return s;
-  if (!has_normal) constant_normal(&g->normal);
+  if (has_normal)
+    hush__unit_normals(&g->normal, f->device->threads > 0 ? f->device->threads : 1);
+  else
+    constant_normal(&g->normal);
   g->has_id = with_id;
   return HUSH_OK;
 }

@@ -30,12 +30,17 @@ typedef struct hush_gbuffer_inputs {
   hush_planar surface;    /* 3, frames with holes: hush__holes_split_background's scratch */
 } hush_gbuffer_inputs;
 
+/* Rescales the normals (3 planes) whose squared length is not within 2e-3
+ * of 1 to unit length; 0 stays 0, unit normals keep their bits. */
+void hush__unit_normals(hush_planar *normal, int threads);
+
 /*
  * Imports this frame's G-buffer into hush__reprojector_next(rp). Fails with
  * HUSH_ERROR_INVALID_OPERATION when info->motion is VECTORS and no motion
  * image is bound. Ids are compared only when use_id is set and an id image is
- * bound. Without a normal image (normal index unbound or -1) every normal is
- * +Z, so the normal test always passes.
+ * bound. Normals are made unit (hush__unit_normals). Without a normal image
+ * (normal index unbound or -1) every normal is +Z, so the normal test always
+ * passes.
  */
 hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *images, int use_id,
                                  const hush_frame_info *info, hush_reprojector *rp,

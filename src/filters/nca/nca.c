@@ -10,6 +10,7 @@
  */
 #include "filters/emission.h"
 #include "filters/filter.h"
+#include "filters/gbuffer.h"
 #include "filters/nca/model.h"
 #include "filters/nca/weights.h"
 
@@ -145,6 +146,7 @@ static hush_status nca_execute(hush_filter f, void *state, const hush_frame_info
 
   if ((s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__filter_import(f, I_NORMAL, &st->normal))) return s;
+  hush__unit_normals(&st->normal, threads); /* the features it was trained on */
   if ((s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
   const int emis = hush__filter_view(f, I_EMISSION) != NULL && hush__param_i(f, P_EMISSION_BYPASS);
   if (emis && ((s = hush__filter_scratch(f, &st->emission, 3)) ||

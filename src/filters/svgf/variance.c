@@ -19,11 +19,12 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
                                           int dy, int y, int x0, int n, const svgf_exp2_poly *poly,
                                           const int squarings, block_acc *acc) {
   const int H = g->height;
-  const size_t gs = g->zn->stride, ms = m->stride;
+  const ptrdiff_t gs = (ptrdiff_t)g->zn->stride, ms = (ptrdiff_t)m->stride;
   const int ya = clampi(y + dy, 0, H - 1), yb = clampi(y - dy, 0, H - 1);
-  const size_t gp = (size_t)y * gs + x0, ga = (size_t)ya * gs + x0 + dx,
-               gb = (size_t)yb * gs + x0 - dx;
-  const size_t ma = (size_t)ya * ms + x0 + dx, mb = (size_t)yb * ms + x0 - dx;
+  /* signed: a tap left of column 0 is in the pad, before the plane's start */
+  const ptrdiff_t gp = (ptrdiff_t)y * gs + x0, ga = (ptrdiff_t)ya * gs + x0 + dx,
+                  gb = (ptrdiff_t)yb * gs + x0 - dx;
+  const ptrdiff_t ma = (ptrdiff_t)ya * ms + x0 + dx, mb = (ptrdiff_t)yb * ms + x0 - dx;
   const float *restrict zp = g->zn->plane[0] + gp, *restrict za = g->zn->plane[0] + ga,
                         *restrict zb = g->zn->plane[0] + gb;
   const float *restrict n0p = g->zn->plane[1] + gp, *restrict n0a = g->zn->plane[1] + ga,
@@ -80,19 +81,20 @@ static void variance_row_valid(const svgf_guide *g, const svgf_padded *m, const 
                                float min_age, float *var, int y, int x0, int n,
                                const svgf_exp2_poly *poly, const int squarings) {
   const int W = g->width, H = g->height;
-  const size_t gs = g->zn->stride, ms = m->stride;
+  const ptrdiff_t gs = (ptrdiff_t)g->zn->stride, ms = (ptrdiff_t)m->stride;
   const float sigma_z = g->sigma_z;
   for (int x = x0; x < x0 + n; x++) {
     const size_t i = (size_t)y * W + x;
     if (!(age[i] < min_age)) continue;
-    const size_t gp = (size_t)y * gs + x;
+    const ptrdiff_t gp = (ptrdiff_t)y * gs + x;
     float sw = 0.0f, s1 = 0.0f, s2 = 0.0f;
     for (int dy = -R; dy <= R; dy++) {
       const int yy = clampi(y + dy, 0, H - 1);
       for (int dx = -R; dx <= R; dx++) {
         /* the padded planes repeat the edge pixel: so does the age */
         if (!(age[(size_t)yy * W + clampi(x + dx, 0, W - 1)] > 0.0f)) continue;
-        const size_t gq = (size_t)yy * gs + x + dx, mq = (size_t)yy * ms + x + dx;
+        /* signed: a tap left of column 0 is in the pad */
+        const ptrdiff_t gq = (ptrdiff_t)yy * gs + x + dx, mq = (ptrdiff_t)yy * ms + x + dx;
         float w = 1.0f;
         if (dx || dy) {
           const float dd = fmaf(sigma_z, fabsf(fmaf(g->gx[i], (float)dx, g->gy[i] * (float)dy)),

@@ -47,15 +47,7 @@
  * Newton steps, then one Newton step of sqrt itself with fmaf; within an
  * ulp or two of sqrtf (0 for 0). */
 static HUSH_ALWAYS_INLINE float svgf_sqrt_pos(float x) {
-  int32_t bits;
-  memcpy(&bits, &x, sizeof bits);
-  bits = 0x5f375a86 - (bits >> 1);
-  float y;
-  memcpy(&y, &bits, sizeof y);
-  const float hx = 0.5f * x;
-  y = y * fmaf(-hx * y, y, 1.5f);
-  y = y * fmaf(-hx * y, y, 1.5f);
-  y = y * fmaf(-hx * y, y, 1.5f);
+  const float y = hush__rsqrt_vec(x);
   const float s = x * y;
   return fmaf(0.5f * y, fmaf(-s, s, x), s);
 }
