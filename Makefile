@@ -4,7 +4,8 @@
 # (Release, then a Release build for x86-64-v3 (its AVX2 loops) where the CPU
 # has AVX2 and FMA, then AddressSanitizer + UBSan, then the path-space
 # filter's concurrent test under ThreadSanitizer, then 60 s of EXR fuzzing,
-# 30 s of scene and sequence-file fuzzing and 45 s of filter-API fuzzing).
+# 30 s of scene and sequence-file fuzzing, 45 s of filter-API fuzzing and
+# 20 s of path-space-filter API fuzzing).
 
 JOBS      ?= $(shell nproc 2>/dev/null || echo 2)
 BUILD     ?= build
@@ -15,6 +16,7 @@ V3        ?= build-v3
 FUZZ_SECS ?= 60
 FUZZ_SCENE_SECS ?= 30
 FUZZ_FILTER_SECS ?= 45
+FUZZ_PSF_SECS ?= 20
 DEMO_OUT  ?= out/demo
 CMAKE_FLAGS ?=
 
@@ -99,6 +101,11 @@ test-fuzz:
 	ASAN_OPTIONS=detect_leaks=1 $(FUZZ)/fuzz/fuzz_filter -max_total_time=$(FUZZ_FILTER_SECS) -timeout=60 \
 	  -rss_limit_mb=2048 -keep_seed=1 -print_final_stats=1 $(FUZZ)/fuzz/filter-run
 	@echo "fuzz_filter: $(FUZZ_FILTER_SECS) s without a crash, leak, NaN output or thread-count difference"
+	cmake --build $(FUZZ) -j $(JOBS) --target fuzz_psf
+	mkdir -p $(FUZZ)/fuzz/psf-run && cp -n fuzz/psf_seeds/* $(FUZZ)/fuzz/psf-run/ 2>/dev/null || true
+	ASAN_OPTIONS=detect_leaks=1 $(FUZZ)/fuzz/fuzz_psf -max_total_time=$(FUZZ_PSF_SECS) -timeout=30 \
+	  -rss_limit_mb=2048 -keep_seed=1 -print_final_stats=1 $(FUZZ)/fuzz/psf-run
+	@echo "fuzz_psf: $(FUZZ_PSF_SECS) s without a crash, leak, NaN lookup or thread-count difference"
 
 demo: deps build
 	./tools/demo.sh $(BUILD)/hush $(DEMO_OUT)
