@@ -17,6 +17,7 @@
  * Crashes, leaks and undefined behaviour are the sanitizers' to report.
  */
 #include "hush.h"
+#include "fuzz_common.h"
 #include "core/half.h"
 #include "eval/synthetic.h"
 
@@ -26,32 +27,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
-
 #define MAX_W 40
 #define MAX_H 24
 #define MAX_FRAMES 4
 #define MAX_IMAGES 24
 #define MAX_SETS 6
-
-/* The input bytes as a stream; past the end every read is 0, so a short
- * input is a plain configuration. */
-typedef struct bytes {
-  const uint8_t *p;
-  size_t n;
-} bytes;
-
-static unsigned u8(bytes *b) {
-  if (!b->n) return 0;
-  b->n--;
-  return *b->p++;
-}
-
-static uint32_t u32(bytes *b) {
-  uint32_t v = 0;
-  for (int i = 0; i < 4; i++) v = v << 8 | u8(b);
-  return v;
-}
 
 /* ---- the plan ------------------------------------------------------------ */
 
@@ -88,65 +68,54 @@ typedef struct plan {
   float jitter;
 } plan;
 
-static void decode(bytes *b, plan *p) {
+static void decode(fuzz_bytes *b, plan *p) {
   memset(p, 0, sizeof *p);
   const uint32_t count = hush_filter_class_count();
-  p->cls = hush_filter_class_at(u8(b) % count);
-  p->width = 1 + u8(b) % MAX_W;
-  p->height = 1 + u8(b) % MAX_H;
-  p->frames = 1 + u8(b) % MAX_FRAMES;
-  p->frame_step = 1 + u8(b) % 8;
+  p->cls = hush_filter_class_at(fuzz_u8(b) % count);
+  p->width = 1 + fuzz_u8(b) % MAX_W;
+  p->height = 1 + fuzz_u8(b) % MAX_H;
+  p->frames = 1 + fuzz_u8(b) % MAX_FRAMES;
+  p->frame_step = 1 + fuzz_u8(b) % 8;
   hush__synth_defaults(&p->synth);
   p->synth.width = p->width;
   p->synth.height = p->height;
-  p->synth.seed = u8(b);
-  p->synth.camera_move = (int)(u8(b) % 3);
-  p->synth.moving_object = (int)(u8(b) & 1);
-  p->vectors = (int)(u8(b) & 1);
-  p->reset_mask = u8(b) & 0x0e & (unsigned)u8(b);
-  p->null_info_mask = u8(b) & 0x0f & (unsigned)u8(b) & (unsigned)u8(b);
-  p->info_size = u8(b) < 16 ? (int)u8(b) * 8 : 0;
-  p->jitter = (float)((int)u8(b) - 128) / 256.0f;
-  const unsigned m = u8(b);
+  p->synth.seed = fuzz_u8(b);
+  p->synth.camera_move = (int)(fuzz_u8(b) % 3);
+  p->synth.moving_object = (int)(fuzz_u8(b) & 1);
+  p->vectors = (int)(fuzz_u8(b) & 1);
+  p->reset_mask = fuzz_u8(b) & 0x0e & (unsigned)fuzz_u8(b);
+  p->null_info_mask = fuzz_u8(b) & 0x0f & (unsigned)fuzz_u8(b) & (unsigned)fuzz_u8(b);
+  p->info_size = fuzz_u8(b) < 16 ? (int)fuzz_u8(b) * 8 : 0;
+  p->jitter = (float)((int)fuzz_u8(b) - 128) / 256.0f;
+  const unsigned m = fuzz_u8(b);
   p->misuse = m < 200 ? 0 : (int)(m - 199);
-  p->misuse_frame = (int)(u8(b) % (p->frames + 1));
-  p->misuse_image = (int)u8(b);
+  p->misuse_frame = (int)(fuzz_u8(b) % (p->frames + 1));
+  p->misuse_image = (int)fuzz_u8(b);
   const uint32_t nimages =
       p->cls->image_count < MAX_IMAGES ? p->cls->image_count : MAX_IMAGES;
   for (uint32_t i = 0; i < nimages; i++) {
     const hush_image_info *ii = &p->cls->images[i];
     image_plan *q = &p->image[i];
-    const unsigned f = u8(b);
+    const unsigned f = fuzz_u8(b);
     /* required images are bound unless the byte says otherwise (rarely) */
     q->bind = ii->required ? f != 255 : (f & 3) != 0;
     q->half = (f >> 2) & 1;
     q->extra = ii->role == HUSH_IMAGE_INPUT ? (int)((f >> 3) & 1) : 0;
     q->pad_px = (f >> 4) & 1;
     q->pad_row = (int)((f >> 5) & 3);
-    const unsigned c = u8(b);
+    const unsigned c = fuzz_u8(b);
     q->corrupt = ii->role == HUSH_IMAGE_INPUT && c >= 192 ? (int)(1 + c % (CORRUPTS - 1)) : 0;
-    q->seed = u32(b);
+    q->seed = fuzz_u32(b);
   }
-  p->sets = (int)(u8(b) % (MAX_SETS + 1));
+  p->sets = (int)(fuzz_u8(b) % (MAX_SETS + 1));
   for (int i = 0; i < p->sets; i++) {
-    p->set[i].param = p->cls->param_count ? (int)(u8(b) % p->cls->param_count) : 0;
-    p->set[i].how = (int)u8(b);
-    p->set[i].frame = (int)(u8(b) % (p->frames + 1));
+    p->set[i].param = p->cls->param_count ? (int)(fuzz_u8(b) % p->cls->param_count) : 0;
+    p->set[i].how = (int)fuzz_u8(b);
+    p->set[i].frame = (int)(fuzz_u8(b) % (p->frames + 1));
   }
 }
 
 /* ---- frames ------------------------------------------------------------- */
-
-/* A hash of (seed, i) in [0, 1). */
-static float hash01(uint32_t seed, uint32_t i) {
-  uint32_t h = seed * 0x9e3779b9u ^ i * 0x85ebca6bu;
-  h ^= h >> 16;
-  h *= 0x7feb352du;
-  h ^= h >> 15;
-  h *= 0x846ca68bu;
-  h ^= h >> 16;
-  return (float)(h >> 8) / 16777216.0f;
-}
 
 /* The synthetic frame's layers a class's image is made from. */
 typedef struct source {
@@ -194,7 +163,7 @@ static float view_at(const hush_image_view *v, uint32_t x, uint32_t y, int c) {
  * frame's layer where it has one, else something plausible. */
 static float value_of(const source *s, uint32_t x, uint32_t y, int c, uint32_t k, uint32_t seed) {
   const uint32_t i = (k * MAX_H + y) * MAX_W + x;
-  const float r = hash01(seed, i * 4 + (uint32_t)c);
+  const float r = fuzz_hash01(seed, i * 4 + (uint32_t)c);
   switch (s->kind) {
   case SRC_LAYER: return view_at(&s->layer, x, y, c);
   case SRC_DIRECT: return 0.6f * view_at(&s->color, x, y, c);
@@ -275,9 +244,9 @@ static void fill_input(buffer *b, const image_plan *q, const char *name, hush_fr
     for (uint32_t x = 0; x < b->view.width; x++)
       for (int c = 0; c < ch; c++) {
         float v = value_of(&src, x, y, c, k, q->seed);
-        if (q->corrupt && hash01(q->seed ^ 0x5bd1e995u, ((k * MAX_H + y) * MAX_W + x) * 4 +
+        if (q->corrupt && fuzz_hash01(q->seed ^ 0x5bd1e995u, ((k * MAX_H + y) * MAX_W + x) * 4 +
                                                            (uint32_t)c) < 0.05f)
-          v = corrupted(q->corrupt, v, hash01(q->seed, x + y));
+          v = corrupted(q->corrupt, v, fuzz_hash01(q->seed, x + y));
         put(b, x, y, c, v);
       }
 }
@@ -473,20 +442,8 @@ static void run(const plan *p, int threads, record *rec) {
   for (uint32_t i = 0; i < MAX_IMAGES; i++) free(buf[i].mem);
 }
 
-int LLVMFuzzerInitialize(int *argc, char ***argv);
-
-/* Idle OpenMP workers sleep at once: the 3-thread run on a 2-core machine
- * otherwise spends most of its time spinning. */
-int LLVMFuzzerInitialize(int *argc, char ***argv) {
-  (void)argc;
-  (void)argv;
-  setenv("KMP_BLOCKTIME", "0", 0);
-  setenv("OMP_WAIT_POLICY", "passive", 0);
-  return 0;
-}
-
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
-  bytes b = {data, size};
+  fuzz_bytes b = {data, size};
   plan p;
   decode(&b, &p);
   /* FUZZ_FILTER_DESCRIBE=1: the plan first (for a sanitizer's report) */

@@ -14,6 +14,7 @@
  * and undefined behaviour are the sanitizers'.
  */
 #include "hush.h"
+#include "fuzz_common.h"
 
 #include <math.h>
 #include <stdint.h>
@@ -21,32 +22,8 @@
 #include <stdlib.h>
 #include <string.h>
 
-int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
-int LLVMFuzzerInitialize(int *argc, char ***argv);
-
 #define MAX_VERTICES 2048
 #define MAX_FRAMES 4
-
-typedef struct bytes {
-  const uint8_t *p;
-  size_t n;
-} bytes;
-
-static unsigned u8(bytes *b) {
-  if (!b->n) return 0;
-  b->n--;
-  return *b->p++;
-}
-
-static float hash01(uint32_t seed, uint32_t i) {
-  uint32_t h = seed * 0x9e3779b9u ^ i * 0x85ebca6bu;
-  h ^= h >> 16;
-  h *= 0x7feb352du;
-  h ^= h >> 15;
-  h *= 0x846ca68bu;
-  h ^= h >> 16;
-  return (float)(h >> 8) / 16777216.0f;
-}
 
 typedef struct plan {
   uint32_t width, height, frames, vertices, clusters, calls;
@@ -62,49 +39,50 @@ typedef struct plan {
   } set[6];
 } plan;
 
-static void decode(bytes *b, plan *p) {
+static void decode(fuzz_bytes *b, plan *p) {
   memset(p, 0, sizeof *p);
-  p->width = 1 + u8(b) % 64;
-  p->height = 1 + u8(b) % 48;
-  p->frames = 1 + u8(b) % MAX_FRAMES;
-  p->vertices = (u8(b) << 3 | u8(b) >> 5) % (MAX_VERTICES + 1);
-  p->clusters = 1 + u8(b) % 16;
-  p->calls = 1 + u8(b) % 4;
-  p->seed = u8(b);
-  p->reset_mask = u8(b) & 0x0e;
+  p->width = 1 + fuzz_u8(b) % 64;
+  p->height = 1 + fuzz_u8(b) % 48;
+  p->frames = 1 + fuzz_u8(b) % MAX_FRAMES;
+  const unsigned hi = fuzz_u8(b), lo = fuzz_u8(b);
+  p->vertices = (hi << 3 | lo >> 5) % (MAX_VERTICES + 1);
+  p->clusters = 1 + fuzz_u8(b) % 16;
+  p->calls = 1 + fuzz_u8(b) % 4;
+  p->seed = fuzz_u8(b);
+  p->reset_mask = fuzz_u8(b) & 0x0e;
   static const float angles[] = {1e-3f, 0.01f, 1e-6f, 1.0f, 0.0f, -0.01f, NAN, INFINITY};
-  p->pixel_angle = angles[u8(b) % 8];
-  const unsigned c = u8(b);
+  p->pixel_angle = angles[fuzz_u8(b) % 8];
+  const unsigned c = fuzz_u8(b);
   p->corrupt = c >= 160 ? (int)(1 + c % 7) : 0;
-  p->bad_tickets = u8(b) >= 224;
-  const unsigned o = u8(b);
+  p->bad_tickets = fuzz_u8(b) >= 224;
+  const unsigned o = fuzz_u8(b);
   p->out_of_order = o >= 240 ? (int)(1 + o % 2) : 0;
   uint32_t count = 0;
   hush_psf_params(&count);
-  p->sets = (int)(u8(b) % 7);
+  p->sets = (int)(fuzz_u8(b) % 7);
   for (int i = 0; i < p->sets; i++) {
-    p->set[i].param = count ? (int)(u8(b) % count) : 0;
-    p->set[i].how = (int)u8(b);
+    p->set[i].param = count ? (int)(fuzz_u8(b) % count) : 0;
+    p->set[i].how = (int)fuzz_u8(b);
   }
 }
 
 static void make_vertex(const plan *p, uint32_t frame, uint32_t i, hush_psf_vertex *v) {
   const uint32_t k = i % p->clusters;
-  const float r = hash01(p->seed, i * 17 + frame * 131071u);
-  const float cx = 4.0f * hash01(p->seed, k * 3), cy = 4.0f * hash01(p->seed, k * 3 + 1),
-              cz = -2.0f - 4.0f * hash01(p->seed, k * 3 + 2);
+  const float r = fuzz_hash01(p->seed, i * 17 + frame * 131071u);
+  const float cx = 4.0f * fuzz_hash01(p->seed, k * 3), cy = 4.0f * fuzz_hash01(p->seed, k * 3 + 1),
+              cz = -2.0f - 4.0f * fuzz_hash01(p->seed, k * 3 + 2);
   v->position[0] = cx + 0.05f * (r - 0.5f);
-  v->position[1] = cy + 0.05f * (hash01(p->seed ^ 1u, i) - 0.5f);
+  v->position[1] = cy + 0.05f * (fuzz_hash01(p->seed ^ 1u, i) - 0.5f);
   v->position[2] = cz;
   v->normal[0] = 0.0f;
   v->normal[1] = (k & 1) ? 1.0f : 0.0f;
   v->normal[2] = (k & 1) ? 0.0f : 1.0f;
   v->origin[0] = v->origin[1] = v->origin[2] = 0.0f;
   v->distance = (k & 2) ? 0.0f : 1.5f;
-  for (int c = 0; c < 3; c++) v->radiance[c] = 2.0f * hash01(p->seed + (uint32_t)c, i + frame * 7919u);
+  for (int c = 0; c < 3; c++) v->radiance[c] = 2.0f * fuzz_hash01(p->seed + (uint32_t)c, i + frame * 7919u);
   v->seed = i * 2654435761u + frame;
   v->flags = (k & 4) ? HUSH_PSF_GLOSSY : 0u;
-  if (p->corrupt && hash01(p->seed ^ 0xabcdu, i) < 0.1f) {
+  if (p->corrupt && fuzz_hash01(p->seed ^ 0xabcdu, i) < 0.1f) {
     switch (p->corrupt) {
     case 1: v->position[i % 3] = NAN; break;
     case 2: v->position[i % 3] = (i & 1) ? INFINITY : -3e38f; break;
@@ -216,16 +194,8 @@ static void run(const plan *p, int threads, record *rec) {
   hush_device_release(dev);
 }
 
-int LLVMFuzzerInitialize(int *argc, char ***argv) {
-  (void)argc;
-  (void)argv;
-  setenv("KMP_BLOCKTIME", "0", 0);
-  setenv("OMP_WAIT_POLICY", "passive", 0);
-  return 0;
-}
-
 int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
-  bytes b = {data, size};
+  fuzz_bytes b = {data, size};
   plan p;
   decode(&b, &p);
   record r1 = {0}, r3 = {0};
