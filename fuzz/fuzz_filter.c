@@ -396,6 +396,29 @@ static void run(const plan *p, int threads, record *rec) {
         info.view_to_clip[15] = 0.0f; /* a singular projection */
         info.view_to_clip[11] = 0.0f;
         note_status(rec, dev, hush_filter_execute(f, &info));
+      } else if (p->misuse >= 7 && p->misuse <= 9 && buf[mi].mem) {
+        hush_image_view bad = buf[mi].view;
+        if (p->misuse == 7) bad.data = NULL;
+        if (p->misuse == 8) bad.row_stride = bad.pixel_stride; /* rows overlap */
+        if (p->misuse == 9) bad.format = (hush_format)99;
+        note_status(rec, dev, hush_filter_set_image(f, mname, &bad));
+        note_status(rec, dev, hush_filter_execute(f, &info));
+        note_status(rec, dev, hush_filter_set_image(f, mname, &buf[mi].view));
+        note_status(rec, dev, hush_filter_commit(f));
+      } else if (p->misuse == 10 && buf[mi].mem) {
+        /* every output on one input's memory: they overlap */
+        for (uint32_t i = 0; i < n && i < MAX_IMAGES; i++)
+          if (buf[i].mem && p->cls->images[i].role == HUSH_IMAGE_OUTPUT) {
+            hush_image_view over = buf[i].view;
+            over.data = buf[mi].mem;
+            note_status(rec, dev, hush_filter_set_image(f, p->cls->images[i].name, &over));
+          }
+        note_status(rec, dev, hush_filter_commit(f));
+        note_status(rec, dev, hush_filter_execute(f, &info));
+        for (uint32_t i = 0; i < n && i < MAX_IMAGES; i++)
+          if (buf[i].mem && p->cls->images[i].role == HUSH_IMAGE_OUTPUT)
+            note_status(rec, dev, hush_filter_set_image(f, p->cls->images[i].name, &buf[i].view));
+        note_status(rec, dev, hush_filter_commit(f));
       }
     }
 
