@@ -88,7 +88,9 @@ static void make_vertex(const plan *p, uint32_t frame, uint32_t i, hush_psf_vert
     case 2: v->position[i % 3] = (i & 1) ? INFINITY : -3e38f; break;
     case 3: v->normal[0] = v->normal[1] = v->normal[2] = 0.0f; break;
     case 4: v->distance = (i & 1) ? -1.0f : NAN; break;
-    case 5: v->radiance[i % 3] = 1e15f; break; /* large, finite: must stay finite */
+    case 5: /* large, finite: accepted (and must stay finite), or beyond 1e15: refused */
+      v->radiance[i % 3] = (i & 2) ? 3e37f : 1e15f;
+      break;
     case 6: v->origin[0] = v->position[0]; /* the vertex seen from itself */
             v->origin[1] = v->position[1];
             v->origin[2] = v->position[2];
