@@ -665,6 +665,93 @@ static void test_train_cli(void) {
   hush_device_release(dev);
 }
 
+/* The "color" layer of an EXR as floats (w x h x 3; the caller frees), or
+ * NULL. */
+static float *read_color(hush_device dev, const char *path, uint32_t *w, uint32_t *h) {
+  hush_frame fr = NULL;
+  if (hush_frame_read_exr(dev, path, &fr) != HUSH_OK) return NULL;
+  hush_image_view v;
+  float *out = NULL;
+  if (hush_frame_get_layer(fr, "color", &v) == HUSH_OK && v.format == HUSH_FORMAT_FLOAT3) {
+    *w = v.width;
+    *h = v.height;
+    out = malloc(sizeof(float) * 3 * v.width * v.height);
+    const size_t row = sizeof(float) * 3 * v.width;
+    const size_t stride = v.row_stride ? v.row_stride : row;
+    if (out && (v.pixel_stride == 0 || v.pixel_stride == 3 * sizeof(float)))
+      for (uint32_t y = 0; y < v.height; y++)
+        memcpy(out + (size_t)y * v.width * 3, (const char *)v.data + v.byte_offset + y * stride,
+               row);
+  }
+  hush_frame_release(fr);
+  return out;
+}
+
+/* --set weights=FILE loads nca weights in denoise, eval and bench: zero
+ * weights with bias b give colour + K (0.5 + b) exactly (emission bypass off:
+ * the synthetic frames are all lit surfaces anyway); a file that cannot be
+ * read is an error naming it; other filters have no such parameter. */
+static void test_weights_cli(void) {
+  REQUIRE(system("mkdir -p '" TWORK "'") == 0);
+  hush_device dev = hush_device_new("threads=1");
+  REQUIRE(dev);
+  char err[8192];
+  int rc = run_cli("synth --out '" TWORK "/seq' --size 40x24 --frames 2 --quiet", err, sizeof err);
+  REQUIRE(rc == 0);
+  hush_nca_weights z;
+  memset(&z, 0, sizeof z);
+  for (int c = 0; c < 9; c++) z.bias[c] = -0.25f;
+  z.iterations = 3;
+  z.color_transform = HUSH_NCA_LINEAR;
+  REQUIRE(hush__nca_weights_save(dev, TWORK "/zero.bin", &z) == HUSH_OK);
+  rc = run_cli("denoise --filter nca --in '" TWORK "/seq' --out '" TWORK "/zout' --set "
+               "emission_bypass=0 --set weights='" TWORK "/zero.bin'",
+               err, sizeof err);
+  CHECK_MSG(rc == 0, "denoise exit %d: %s", rc, err);
+  uint32_t w0 = 0, h0 = 0, w1 = 0, h1 = 0;
+  float *in = read_color(dev, TWORK "/seq/frame_0001.exr", &w0, &h0);
+  float *out = read_color(dev, TWORK "/zout/frame_0001.exr", &w1, &h1);
+  CHECK(in && out && w0 == 40 && h0 == 24 && w1 == w0 && h1 == h0);
+  if (in && out && w1 == w0 && h1 == h0) {
+    int exact = 1;
+    for (uint32_t i = 0; i < 3 * w0 * h0; i++) exact &= out[i] == zero_weights_output(in[i], 3);
+    CHECK_MSG(exact, "denoise --set weights=zero.bin: output != colour + K (0.5 + bias)");
+  }
+  /* and back to the built-in weights, which do not add a constant */
+  rc = run_cli("denoise --filter nca --in '" TWORK "/seq' --out '" TWORK "/bout' --set "
+               "emission_bypass=0 --set weights=builtin",
+               err, sizeof err);
+  CHECK_MSG(rc == 0, "denoise exit %d: %s", rc, err);
+  float *bout = read_color(dev, TWORK "/bout/frame_0001.exr", &w1, &h1);
+  CHECK(bout && out && memcmp(bout, out, sizeof(float) * 3 * w0 * h0) != 0);
+  free(in);
+  free(out);
+  free(bout);
+  REQUIRE(system("head -c 100 '" TWORK "/zero.bin' > '" TWORK "/short.bin'") == 0);
+  rc = run_cli("denoise --filter nca --in '" TWORK "/seq' --out '" TWORK "/sout' --set "
+               "weights='" TWORK "/short.bin'",
+               err, sizeof err);
+  CHECK_MSG(rc == 1 && strstr(err, "short.bin") && strstr(err, "truncated"), "exit %d: %s", rc,
+            err);
+  rc = run_cli("denoise --filter svgf --in '" TWORK "/seq' --out '" TWORK "/sout' --set "
+               "weights='" TWORK "/zero.bin'",
+               err, sizeof err);
+  CHECK_MSG(rc == 1 && strstr(err, "no parameter 'weights'"), "exit %d: %s", rc, err);
+  rc = run_cli("bench --filters nca,accumulate --size 40x24 --frames 2 --warmup 0 --threads 1 "
+               "--set weights='" TWORK "/zero.bin'",
+               err, sizeof err);
+  CHECK_MSG(rc == 0, "bench exit %d: %s", rc, err);
+  rc = run_cli("bench --filters nca --size 40x24 --frames 2 --warmup 0 --threads 1 --set "
+               "weights='" TWORK "/missing.bin'",
+               err, sizeof err);
+  CHECK_MSG(rc == 1 && strstr(err, "missing.bin"), "bench exit %d: %s", rc, err);
+  rc = run_cli("eval --seq '" TWORK "/seq' --out '" TWORK "/rep' --filters nca --threads 1 "
+               "--set nca.weights='" TWORK "/short.bin'",
+               err, sizeof err);
+  CHECK_MSG(rc == 1 && strstr(err, "short.bin"), "eval exit %d: %s", rc, err);
+  hush_device_release(dev);
+}
+
 int main(void) {
   test_sigmoid();
   test_zero_weights_step();
@@ -678,5 +765,6 @@ int main(void) {
   test_default_weights_match_file();
   test_train_cli();
   test_train_emission();
+  test_weights_cli();
   return check_summary();
 }

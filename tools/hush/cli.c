@@ -247,6 +247,24 @@ static int frame_has_layer(hush_frame frame, const char *name) {
   return 0;
 }
 
+static int is_nca_weights(hush_filter filter, const char *key) {
+  return strcmp(key, "weights") == 0 && strcmp(hush_filter_get_class(filter)->name, "nca") == 0;
+}
+
+hush_status cli_filter_set(hush_filter filter, const char *key, const char *value) {
+  if (is_nca_weights(filter, key))
+    return hush_nca_load_weights(filter, strcmp(value, "builtin") == 0 ? NULL : value);
+  return hush_filter_set_string(filter, key, value);
+}
+
+int cli_filter_has_param(hush_filter filter, const char *key) {
+  if (is_nca_weights(filter, key)) return 1;
+  const hush_filter_class_info *cls = hush_filter_get_class(filter);
+  for (uint32_t k = 0; k < cls->param_count; k++)
+    if (strcmp(cls->params[k].name, key) == 0) return 1;
+  return 0;
+}
+
 int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hush_frame frame,
                     const char *file) {
   const hush_filter_class_info *cls = hush_filter_get_class(filter);

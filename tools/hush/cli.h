@@ -115,6 +115,17 @@ void cli_layer_channels(const char *layer, int channels, char *buf, size_t size)
 int cli_bind_inputs(const char *cmd, hush_device device, hush_filter filter, hush_frame frame,
                     const char *file);
 
+/*
+ * A --set KEY=VALUE on a filter: hush_filter_set_string, except the key
+ * "weights" of the nca filter, which loads a weights file written by `hush
+ * train-nca` (hush_nca_load_weights; the value "builtin" restores the
+ * built-in weights). The parameter tables hold numbers only, so the file is
+ * not one of them.
+ */
+hush_status cli_filter_set(hush_filter filter, const char *key, const char *value);
+/* Whether cli_filter_set takes key for this filter. */
+int cli_filter_has_param(hush_filter filter, const char *key);
+
 /* Writes s to f as a JSON string literal (quoted, escaped). */
 void cli_json_string(FILE *f, const char *s);
 

@@ -52,6 +52,7 @@ static const char *const help_text =
     "  --distinct N        distinct frames made and cycled (default 8)\n"
     "  --threads N         worker threads, 0 = one per core (default 0)\n"
     "  --set KEY=VALUE     a parameter for every filter that has it; repeatable\n"
+    "                      (weights=FILE: nca's weights from `hush train-nca`)\n"
     "  --scene SCENE       render the frames: PATH/scene.json or builtin:NAME\n"
     "                      (default: synthetic frames)\n"
     "  --path MOVE         with --scene: the camera move, as `hush render --path`\n"
@@ -198,15 +199,13 @@ static const char *set_key(const bench_options *o, int i, char key[SET_KEY_MAX])
 }
 
 static int apply_sets(const bench_options *o, hush_device device, hush_filter f) {
-  const hush_filter_class_info *cls = hush_filter_get_class(f);
   for (int i = 0; i < o->set_count; i++) {
     char key[SET_KEY_MAX];
     const char *value = set_key(o, i, key);
     if (!value) return CLI_EXIT_RUNTIME;
-    int has = 0;
-    for (uint32_t k = 0; k < cls->param_count; k++) has |= strcmp(cls->params[k].name, key) == 0;
-    if (!has) continue; /* parameters are per filter; skip those this one lacks */
-    const hush_status st = hush_filter_set_string(f, key, value);
+    /* parameters are per filter; skip those this one lacks */
+    if (!cli_filter_has_param(f, key)) continue;
+    const hush_status st = cli_filter_set(f, key, value);
     if (st != HUSH_OK) return cli_device_error("bench", device, st, o->sets[i]);
   }
   return 0;

@@ -39,7 +39,9 @@ static const char *const help_text =
     "  --in SEQ_DIR        the input sequence (required)\n"
     "  --out DIR           the output directory (required)\n"
     "  --set KEY=VALUE     set a filter parameter; repeatable. Values: numbers,\n"
-    "                      true/false, or an enum's value names\n"
+    "                      true/false, or an enum's value names; nca also takes\n"
+    "                      weights=FILE (from `hush train-nca`; builtin: the\n"
+    "                      built-in weights)\n"
     "  --frames A:B        only frames A to B-1 (either side may be empty;\n"
     "                      a single A is frame A only); default all\n"
     "  --png               also write DIR/frame_NNNN.png of the output\n"
@@ -150,7 +152,7 @@ static int make_filter(denoise_run *r) {
     if ((size_t)(eq - kv) >= sizeof key) return cli_error(r->cmd, "--set %s: name too long", kv);
     memcpy(key, kv, (size_t)(eq - kv));
     key[eq - kv] = '\0';
-    const hush_status st = hush_filter_set_string(r->filter, key, eq + 1);
+    const hush_status st = cli_filter_set(r->filter, key, eq + 1);
     if (st != HUSH_OK) {
       char context[256];
       snprintf(context, sizeof context, "--set %s", kv);

@@ -81,7 +81,8 @@ static const char *const help_text =
     "                       bmfr-tg.temporal_gradients=on)\n"
     "  --set F.KEY=VALUE    parameter KEY of filter F; repeatable (default: the\n"
     "                       filter's defaults); psf.KEY=VALUE sets a psf parameter\n"
-    "                       (psf.vertex=2, psf.scale=4 ...) for --scene\n"
+    "                       (psf.vertex=2, psf.scale=4 ...) for --scene;\n"
+    "                       nca.weights=FILE loads weights from `hush train-nca`\n"
     "  --frames A:B         --seq: only frames A to B-1 (default all)\n"
     "                       --scene: the number of frames to render (default:\n"
     "                       the camera path's length, else 16)\n"
@@ -365,7 +366,7 @@ static int apply_sets(eval_run *r, eval_filter *f) {
     if ((size_t)(eq - dot - 1) >= sizeof key) return cli_error(r->cmd, "--set %s: name too long", s);
     memcpy(key, dot + 1, (size_t)(eq - dot - 1));
     key[eq - dot - 1] = '\0';
-    const hush_status st = hush_filter_set_string(f->filter, key, eq + 1);
+    const hush_status st = cli_filter_set(f->filter, key, eq + 1);
     if (st != HUSH_OK) {
       char context[256];
       snprintf(context, sizeof context, "--set %s", s);

@@ -89,6 +89,9 @@ static void print_text(const hush_filter_class_info *c) {
     printf("    %-*s  %-5s  %-*s  %-*s  %s\n", wn, p->name, type_name(p->type), wd, def, wr, range,
            p->doc ? p->doc : "");
   }
+  if (strcmp(c->name, "nca") == 0)
+    printf("  weights: --set weights=FILE loads a weights file from `hush train-nca` (builtin: the\n"
+           "  built-in ones); the API's hush_nca_load_weights (docs/nca.md)\n");
 
   int wi = 4;
   for (uint32_t i = 0; i < c->image_count; i++) {
@@ -139,6 +142,10 @@ static void print_markdown(const hush_filter_class_info *c) {
     md_cell(p->doc);
     printf(" |\n");
   }
+  if (strcmp(c->name, "nca") == 0)
+    printf("\nWeights: `--set weights=FILE` on the command line loads a weights file from `hush "
+           "train-nca` (`builtin`: the built-in ones); the API's `hush_nca_load_weights` "
+           "(docs/nca.md).\n");
   printf("\n| Image | Role | Required | Channels | Description |\n");
   printf("|---|---|---|---|---|\n");
   for (uint32_t i = 0; i < c->image_count; i++) {
