@@ -7,6 +7,9 @@
 #include "core/hmath.h"
 
 #include <omp.h>
+#include <sched.h>
+#include <stdatomic.h>
+#include <stdlib.h>
 #include <string.h>
 
 const svgf_kernel svgf_kernel_5x5 = {2, {1.0f / 16, 1.0f / 4, 3.0f / 8, 1.0f / 4, 1.0f / 16}};
@@ -814,15 +817,49 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
 
 /*
  * The wavefront (atrous.h). Level k runs row y at time y + lag[k]; lag[k]
- * = lag[k-1] + reach + 1 with reach = radius * max(step k, step k-1), so
- * that at that time level k-1 has written every row level k reads (y +-
- * radius * step k, and the variance's y +- 1) and has read for the last
- * time the rows of its input that level k overwrites (level k writes the
- * buffer level k-2 wrote). The rows run at one time are of different
+ * = lag[k-1] + reach + 1 + WAVE_SLACK with reach = radius * max(step k,
+ * step k-1), so that at that time level k-1 has written every row level k
+ * reads (y +- radius * step k, and the variance's y +- 1) and has read for
+ * the last time the rows of its input that level k overwrites (level k
+ * writes the buffer level k-2 wrote), even in the part of a thread up to
+ * WAVE_SLACK times behind. The rows run at one time are of different
  * levels and touch disjoint rows, so they run together; each is split into
  * one column part per thread, thread i always taking part i (it keeps its
- * part's rows in its own L2). One barrier per time.
+ * part's rows in its own L2). Instead of a barrier per time, a thread
+ * starts time t once every other has finished time t - 1 - WAVE_SLACK
+ * (wave_wait): the parts of a row never take exactly the same time (the
+ * sky skips its taps, misses differ), and with a barrier the faster thread
+ * waited at every row, 6-7 % of the a-trous on the bench's frames
+ * (docs/svgf-speed.md, thirteenth round); the slack lets the threads
+ * drift apart by a few rows instead and the differences average out.
  */
+#define WAVE_SLACK 4
+
+/* One thread's progress: the last time it finished, on a cache line of its
+ * own (no false sharing between the spinning readers and the writer). */
+typedef struct wave_progress {
+  _Alignas(64) atomic_int done;
+} wave_progress;
+
+/* Spins until every part but `self` has finished time `t` (a no-op for t <
+ * 0). The acquire pairs with the release in wavefront: the rows a part
+ * wrote up to that time are visible here. */
+static void wave_wait(wave_progress *progress, int parts, int self, int t) {
+  if (t < 0) return;
+  for (int q = 0; q < parts; q++) {
+    if (q == self) continue;
+    for (unsigned spins = 0; atomic_load_explicit(&progress[q].done, memory_order_acquire) < t;
+         spins++) {
+#if defined(__x86_64__) || defined(__i386__)
+      __builtin_ia32_pause();
+#endif
+      /* the other thread may have lost its core (more threads than cores,
+       * or a busy host): do not keep this one from it */
+      if (spins >= 4096) sched_yield();
+    }
+  }
+}
+
 static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
                       const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                       int threads) {
@@ -838,22 +875,29 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
     const int step = lp[k].step > lp[k - 1].step ? lp[k].step : lp[k - 1].step;
     const int radius = lp[k].kernel->radius > lp[k - 1].kernel->radius ? lp[k].kernel->radius
                                                                         : lp[k - 1].kernel->radius;
-    lag[k] = lag[k - 1] + radius * step + 1;
+    lag[k] = lag[k - 1] + radius * step + 1 + WAVE_SLACK;
   }
   const int W = g->width, H = g->height, times = H + lag[n - 1];
+  if (threads < 1) threads = 1;
+  wave_progress *progress =
+      aligned_alloc(_Alignof(wave_progress), (size_t)threads * sizeof(wave_progress));
+  if (!progress) threads = 1; /* nothing to wait for with one part */
+  for (int q = 0; progress && q < threads; q++) atomic_init(&progress[q].done, -1);
 #pragma omp parallel num_threads(threads)
   {
-    const int parts = omp_get_num_threads();
+    const int parts = omp_get_num_threads(), part = omp_get_thread_num();
+    /* parts of whole 32-pixel pairs of vectors */
+    const int xa = part_edge(W, part, parts), xb = part_edge(W, part + 1, parts);
     for (int t = 0; t < times; t++) {
-#pragma omp for schedule(static, 1)
-      for (int u = 0; u < n * parts; u++) {
-        const int k = u / parts, part = u % parts, y = t - lag[k];
-        /* parts of whole 32-pixel pairs of vectors */
-        const int xa = part_edge(W, part, parts), xb = part_edge(W, part + 1, parts);
+      if (parts > 1) wave_wait(progress, parts, part, t - 1 - WAVE_SLACK);
+      for (int k = 0; k < n; k++) {
+        const int y = t - lag[k];
         if (y >= 0 && y < H && xa < xb) row[k](&c[k], y, xa, xb);
       }
+      if (parts > 1) atomic_store_explicit(&progress[part].done, t, memory_order_release);
     }
   }
+  free(progress);
 }
 
 void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,

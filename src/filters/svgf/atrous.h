@@ -78,7 +78,7 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
 /* Levels run together in one wavefront (more are run in groups). */
 #define SVGF_WAVEFRONT_LEVELS 8
 /* Smaller frames run one level at a time: their planes stay in cache
- * anyway, and the wavefront's barrier per row and its interleaving of
+ * anyway, and the wavefront's synchronisation per row and its interleaving of
  * levels cost more than they save (docs/svgf-speed.md, eighth round:
  * slower at 320x180 and 480x270, faster from 640x360 on). */
 #define SVGF_WAVEFRONT_MIN_PIXELS 200000
