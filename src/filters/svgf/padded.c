@@ -37,11 +37,16 @@ hush_status svgf_padded_ensure(hush_device device, svgf_padded *p, int channels,
 }
 
 void svgf_pad_row_sides(float *row, int width, int pad, int left, int right) {
-  const float l = row[0], r = row[width - 1];
-  if (left)
+  /* only the side padded is read: another thread may be writing the other
+   * end of the row (the a-trous wavefront's column parts) */
+  if (left) {
+    const float l = row[0];
     for (int i = 1; i <= pad; i++) row[-i] = l;
-  if (right)
+  }
+  if (right) {
+    const float r = row[width - 1];
     for (int i = 1; i <= pad; i++) row[width - 1 + i] = r;
+  }
 }
 
 void svgf_pad_row(float *row, int width, int pad) { svgf_pad_row_sides(row, width, pad, 1, 1); }
