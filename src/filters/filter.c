@@ -492,7 +492,7 @@ hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar 
 hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const int *images,
                                     hush_planar *const *dst) {
   if (count > HUSH_IMPORT_MANY_MAX) return HUSH_ERROR_UNKNOWN; /* a caller's bug */
-  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const int threads = hush__filter_threads(f);
   const int H = (int)f->height;
   size_t bad[HUSH_IMPORT_MANY_MAX] = {0};
   /* one parallel region for all the images, row by row */
@@ -520,7 +520,7 @@ hush_status hush__filter_import_demodulated(struct hush_filter_t *f, int image,
   const hush_nonfinite_policy policy =
       hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
   size_t replaced = 0;
-  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const int threads = hush__filter_threads(f);
   const hush_status s =
       hush__import_demodulated(f->device, &f->views[image], f->cls->info->images[image].name, dst,
                                albedo, policy, &replaced, threads);

@@ -105,6 +105,10 @@ int hush__filter_image_index(const struct hush_filter_t *f, const char *name);
 static inline const hush_image_view *hush__filter_view(const struct hush_filter_t *f, int i) {
   return f->bound[i] ? &f->views[i] : NULL;
 }
+/* The worker threads of the filter's device (at least 1). */
+static inline int hush__filter_threads(const struct hush_filter_t *f) {
+  return f->device->threads > 0 ? f->device->threads : 1;
+}
 /* Imports bound input image i into dst (already sized), honouring the
  * "nonfinite" parameter; reports errors naming the image. */
 hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar *dst);

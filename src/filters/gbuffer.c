@@ -140,7 +140,7 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, i
   }
   if ((s = hush__filter_import_many(f, count, images, dst))) return s;
   if (has_normal)
-    hush__unit_normals(&g->normal, f->device->threads > 0 ? f->device->threads : 1);
+    hush__unit_normals(&g->normal, hush__filter_threads(f));
   else
     constant_normal(&g->normal);
   g->has_id = with_id;

@@ -172,7 +172,7 @@ static hush_status export_result(hush_filter f, accumulate_state *st, hush_plana
 
 static hush_status accumulate_execute(hush_filter f, void *state, const hush_frame_info *info) {
   accumulate_state *st = state;
-  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const int threads = hush__filter_threads(f);
   hush_status s;
   hush__filter_timing_begin(f);
 

@@ -80,7 +80,7 @@ static hush_status nca_create(hush_filter f, void **state) {
   nca_state *st = calloc(1, sizeof *st);
   if (!st) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "nca: out of memory");
   const size_t n = (size_t)f->width * f->height;
-  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const int threads = hush__filter_threads(f);
   hush_status s = hush__planar_init(f->device, &st->color, 3, f->width, f->height);
   if (!s) s = hush__planar_init(f->device, &st->normal, 3, f->width, f->height);
   if (!s) s = hush__planar_init(f->device, &st->albedo, 3, f->width, f->height);
@@ -136,7 +136,7 @@ static void state_to_color(float *const plane[3], hush_planar *out, uint32_t tra
 static hush_status nca_execute(hush_filter f, void *state, const hush_frame_info *info) {
   (void)info;
   nca_state *st = state;
-  int threads = f->device->threads > 0 ? f->device->threads : 1;
+  int threads = hush__filter_threads(f);
   if (threads > st->scratch_threads) threads = st->scratch_threads;
   const hush_nca_weights *wt = f->class_data ? f->class_data : &hush__nca_default_weights;
   const int k_param = hush__param_i(f, P_ITERATIONS);

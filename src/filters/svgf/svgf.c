@@ -143,7 +143,7 @@ hush_status svgf_create(hush_filter f, void **state) {
   svgf_state *st = calloc(1, sizeof *st);
   if (!st) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "svgf: out of memory");
   const uint32_t W = f->width, H = f->height;
-  st->threads = f->device->threads > 0 ? f->device->threads : 1;
+  st->threads = hush__filter_threads(f);
   hush_status s = hush__reprojector_init(f->device, &st->rp, W, H);
   if (!s) s = component_init(f->device, &st->comp[0], W, H);
   if (!s) s = hush__planar_init(f->device, &st->grad, 2, W, H);

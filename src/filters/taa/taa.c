@@ -106,7 +106,7 @@ static hush_status taa_create(hush_filter f, void **state) {
 
 static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info *info) {
   taa_state *st = state;
-  const int threads = f->device->threads > 0 ? f->device->threads : 1;
+  const int threads = hush__filter_threads(f);
   hush_status s;
   hush__filter_timing_begin(f);
 
