@@ -77,10 +77,8 @@ test-asan:
 # and its Archer tool, which tells TSan about OpenMP's barriers (gcc's
 # libgomp is not instrumented: every parallel loop would be a false report).
 # tests/tsan.supp: the uninstrumented libraries' own threads (Embree, TBB,
-# libomp). test_bmfr is left out: clang's rounding moves its
-# exact-reconstruction check (0.95e-3 with gcc) just past its 1e-3 bound;
-# bmfr runs on two threads in test_api.
-TSAN_TESTS = test_accumulate test_api test_asvgf test_cli test_core test_eval_cli \
+# libomp).
+TSAN_TESTS = test_accumulate test_api test_asvgf test_bmfr test_cli test_core test_eval_cli \
              test_export_bmfr test_gradients test_io test_lag test_metrics test_nca \
              test_progressive test_psf test_render test_render_cli test_report test_scene \
              test_ssim test_svgf test_synthetic test_taa
@@ -94,7 +92,7 @@ test-tsan:
 	cmake --build $(TSAN) -j $(JOBS) --target hush_cli $(TSAN_TESTS)
 	cd $(TSAN) && OMP_TOOL_LIBRARIES=$(ARCHER) \
 	  TSAN_OPTIONS="halt_on_error=1 ignore_noninstrumented_modules=1 suppressions=$(CURDIR)/tests/tsan.supp" \
-	  ctest -j $(JOBS) --output-on-failure -R '^test_' -E '^test_bmfr$$'
+	  ctest -j $(JOBS) --output-on-failure -R '^test_'
 
 test-fuzz:
 	cmake -S . -B $(FUZZ) -DCMAKE_C_COMPILER=clang -DCMAKE_BUILD_TYPE=RelWithDebInfo -DHUSH_FUZZ=ON -DHUSH_BUILD_TESTS=OFF -DHUSH_NATIVE=OFF $(CMAKE_FLAGS)

@@ -71,9 +71,9 @@ static void fit_refined(block *b, const bmfr_feature_set *set, uint64_t frame, f
   hush__bmfr_synthesize(b->T, set->count, BN, BN, (const float(*)[BMFR_MAX_FEATURES])coef, y);
 }
 
-/* With the filter's default refinement. */
+/* With the filter's default refinement (bmfr.c's table: refine 2). */
 static void fit(block *b, const bmfr_feature_set *set, uint64_t frame, float eps) {
-  fit_refined(b, set, frame, eps, 1);
+  fit_refined(b, set, frame, eps, 2);
 }
 
 /* A curved surface in world units far from the origin (positions of about

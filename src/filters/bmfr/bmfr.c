@@ -120,7 +120,7 @@ static const hush_param_info bmfr_params[P_COUNT] = {
      "stochastic regularisation: features get zero-mean uniform noise in [-noise, noise] for "
      "the factorisation",
      NULL},
-    {"refine", HUSH_PARAM_INT, 1, 0, 4,
+    {"refine", HUSH_PARAM_INT, 2, 0, 4,
      "steps of iterative refinement of the block weights towards the noise-free fit, undoing "
      "the noise's errors-in-variables bias (0: the paper's plain solve)",
      NULL},
