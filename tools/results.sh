@@ -7,7 +7,9 @@
 #   tools/results.sh [PART...]     PART: speed synthetic scenes render (default: all);
 #                                  join: only rewrite RESULTS.md from the parts
 #
-# Environment: HUSH (build/hush), BENCH_FRAMES (60); for the scenes part
+# Environment: HUSH (build/hush), BENCH_FRAMES (60), SPEED_ROUNDS (3: each bench of
+# the speed part runs that many times, and each filter's row is its fastest run's,
+# as the shared host's busy phases only add time); for the scenes part
 # SCENE_SIZE (640x360), SCENE_FRAMES (16), SCENE_REF_SPP (64); the scenes and
 # render parts need ../shared/scenes and are skipped without it.
 set -euo pipefail
@@ -31,10 +33,27 @@ summary_table() { # the table of a hush eval summary.md
   sed -n '/^| filter/,/^$/p' "$1"
 }
 
+# bench_best OUT.csv BENCH-ARGS...: hush bench SPEED_ROUNDS times; OUT.csv gets,
+# per filter, the rows of the run with the smallest total (the last run's
+# stdout goes to OUT.txt)
+bench_best() {
+  local out=$1 r
+  shift
+  for ((r = 0; r < ${SPEED_ROUNDS:-3}; r++)); do
+    "$hush" bench "$@" --csv "$out.$r" >"${out%.csv}.txt"
+  done
+  awk -F, 'FNR == 1 { file++; if (file == 1) print; next }
+    { row[file, $1] = row[file, $1] $0 "\n" }
+    $2 == "total" { if (!($1 in best) || $(NF-2) + 0 < total[$1]) { best[$1] = file; total[$1] = $(NF-2) + 0 } }
+    file == 1 && !($1 in seen) { seen[$1] = 1; order[++n] = $1 }
+    END { for (i = 1; i <= n; i++) printf "%s", row[best[order[i]], order[i]] }' "$out".*  >"$out"
+  rm -f "$out".*
+}
+
 part_speed() {
   local frames=${BENCH_FRAMES:-60}
-  "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 1 --csv "$work/t1.csv" >/dev/null
-  "$hush" bench --filters "$filters" --size 1280x720 --frames "$frames" --threads 2 --csv "$work/t2.csv" >/dev/null
+  bench_best "$work/t1.csv" --filters "$filters" --size 1280x720 --frames "$frames" --threads 1
+  bench_best "$work/t2.csv" --filters "$filters" --size 1280x720 --frames "$frames" --threads 2
   # the same filters on rendered frames: a real camera path's motion (windows
   # and gathers instead of contiguous history reads, disocclusions), lights
   # seen directly (the emission's own blend), no sky to skip
@@ -42,19 +61,21 @@ part_speed() {
   [ -f "$scene/scene.json" ] || scene=builtin:cornell-moving
   local scene_filters
   scene_filters=$(tr , '\n' <<<"$filters" | grep -vx -e asvgf -e nca | paste -sd, -)
-  "$hush" bench --scene "$scene" --filters "$scene_filters" --size 1280x720 --frames "$frames" \
-    --distinct 8 --threads 2 --csv "$work/scene2.csv" >/dev/null
+  bench_best "$work/scene2.csv" --scene "$scene" --filters "$scene_filters" --size 1280x720 \
+    --frames "$frames" --distinct 8 --threads 2
   # psf filters the path tracer's vertices: a built-in scene, so no ../shared needed
   local t
   for t in 1 2; do
-    "$hush" bench --scene builtin:courtyard --filters psf --size 1280x720 --frames "$frames" \
-      --distinct 8 --threads $t --csv "$work/psf$t.csv" >"$work/psf$t.txt"
+    bench_best "$work/psf$t.csv" --scene builtin:courtyard --filters psf --size 1280x720 \
+      --frames "$frames" --distinct 8 --threads $t
   done
   {
     echo "## Speed: \`hush bench --size 1280x720 --frames $frames\` ($today)"
     echo
     echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded, on"
     echo "$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -n 1) ($(nproc) cores; the project's VM, whose host CPU changes between sessions)."
+    echo "Each bench ran ${SPEED_ROUNDS:-3} times; each filter's rows are from its run with the smallest"
+    echo "total (the shared host's busy phases only add time)."
     echo
     for t in 1 2; do
       echo "### $t thread(s)"
