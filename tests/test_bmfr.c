@@ -277,14 +277,14 @@ static void spd_solve(const double *G, int m, const double *b, double *x) {
  * alpha += ((T + N)^T (T + N))^-1 T^T (z - T alpha), and y = max(T alpha, 0).
  * Noisy radiance (a real residual), blocks of 32x32 and 17x17 (n not a
  * multiple of the vector width, ld padded), with and without holes,
- * refine 0 and 1.
+ * refine 0, 1 and 2 (the default).
  */
 static void test_fit_reference(void) {
   bmfr_feature_set set;
   default_set(&set);
   const int M = set.count;
-  for (int cfg = 0; cfg < 6; cfg++) {
-    const int B = cfg < 4 ? 32 : 17, n = B * B, holes = cfg % 2, refine = (cfg / 2) % 2;
+  for (int cfg = 0; cfg < 12; cfg++) {
+    const int B = cfg < 6 ? 32 : 17, n = B * B, holes = cfg % 2, refine = (cfg / 2) % 3;
     const size_t ld = ((size_t)n + 15) & ~(size_t)15;
     float *base = calloc(BMFR_BASE_COUNT * ld, sizeof *base), *mask = calloc(ld, sizeof *mask);
     float *T = calloc(BMFR_MAX_FEATURES * ld, sizeof *T), *noise = calloc(BMFR_MAX_FEATURES * ld, 4);
