@@ -60,18 +60,22 @@ sets() { # $1 prefix ("" or "svgf."), $2 settings -> --set arguments
   for kv in $2; do printf -- '--set %s%s ' "$1" "$kv"; done
 }
 
+# the RMSE, relMSE, SSIM and temporal-error cells of filter $1's row in summary $2
+row_of() {
+  awk -F'|' -v f="$1" '$2 ~ "^ *"f" *$" { printf "%s |%s |%s |%s", $3, $4, $5, $7; exit }' "$2"
+}
+
 # quality: one hush eval per configuration, the filter's row of its summary
+# (every summary holds the accumulate baseline too: the first one gives it)
 declare -A quality
 for i in "${!configs[@]}"; do
   IFS='|' read -r f s _ <<<"${configs[$i]}"
   # shellcheck disable=SC2046
   "$hush" eval --seq "$dir/seq" --ref "$dir/ref" --filters "$f" $(sets "$f." "$s") --no-video \
     --quiet --out "$dir/eval$i" >/dev/null
-  quality[$i]=$(awk -F'|' -v f="$f" '$2 ~ "^ *"f" *$" { printf "%s |%s |%s |%s", $3, $4, $5, $7; exit }' \
-    "$dir/eval$i/summary.md")
-  [ "$i" = 0 ] && baseline=$(awk -F'|' '$2 ~ /^ *accumulate *$/ { printf "%s |%s |%s |%s", $3, $4, $5, $7; exit }' \
-    "$dir/eval$i/summary.md")
+  quality[$i]=$(row_of "$f" "$dir/eval$i/summary.md")
 done
+baseline=$(row_of accumulate "$dir/eval0/summary.md")
 
 # speed: the configurations in turn, ROUNDS times; "total:stage" per run
 declare -A runs
