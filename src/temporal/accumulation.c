@@ -6,6 +6,7 @@
 #include "temporal/accumulation.h"
 
 #include "core/device.h"
+#include "core/stream.h"
 
 #include <math.h>
 #include <string.h>
@@ -196,6 +197,7 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   const float *s2 = b->sample[nc > 2 ? 2 : 0] + row, *s3 = b->sample[nc > 3 ? 3 : 0] + row;
   float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
   float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
+  float st[8][CHUNK] __attribute__((aligned(64)));
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
     const int32_t o = contiguous ? base + x
@@ -222,17 +224,24 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
 #undef HUSH_APPLY4
 #undef HUSH_TAP
     blend_compute(&p, &q, mask[x] != 0, nc);
-    o0[x] = q.c0;
-    if (nc > 1) o1[x] = q.c1;
-    if (nc > 2) o2[x] = q.c2;
-    if (nc > 3) o3[x] = q.c3;
+    st[0][k] = q.c0;
+    if (nc > 1) st[1][k] = q.c1;
+    if (nc > 2) st[2][k] = q.c2;
+    if (nc > 3) st[3][k] = q.c3;
     if (mom) {
-      om1[x] = q.m1;
-      om2[x] = q.m2;
-      if (var) var[x] = q.var;
+      st[4][k] = q.m1;
+      st[5][k] = q.m2;
+      if (var) st[6][k] = q.var;
     }
-    oa[x] = q.age;
+    st[7][k] = q.age;
   }
+  /* staged in L1, then streamed out (core/stream.h): the history is read
+   * again only after the whole frame's blend */
+  const size_t bytes = (size_t)len * sizeof(float);
+  float *const outs[8] = {o0, o1, o2, o3, om1, om2, var, oa};
+  const int used[8] = {1, nc > 1, nc > 2, nc > 3, mom, mom, mom && var, 1};
+  for (int t = 0; t < 8; t++)
+    if (used[t]) hush__stream_copy(outs[t] + x_begin, st[t], bytes);
 }
 
 /* Rows per chunk of the parallel blend (see hush__accum_blend). */
@@ -286,6 +295,7 @@ static HUSH_ALWAYS_INLINE void blend_rows(const blend_ctx *b, int y, const int n
   const size_t row = (size_t)y * b->W;
   if (b->plan && b->plan->blocks) {
     blend_row(b, row, nc, mom);
+    hush__stream_fence();
   } else {
     for (size_t i = row; i < row + b->W; i++) blend_pixel(b, i, nc);
   }
@@ -600,6 +610,7 @@ static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *c
   const float *s2 = sample[nc > 2 ? 2 : 0] + row, *s3 = sample[nc > 3 ? 3 : 0] + row;
   float *o0 = out[0] + row, *o1 = out[nc > 1] + row;
   float *o2 = out[nc > 2 ? 2 : 0] + row, *o3 = out[nc > 3 ? 3 : 0] + row;
+  float st[4][CHUNK] __attribute__((aligned(64)));
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
     const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
@@ -621,11 +632,17 @@ static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *c
     const float r3 = nc > 3 ? HUSH_BLEND(p3, s3, 3) : 0.0f;
 #undef HUSH_BLEND
 #undef HUSH_TAP
-    o0[x] = r0;
-    if (nc > 1) o1[x] = r1;
-    if (nc > 2) o2[x] = r2;
-    if (nc > 3) o3[x] = r3;
+    st[0][k] = r0;
+    if (nc > 1) st[1][k] = r1;
+    if (nc > 2) st[2][k] = r2;
+    if (nc > 3) st[3][k] = r3;
   }
+  /* staged, then streamed out (as blend_pixels) */
+  const size_t bytes = (size_t)len * sizeof(float);
+  hush__stream_copy(o0 + x_begin, st[0], bytes);
+  if (nc > 1) hush__stream_copy(o1 + x_begin, st[1], bytes);
+  if (nc > 2) hush__stream_copy(o2 + x_begin, st[2], bytes);
+  if (nc > 3) hush__stream_copy(o3 + x_begin, st[3], bytes);
 }
 
 /* One row of hush__temporal_blend for nc (1..4) channels, chunk by chunk
@@ -724,5 +741,6 @@ void hush__temporal_blend_rows(const hush_reproject_plan *plan, const float *con
       default: tblend_row(&t, p, s, o, row, 4); break;
       }
     }
+    hush__stream_fence();
   }
 }

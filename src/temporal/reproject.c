@@ -21,6 +21,7 @@
 
 #include "core/device.h"
 #include "core/hmath.h"
+#include "core/stream.h"
 
 #include <math.h>
 #include <stdlib.h>
@@ -912,18 +913,31 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
 static void store_span(const span_taps *restrict st, int32_t *restrict origin,
                        uint16_t *restrict mask, uint8_t *restrict kind, float *restrict w0,
                        float *restrict w1, float *restrict w2, float *restrict w3, int n) {
+  /* staged in L1, then streamed to the plan (core/stream.h): the plan is
+   * read only after the whole frame's build */
+  int32_t so[SPAN];
+  uint16_t sm[SPAN];
+  uint8_t sk[SPAN];
+  float sw[4][SPAN] __attribute__((aligned(64)));
   for (int k = 0; k < n; k++) {
-    origin[k] = st->origin[k];
-    mask[k] = (uint16_t)st->mask[k];
-    kind[k] = (uint8_t)st->kind[k];
+    so[k] = st->origin[k];
+    sm[k] = (uint16_t)st->mask[k];
+    sk[k] = (uint8_t)st->kind[k];
     float w[4];
     hush__reproject_renormalised((unsigned)st->mask[k], st->fx[k], st->fy[k], w);
     const int bil = st->kind[k] == HUSH_FOOTPRINT_BILINEAR;
-    w0[k] = bil ? w[0] : 0.0f;
-    w1[k] = bil ? w[1] : 0.0f;
-    w2[k] = bil ? w[2] : 0.0f;
-    w3[k] = bil ? w[3] : 0.0f;
+    sw[0][k] = bil ? w[0] : 0.0f;
+    sw[1][k] = bil ? w[1] : 0.0f;
+    sw[2][k] = bil ? w[2] : 0.0f;
+    sw[3][k] = bil ? w[3] : 0.0f;
   }
+  hush__stream_copy(origin, so, (size_t)n * sizeof *origin);
+  hush__stream_copy(mask, sm, (size_t)n * sizeof *mask);
+  hush__stream_copy(kind, sk, (size_t)n * sizeof *kind);
+  hush__stream_copy(w0, sw[0], (size_t)n * sizeof *w0);
+  hush__stream_copy(w1, sw[1], (size_t)n * sizeof *w1);
+  hush__stream_copy(w2, sw[2], (size_t)n * sizeof *w2);
+  hush__stream_copy(w3, sw[3], (size_t)n * sizeof *w3);
 }
 
 /* Pixel k of a span takes plan_pixel's footprint. */
@@ -1055,7 +1069,10 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
    * handed out in small chunks instead; each row is computed on its own,
    * so the plan does not depend on which thread builds it. */
 #pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
-  for (int y = 0; y < H; y++) build_row(&c, plan, y);
+  for (int y = 0; y < H; y++) {
+    build_row(&c, plan, y);
+    hush__stream_fence();
+  }
   return HUSH_OK;
 }
 
