@@ -448,9 +448,19 @@ static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __mmask16 m,
   _mm512_mask_storeu_ps(out[SVGF_G] + x, m, gg);
   _mm512_mask_storeu_ps(out[SVGF_B] + x, m, bb);
   if (also[0]) {
-    _mm512_mask_storeu_ps(also[0] + x, m, rr);
-    _mm512_mask_storeu_ps(also[1] + x, m, gg);
-    _mm512_mask_storeu_ps(also[2] + x, m, bb);
+    /* the colour history: read again only by the next frame's
+     * accumulation, so whole aligned lines are streamed (no read for
+     * ownership; core/stream.h); avx_level_row fences the row */
+    if (m == (__mmask16)0xffff && (((uintptr_t)(also[0] + x) | (uintptr_t)(also[1] + x) |
+                                    (uintptr_t)(also[2] + x)) % 64) == 0) {
+      _mm512_stream_ps(also[0] + x, rr);
+      _mm512_stream_ps(also[1] + x, gg);
+      _mm512_stream_ps(also[2] + x, bb);
+    } else {
+      _mm512_mask_storeu_ps(also[0] + x, m, rr);
+      _mm512_mask_storeu_ps(also[1] + x, m, gg);
+      _mm512_mask_storeu_ps(also[2] + x, m, bb);
+    }
   }
   if (WITH_VAR)
     _mm512_mask_storeu_ps(out[SVGF_VAR] + x, m, _mm512_mul_ps(_mm512_mul_ps(sv, inv), inv));
@@ -529,6 +539,7 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, 
     avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, xb - x, a.out,
                 a.also, 0, 0, VALIDITY, WITH_VAR);
   pad_written(c->out, a.o, c->g->width, xa, xb);
+  if (a.also[0]) _mm_sfence(); /* the streamed history before the row is done */
 }
 
 /* Whether the AVX-512 loop takes two vectors of pixels at a time (lp's
