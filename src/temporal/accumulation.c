@@ -452,59 +452,72 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
   float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
   float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
   int empty = 0;
+  /* the row in pieces staged in L1, each streamed out after its loop (as
+   * blend_pixels) */
+  enum { PIECE = 256 };
+  float st[8][PIECE] __attribute__((aligned(64)));
+  for (int x0 = 0; x0 < W; x0 += PIECE) {
+    const int x1 = W - x0 < PIECE ? W : x0 + PIECE;
 #pragma omp simd reduction(| : empty)
-  for (int x = 0; x < W; x++) {
-    const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
-    const int32_t o = origin[x] & -(int32_t)bil;
-    const int32_t t1 = o + 1, t2 = o + W, t3 = o + W + 1;
-    /* a tap of an empty pixel (age 0) takes no part */
-    const float a0 = hush__select_bits(pa[o] > 0.0f, w0[x], 0.0f);
-    const float a1 = hush__select_bits(pa[t1] > 0.0f, w1[x], 0.0f);
-    const float a2 = hush__select_bits(pa[t2] > 0.0f, w2[x], 0.0f);
-    const float a3 = hush__select_bits(pa[t3] > 0.0f, w3[x], 0.0f);
-    const float wsum = 0.0f + a0 + a1 + a2 + a3;
-    const int has = wsum > 0.0f;
-    const float inv = has ? 1.0f / (has ? wsum : 1.0f) : 0.0f;
+    for (int x = x0; x < x1; x++) {
+      const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
+      const int32_t o = origin[x] & -(int32_t)bil;
+      const int32_t t1 = o + 1, t2 = o + W, t3 = o + W + 1;
+      const int k = x - x0;
+      /* a tap of an empty pixel (age 0) takes no part */
+      const float a0 = hush__select_bits(pa[o] > 0.0f, w0[x], 0.0f);
+      const float a1 = hush__select_bits(pa[t1] > 0.0f, w1[x], 0.0f);
+      const float a2 = hush__select_bits(pa[t2] > 0.0f, w2[x], 0.0f);
+      const float a3 = hush__select_bits(pa[t3] > 0.0f, w3[x], 0.0f);
+      const float wsum = 0.0f + a0 + a1 + a2 + a3;
+      const int has = wsum > 0.0f;
+      const float inv = has ? 1.0f / (has ? wsum : 1.0f) : 0.0f;
 #define HUSH_APPLY4(t) ((0.0f + a0 * (t)[o] + a1 * (t)[t1] + a2 * (t)[t2] + a3 * (t)[t3]) * inv)
-    blend_px q;
-    q.s0 = s0[x];
-    q.s1 = nc > 1 ? s1[x] : 0.0f;
-    q.s2 = nc > 2 ? s2[x] : 0.0f;
-    q.s3 = nc > 3 ? s3[x] : 0.0f;
-    /* computed for every pixel, then selected: no load under a branch */
-    q.h0 = hush__select_bits(has, HUSH_APPLY4(p0), 0.0f);
-    q.h1 = nc > 1 ? hush__select_bits(has, HUSH_APPLY4(p1), 0.0f) : 0.0f;
-    q.h2 = nc > 2 ? hush__select_bits(has, HUSH_APPLY4(p2), 0.0f) : 0.0f;
-    q.h3 = nc > 3 ? hush__select_bits(has, HUSH_APPLY4(p3), 0.0f) : 0.0f;
-    q.hm1 = mom ? hush__select_bits(has, HUSH_APPLY4(pm1), 0.0f) : 0.0f;
-    q.hm2 = mom ? hush__select_bits(has, HUSH_APPLY4(pm2), 0.0f) : 0.0f;
-    q.ha = hush__select_bits(has, HUSH_APPLY4(pa), 0.0f);
+      blend_px q;
+      q.s0 = s0[x];
+      q.s1 = nc > 1 ? s1[x] : 0.0f;
+      q.s2 = nc > 2 ? s2[x] : 0.0f;
+      q.s3 = nc > 3 ? s3[x] : 0.0f;
+      /* computed for every pixel, then selected: no load under a branch */
+      q.h0 = hush__select_bits(has, HUSH_APPLY4(p0), 0.0f);
+      q.h1 = nc > 1 ? hush__select_bits(has, HUSH_APPLY4(p1), 0.0f) : 0.0f;
+      q.h2 = nc > 2 ? hush__select_bits(has, HUSH_APPLY4(p2), 0.0f) : 0.0f;
+      q.h3 = nc > 3 ? hush__select_bits(has, HUSH_APPLY4(p3), 0.0f) : 0.0f;
+      q.hm1 = mom ? hush__select_bits(has, HUSH_APPLY4(pm1), 0.0f) : 0.0f;
+      q.hm2 = mom ? hush__select_bits(has, HUSH_APPLY4(pm2), 0.0f) : 0.0f;
+      q.ha = hush__select_bits(has, HUSH_APPLY4(pa), 0.0f);
 #undef HUSH_APPLY4
-    const float h0 = q.h0, h1 = q.h1, h2 = q.h2, h3 = q.h3, hm1 = q.hm1, hm2 = q.hm2;
-    /* a hole: no new sample; the history as it was, or nothing */
-    float hage = has ? hush__floorf_vec(q.ha + 0.5f) : 0.0f;
-    hage = hage > p.max_age ? p.max_age : hage;
-    hage = has && hage < 1.0f ? 1.0f : hage;
-    const float hm1sq = hm1 * hm1;
-    const float hv = hm2 - hm1sq;
-    const float hvar = hv > 0.0f ? hv : 0.0f;
-    blend_compute(&p, &q, has, nc); /* traced */
-    const int traced = has_spp ? sp[x] > 0.0f : 1;
-    const float c0 = traced ? q.c0 : h0, c1 = traced ? q.c1 : h1;
-    const float c2 = traced ? q.c2 : h2, c3 = traced ? q.c3 : h3;
-    const float m1 = traced ? q.m1 : hm1, m2 = traced ? q.m2 : hm2;
-    const float age = traced ? q.age : hage, v = traced ? q.var : hvar;
-    o0[x] = c0;
-    if (nc > 1) o1[x] = c1;
-    if (nc > 2) o2[x] = c2;
-    if (nc > 3) o3[x] = c3;
-    if (mom) {
-      om1[x] = m1;
-      om2[x] = m2;
-      if (var) var[x] = v;
+      const float h0 = q.h0, h1 = q.h1, h2 = q.h2, h3 = q.h3, hm1 = q.hm1, hm2 = q.hm2;
+      /* a hole: no new sample; the history as it was, or nothing */
+      float hage = has ? hush__floorf_vec(q.ha + 0.5f) : 0.0f;
+      hage = hage > p.max_age ? p.max_age : hage;
+      hage = has && hage < 1.0f ? 1.0f : hage;
+      const float hm1sq = hm1 * hm1;
+      const float hv = hm2 - hm1sq;
+      const float hvar = hv > 0.0f ? hv : 0.0f;
+      blend_compute(&p, &q, has, nc); /* traced */
+      const int traced = has_spp ? sp[x] > 0.0f : 1;
+      const float c0 = traced ? q.c0 : h0, c1 = traced ? q.c1 : h1;
+      const float c2 = traced ? q.c2 : h2, c3 = traced ? q.c3 : h3;
+      const float m1 = traced ? q.m1 : hm1, m2 = traced ? q.m2 : hm2;
+      const float age = traced ? q.age : hage, v = traced ? q.var : hvar;
+      st[0][k] = c0;
+      if (nc > 1) st[1][k] = c1;
+      if (nc > 2) st[2][k] = c2;
+      if (nc > 3) st[3][k] = c3;
+      if (mom) {
+        st[4][k] = m1;
+        st[5][k] = m2;
+        if (var) st[6][k] = v;
+      }
+      st[7][k] = age;
+      empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
     }
-    oa[x] = age;
-    empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
+    const size_t bytes = (size_t)(x1 - x0) * sizeof(float);
+    float *const outs[8] = {o0, o1, o2, o3, om1, om2, var, oa};
+    const int used[8] = {1, nc > 1, nc > 2, nc > 3, mom, mom, mom && var, 1};
+    for (int t = 0; t < 8; t++)
+      if (used[t]) hush__stream_copy(outs[t] + x0, st[t], bytes);
   }
   return empty;
 }
@@ -517,6 +530,7 @@ static HUSH_ALWAYS_INLINE int blend_rows_holes(const blend_ctx *b, int y, const 
   if (b->plan && b->plan->blocks) {
     empty = spp ? blend_row_holes(b, row, spp, 1, nc, mom)
                 : blend_row_holes(b, row, NULL, 0, nc, mom);
+    hush__stream_fence(); /* the row's streamed stores, before the barrier */
     const size_t end = row + b->W;
     for (size_t i = hush__reproject_next_3x3(b->plan, row, end); i < end;
          i = hush__reproject_next_3x3(b->plan, i + 1, end))
