@@ -162,7 +162,7 @@ static void test_resolve(hush_device dev, hush_taa_box box, int tonemap, int thr
   hush_reproject_plan plan;
   REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
   random_plan(&plan, W, H);
-  hush_taa_params p = {0.2f, box, tonemap};
+  hush_taa_params p = {0.2f, box, tonemap, NULL};
 
   hush_taa taa, taa3;
   REQUIRE(hush__taa_init(dev, &taa, W, H) == HUSH_OK);
@@ -263,7 +263,7 @@ static void test_resolve_smooth(hush_device dev, int H) {
     }
   plan.blocks = 1;
   CHECK(runs > (int)n / 3);
-  hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1};
+  hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1, NULL};
   hush_planar outs[4];
   for (int threads = 1; threads <= 4; threads++) {
     hush_taa taa;
@@ -316,7 +316,7 @@ static void test_resolve_tiny(hush_device dev) {
           plan.mask[i] = 0;
         }
     }
-    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1};
+    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 1, NULL};
     hush_taa taa;
     REQUIRE(hush__taa_init(dev, &taa, W, H) == HUSH_OK);
     hush__taa_resolve(&taa, NULL, (const float *const *)color[0].plane, &p, 4);
@@ -359,7 +359,7 @@ static void test_resolve_holes(hush_device dev, int threads) {
   random_plan(&plan, W, H);
   for (int tonemap = 0; tonemap < 2; tonemap++) {
     /* every pixel traced: the definition */
-    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, tonemap};
+    hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, tonemap, NULL};
     hush_taa a;
     REQUIRE(hush__taa_init(dev, &a, W, H) == HUSH_OK);
     for (size_t i = 0; i < n; i++) spp[i] = 1.0f;
@@ -375,7 +375,7 @@ static void test_resolve_holes(hush_device dev, int threads) {
     hush__taa_free(&a);
   }
   /* one pixel in eight traced, linear values: the hole rules one by one */
-  hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 0};
+  hush_taa_params p = {0.2f, HUSH_TAA_CLAMP, 0, NULL};
   for (size_t i = 0; i < n; i++) spp[i] = frand() < 0.125f ? 1.0f : 0.0f;
   for (int k = 0; k < 3; k++)
     for (size_t i = 0; i < n; i++) garbage.plane[k][i] = spp[i] > 0.0f ? color.plane[k][i] : 1e6f;

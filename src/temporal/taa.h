@@ -27,6 +27,11 @@ typedef struct hush_taa_params {
   float alpha;      /* weight of the current frame, (0, 1] */
   hush_taa_box box;
   int tonemap;      /* resolve on c / (1 + luma(c)) */
+  /* NULL, or the filter's output view (frame-sized, 3 channels or more):
+   * hush__taa_resolve and _modulated also write each resolved row there
+   * while it is in cache (hush__view_export_span), which saves the caller
+   * a pass over the output; hush__taa_resolve_holes ignores it */
+  const hush_image_view *out_view;
 } hush_taa_params;
 
 typedef struct hush_taa {

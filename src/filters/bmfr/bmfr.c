@@ -705,11 +705,16 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   const hush_planar *result = &st->fhist[cur];
   hush_planar rgb = {{result->plane[0], result->plane[1], result->plane[2]}, 3, f->width,
                      f->height};
+  int exported = 0;
   if (with_taa) {
     hush_taa_params tp;
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;
     tp.tonemap = 1;
+    /* without the emission to add, the output is written as TAA resolves
+     * each row */
+    tp.out_view = emis ? NULL : hush__filter_view(f, I_OUTPUT);
+    exported = tp.out_view != NULL;
     hush__taa_resolve_modulated(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
                                 demod ? (const float *const *)st->albedo.plane : NULL, &tp,
                                 threads);
@@ -729,7 +734,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if (albedo || e)
     hush__export_remodulated(&rgb, albedo, e, e ? hush__emission_rows_of(&st->eh) : NULL,
                              hush__filter_view(f, I_OUTPUT), threads);
-  else
+  else if (!exported)
     hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *fit_view = hush__filter_view(f, I_FITTED);
   if (fit_view) hush__view_export(&st->fitted, fit_view, threads);

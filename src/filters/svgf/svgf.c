@@ -598,6 +598,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
     tp.alpha = hush__param_f(f, P_TAA_ALPHA);
     tp.box = HUSH_TAA_CLAMP;
     tp.tonemap = 1;
+    tp.out_view = NULL;
     if (holes && hush__param_i(f, P_PROGRESSIVE_TAA)) /* the filtered frame is whole */
       hush__taa_resolve_holes(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
                               st->spp.plane[0], 1, &tp, st->prog.scratch.plane[0], threads);

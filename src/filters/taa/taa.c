@@ -130,6 +130,7 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
   tp.alpha = hush__param_f(f, P_ALPHA);
   tp.box = (hush_taa_box)hush__param_i(f, P_BOX);
   tp.tonemap = hush__param_i(f, P_TONEMAP);
+  tp.out_view = NULL;
   if (st->gin.has_holes) {
     /* only the traced pixels update; pixels with nothing at all (no
      * history, no traced neighbour) are filled from around */
@@ -139,12 +140,15 @@ static hush_status taa_execute(hush_filter f, void *state, const hush_frame_info
       hush__holes_fill(st->gin.holes.pyramid, f->width, f->height, st->valid.plane[0],
                        t->history[t->latest].plane, 3, threads);
   } else {
+    /* the output written as each row is resolved */
+    tp.out_view = hush__filter_view(f, I_OUTPUT);
     hush__taa_resolve(&st->taa, &st->rp.plan, (const float *const *)st->color.plane, &tp,
                       threads);
   }
   hush__filter_timing_stage(f, "resolve");
 
-  hush__view_export(hush__taa_output(&st->taa), hush__filter_view(f, I_OUTPUT), threads);
+  if (!tp.out_view)
+    hush__view_export(hush__taa_output(&st->taa), hush__filter_view(f, I_OUTPUT), threads);
   hush__filter_timing_stage(f, "export");
   return HUSH_OK;
 }
