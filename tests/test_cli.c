@@ -301,6 +301,13 @@ static void test_bench(void) {
   CHECK(strncmp(csv, "filter,stage,width,height,frames,threads,cpu,median_ms", 54) == 0);
   CHECK(strstr(csv, "accumulate,total,48,32,4,1,") != NULL);
   CHECK(strstr(csv, "accumulate,reproject,") != NULL);
+  /* the optional outputs bound too (fitted, history_length) */
+  hush(&r, "bench --filters bmfr --size 64x48 --frames 2 --warmup 1 --distinct 2 --threads 1 "
+           "--all-outputs");
+  CHECK_MSG(r.status == 0, "bench --all-outputs: %s", r.err);
+  CHECK(strstr(r.out, "bmfr") && strstr(r.out, "total"));
+  hush(&r, "bench --filters bmfr --size 64x48 --frames 2 --all-outputs=1");
+  CHECK_FAILS(&r, 2, "--all-outputs");
   hush(&r, "bench --filters nosuch --size 48x32");
   CHECK_FAILS(&r, 1, "nosuch");
   hush(&r, "bench --size 0x32");

@@ -56,6 +56,10 @@ static const char *const help_text =
     "  --scene SCENE       render the frames: PATH/scene.json or builtin:NAME\n"
     "                      (default: synthetic frames)\n"
     "  --path MOVE         with --scene: the camera move, as `hush render --path`\n"
+    "  --all-outputs       also bind (and so time the export of) each filter's\n"
+    "                      optional outputs (fitted, variance_estimate,\n"
+    "                      history_length, ...); by default only the\n"
+    "                      required output is bound, as a renderer would\n"
     "  --csv FILE          also write the results as CSV\n"
     "  -h, --help          show this help\n"
     "Filters that need the layer 'gradient' (asvgf) get a stand-in: per 3x3\n"
@@ -76,6 +80,7 @@ typedef struct bench_options {
   const char *csv;
   const char *scene, *path; /* --scene: rendered frames */
   int psf;                  /* psf is timed (named, or the default list with --scene) */
+  int all_outputs;          /* --all-outputs: the optional outputs bound too */
 } bench_options;
 
 /* What psf replays: per distinct frame, the vertices it selected. */
@@ -127,6 +132,8 @@ static void parse_options(int argc, char **argv, bench_options *o) {
       if (!strchr(v, '=') || v[0] == '=') cli_usage_error(a.cmd, "--set: expected KEY=VALUE, got '%s'", v);
       if (o->set_count == 64) cli_usage_error(a.cmd, "--set: too many");
       o->sets[o->set_count++] = v;
+    } else if (cli_switch(&a, arg, "--all-outputs")) {
+      o->all_outputs = 1;
     } else if (cli_option(&a, arg, "--csv", &v)) {
       o->csv = v;
     } else if (cli_option(&a, arg, "--scene", &v)) {
@@ -260,6 +267,7 @@ static int bench_filter(const bench_options *o, hush_device device, hush_frame *
   const hush_filter_class_info *cls = hush_filter_get_class(f);
   for (uint32_t i = 0; !rc && out && i < cls->image_count; i++) {
     if (cls->images[i].role != HUSH_IMAGE_OUTPUT) continue;
+    if (!cls->images[i].required && !o->all_outputs) continue;
     hush_image_view view;
     hush_status st = hush_frame_add_layer(out, cls->images[i].name, cls->images[i].channels, &view);
     if (st == HUSH_OK) st = hush_filter_set_image(f, cls->images[i].name, &view);
