@@ -71,6 +71,27 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
  * floats (L1-resident) between the multiply and the interleave. */
 #define EXPORT_SPAN 512
 
+void hush__export_remodulated_span(const float *const filtered[3], const float *const albedo[3],
+                                   const hush_image_view *view, uint32_t y, uint32_t x0,
+                                   uint32_t n) {
+  float buf[3][EXPORT_SPAN];
+  const float *const in[3] = {buf[0], buf[1], buf[2]};
+  for (uint32_t s0 = 0; s0 < n; s0 += EXPORT_SPAN) {
+    const uint32_t m = n - s0 < EXPORT_SPAN ? n - s0 : EXPORT_SPAN;
+    for (int c = 0; c < 3; c++) {
+      const float *restrict flt = filtered[c] + s0;
+      float *restrict o = buf[c];
+      if (albedo) {
+        const float *restrict alb = albedo[c] + s0;
+        for (uint32_t x = 0; x < m; x++) o[x] = flt[x] * albedo_clamped(alb[x]);
+      } else {
+        memcpy(o, flt, m * sizeof(float));
+      }
+    }
+    hush__view_export_span(in, 3, view, y, x0 + s0, m);
+  }
+}
+
 void hush__export_remodulated(const hush_planar *filtered, const hush_planar *albedo,
                               const hush_planar *add, const float *add_rows,
                               const hush_image_view *view, int threads) {

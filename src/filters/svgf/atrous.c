@@ -823,7 +823,10 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
   const row_fn row = level_init(&c, g, lp, in, out);
   const int W = g->width, H = g->height;
 #pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++) row(&c, y, 0, W);
+  for (int y = 0; y < H; y++) {
+    row(&c, y, 0, W);
+    if (out->span_done) out->span_done(out->span_ctx, y, 0, W);
+  }
 }
 
 /*
@@ -903,7 +906,10 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
       if (parts > 1) wave_wait(progress, parts, part, t - 1 - WAVE_SLACK);
       for (int k = 0; k < n; k++) {
         const int y = t - lag[k];
-        if (y >= 0 && y < H && xa < xb) row[k](&c[k], y, xa, xb);
+        if (y >= 0 && y < H && xa < xb) {
+          row[k](&c[k], y, xa, xb);
+          if (out[k]->span_done) out[k]->span_done(out[k]->span_ctx, y, xa, xb);
+        }
       }
       if (parts > 1) atomic_store_explicit(&progress[part].done, t, memory_order_release);
     }
@@ -922,7 +928,7 @@ void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
 void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads) {
-  if ((long long)g->width * g->height >= SVGF_WAVEFRONT_MIN_PIXELS) {
+  if (svgf_atrous_levels_wavefront(g->width, g->height)) {
     svgf_atrous_wavefront(g, lp, in, out, n, threads);
     return;
   }

@@ -48,6 +48,11 @@ typedef struct svgf_level_out {
    * of width floats a row (svgf's feedback of the first level into the
    * colour history, without a copy pass) */
   float *also[3];
+  /* optional (NULL: none): called by the thread that wrote pixels [xa, xb)
+   * of row y, right after (svgf's export of the last level's rows while
+   * they are in cache; with stride 0 the planes are then one row) */
+  void (*span_done)(void *ctx, int y, int xa, int xb);
+  void *span_ctx;
 } svgf_level_out;
 
 static inline svgf_level_out svgf_level_out_padded(svgf_padded *p) {
@@ -56,6 +61,8 @@ static inline svgf_level_out svgf_level_out_padded(svgf_padded *p) {
   o.stride = p->stride;
   o.pad = p->pad;
   o.also[0] = o.also[1] = o.also[2] = NULL;
+  o.span_done = NULL;
+  o.span_ctx = NULL;
   return o;
 }
 
@@ -98,6 +105,14 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
 void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads);
+
+/* Whether svgf_atrous_levels runs a width x height image as a wavefront,
+ * whose threads split every row into column parts: then (only) a level's
+ * output may be a single row (stride 0) that its span_done empties before
+ * the thread writes the next. */
+static inline int svgf_atrous_levels_wavefront(int width, int height) {
+  return (long long)width * height >= SVGF_WAVEFRONT_MIN_PIXELS;
+}
 
 /* The wavefront whatever the frame's size (svgf_atrous_levels keeps one
  * level at a time below SVGF_WAVEFRONT_MIN_PIXELS); for tests. */

@@ -97,6 +97,7 @@ typedef struct svgf_state {
   hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
+  float *line;  /* 3 rows of width floats: the last level's rows on their way out */
 } svgf_state;
 
 static void component_free(svgf_component *c) {
@@ -133,6 +134,7 @@ void svgf_destroy(void *state) {
   hush__planar_free(&st->spp);
   hush__planar_free(&st->sample_var);
   hush__gbuffer_inputs_free(&st->gin);
+  hush__free_floats(st->line);
   hush__taa_free(&st->taa);
   svgf_progressive_free(&st->prog);
   hush__planar_free(&st->eps);
@@ -248,7 +250,30 @@ typedef struct frame_ctx {
   int holes; /* progressive: this frame has untraced pixels */
   const svgf_kernel *kernel;
   svgf_adaptive *ad; /* asvgf: the adaptive temporal stage, else NULL */
+  /* non-NULL: the last level's rows go straight to this view (times the
+   * albedo's planes unless NULL) as they are written, through st->line,
+   * instead of into the component's result */
+  const hush_image_view *out_view;
+  const hush_planar *out_albedo;
 } frame_ctx;
+
+/* Where the last level's finished rows go (svgf_level_out.span_done). */
+typedef struct row_export {
+  const float *line[3]; /* the level's output: one row, stride 0 */
+  const hush_planar *albedo;
+  const hush_image_view *view;
+} row_export;
+
+static void export_span(void *ctx, int y, int xa, int xb) {
+  const row_export *e = ctx;
+  const size_t at = (size_t)y * e->view->width + (size_t)xa;
+  const float *const in[3] = {e->line[0] + xa, e->line[1] + xa, e->line[2] + xa};
+  const float *const alb[3] = {e->albedo ? e->albedo->plane[0] + at : NULL,
+                               e->albedo ? e->albedo->plane[1] + at : NULL,
+                               e->albedo ? e->albedo->plane[2] + at : NULL};
+  hush__export_remodulated_span(in, e->albedo ? alb : NULL, e->view, (uint32_t)y, (uint32_t)xa,
+                                (uint32_t)(xb - xa));
+}
 
 /* Accumulation, variance and a-trous of one component: c->result. */
 static void filter_component(const frame_ctx *fc, svgf_component *c, int export_variance) {
@@ -341,6 +366,20 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   last.stride = (size_t)W;
   last.pad = 0;
   last.also[0] = last.also[1] = last.also[2] = NULL;
+  last.span_done = NULL;
+  last.span_ctx = NULL;
+  row_export rx;
+  if (fc->out_view) {
+    for (int k = 0; k < 3; k++) rx.line[k] = st->line + (size_t)k * W;
+    rx.albedo = fc->out_albedo;
+    rx.view = fc->out_view;
+    last.plane[SVGF_R] = st->line;
+    last.plane[SVGF_G] = st->line + W;
+    last.plane[SVGF_B] = st->line + 2 * (size_t)W;
+    last.stride = 0;
+    last.span_done = export_span;
+    last.span_ctx = &rx;
+  }
   /* the first level's colour written straight into the colour history as
    * well (with holes only where the age allows: copy_color_where) */
   const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
@@ -558,6 +597,21 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   fc.threads = threads;
   fc.holes = holes;
   fc.ad = ad;
+  /* the output written as the last level finishes its rows (one pass over
+   * the frame less), when nothing comes after the a-trous but the
+   * remodulation: no TAA, emission or second component, a last level
+   * whose rows nothing reads again (with holes and the feedback, a single
+   * level is copied into the history afterwards), and the wavefront, whose
+   * threads share the one row buffer column by column */
+  const int feedback_alone =
+      hush__param_i(f, P_FEEDBACK_FIRST_LEVEL) && holes && iterations == 1;
+  fc.out_view = NULL;
+  fc.out_albedo = demod ? &st->albedo : NULL;
+  if (!with_taa && !emis && !split && iterations > 0 && !feedback_alone &&
+      svgf_atrous_levels_wavefront(W, H)) {
+    if (!st->line) st->line = hush__alloc_floats((size_t)3 * W);
+    fc.out_view = st->line ? hush__filter_view(f, I_OUTPUT) : NULL;
+  }
   filter_component(&fc, &st->comp[0], 1);
   if (split) {
     filter_component(&fc, &st->comp[1], 0);
@@ -577,6 +631,11 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
                                         hush__accum_age(&st->comp[0].acc)->plane[0],
                                         fc.ap.alpha_min, &st->emission,
                                         holes ? st->spp.plane[0] : NULL, threads);
+  if (fc.out_view) {
+    if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
+    hush__filter_timing_stage(f, "export");
+    return HUSH_OK;
+  }
   if ((demod || emis) && !with_taa) {
     /* nothing else needs the remodulated planes: one pass */
     hush__export_remodulated(result, demod ? &st->albedo : NULL, e,
