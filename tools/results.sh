@@ -75,7 +75,8 @@ part_speed() {
     echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded, on"
     echo "$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -n 1) ($(nproc) cores; the project's VM, whose host CPU changes between sessions)."
     echo "Each bench ran ${SPEED_ROUNDS:-3} times; each filter's rows are from its run with the smallest"
-    echo "total (the shared host's busy phases only add time)."
+    echo "total (the shared host's busy phases only add time). Each filter's required output only"
+    echo "is bound (as a renderer would; \`--all-outputs\` would add the optional ones' exports)."
     echo
     for t in 1 2; do
       echo "### $t thread(s)"
