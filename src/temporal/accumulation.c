@@ -157,6 +157,18 @@ _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
  * (hush__reproject_window). */
 enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW };
 
+/* A blend's outputs, staged in L1 (plane t at st + t * stride: colour
+ * 0..3, moments 4 and 5, variance 6, age 7), streamed out to pixels
+ * x..x+len-1 of their rows (core/stream.h): a history is read again only
+ * after the whole frame's blend, so reading its lines for ownership first
+ * would only cost bandwidth. out[t] NULL: not written. */
+static HUSH_ALWAYS_INLINE void stream_staged(float *const out[8], const float *st, size_t stride,
+                                             int x, int len) {
+  for (int t = 0; t < 8; t++)
+    if (out[t])
+      hush__stream_copy(out[t] + x, st + (size_t)t * stride, (size_t)len * sizeof(float));
+}
+
 /*
  * Pixels row + x_begin .. row + x_begin + len - 1 of a plan with blocks, each
  * gathered as a block (origin and the plan's four weights; all 0 for a
@@ -235,13 +247,9 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
     }
     st[7][k] = q.age;
   }
-  /* staged in L1, then streamed out (core/stream.h): the history is read
-   * again only after the whole frame's blend */
-  const size_t bytes = (size_t)len * sizeof(float);
-  float *const outs[8] = {o0, o1, o2, o3, om1, om2, var, oa};
-  const int used[8] = {1, nc > 1, nc > 2, nc > 3, mom, mom, mom && var, 1};
-  for (int t = 0; t < 8; t++)
-    if (used[t]) hush__stream_copy(outs[t] + x_begin, st[t], bytes);
+  float *const outs[8] = {o0, nc > 1 ? o1 : NULL, nc > 2 ? o2 : NULL,
+                          nc > 3 ? o3 : NULL, om1, om2, var, oa}; /* NULL: not written */
+  stream_staged(outs, st[0], CHUNK, x_begin, len);
 }
 
 /* Rows per chunk of the parallel blend (see hush__accum_blend). */
@@ -452,10 +460,11 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
   float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
   float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
   int empty = 0;
-  /* the row in pieces staged in L1, each streamed out after its loop (as
-   * blend_pixels) */
+  /* the row in pieces staged in L1, each streamed out after its loop */
   enum { PIECE = 256 };
   float st[8][PIECE] __attribute__((aligned(64)));
+  float *const outs[8] = {o0, nc > 1 ? o1 : NULL, nc > 2 ? o2 : NULL,
+                          nc > 3 ? o3 : NULL, om1, om2, var, oa}; /* NULL: not written */
   for (int x0 = 0; x0 < W; x0 += PIECE) {
     const int x1 = W - x0 < PIECE ? W : x0 + PIECE;
 #pragma omp simd reduction(| : empty)
@@ -513,11 +522,7 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
       st[7][k] = age;
       empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
     }
-    const size_t bytes = (size_t)(x1 - x0) * sizeof(float);
-    float *const outs[8] = {o0, o1, o2, o3, om1, om2, var, oa};
-    const int used[8] = {1, nc > 1, nc > 2, nc > 3, mom, mom, mom && var, 1};
-    for (int t = 0; t < 8; t++)
-      if (used[t]) hush__stream_copy(outs[t] + x0, st[t], bytes);
+    stream_staged(outs, st[0], PIECE, x0, x1 - x0);
   }
   return empty;
 }
@@ -651,12 +656,9 @@ static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *c
     if (nc > 2) st[2][k] = r2;
     if (nc > 3) st[3][k] = r3;
   }
-  /* staged, then streamed out (as blend_pixels) */
-  const size_t bytes = (size_t)len * sizeof(float);
-  hush__stream_copy(o0 + x_begin, st[0], bytes);
-  if (nc > 1) hush__stream_copy(o1 + x_begin, st[1], bytes);
-  if (nc > 2) hush__stream_copy(o2 + x_begin, st[2], bytes);
-  if (nc > 3) hush__stream_copy(o3 + x_begin, st[3], bytes);
+  float *const outs[8] = {o0, nc > 1 ? o1 : NULL, nc > 2 ? o2 : NULL, nc > 3 ? o3 : NULL,
+                          NULL, NULL, NULL, NULL};
+  stream_staged(outs, st[0], CHUNK, x_begin, len);
 }
 
 /* One row of hush__temporal_blend for nc (1..4) channels, chunk by chunk

@@ -349,19 +349,16 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
       t.clip = params->box == HUSH_TAA_CLIP;
       if (!use_history || !plan->blocks) {
         for (int x = 0; x < W; x++) resolve_taps(&t, use_history ? plan : NULL, prev, x, y, W);
-        if (params->out_view)
-          hush__view_export_span((const float *const *)t.out, 3, params->out_view, (uint32_t)y,
-                                 0, (uint32_t)W);
-        continue;
+      } else {
+        interior_row(&t, plan, prev, row, W);
+        /* the border columns and the 3X3 footprints, through the taps */
+        resolve_taps(&t, plan, prev, 0, y, W);
+        if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
+        const size_t last = row + (size_t)W - 1;
+        for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
+             i = hush__reproject_next_3x3(plan, i + 1, last))
+          resolve_taps(&t, plan, prev, (int)(i - row), y, W);
       }
-      interior_row(&t, plan, prev, row, W);
-      /* the border columns and the 3X3 footprints, through the taps */
-      resolve_taps(&t, plan, prev, 0, y, W);
-      if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
-      const size_t last = row + (size_t)W - 1;
-      for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
-           i = hush__reproject_next_3x3(plan, i + 1, last))
-        resolve_taps(&t, plan, prev, (int)(i - row), y, W);
       if (params->out_view)
         hush__view_export_span((const float *const *)t.out, 3, params->out_view, (uint32_t)y, 0,
                                (uint32_t)W);

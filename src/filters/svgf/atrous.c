@@ -5,6 +5,7 @@
 #include "filters/svgf/atrous.h"
 
 #include "core/hmath.h"
+#include "core/stream.h"
 
 #include <omp.h>
 #include <sched.h>
@@ -539,7 +540,7 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, 
     avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, xb - x, a.out,
                 a.also, 0, 0, VALIDITY, WITH_VAR);
   pad_written(c->out, a.o, c->g->width, xa, xb);
-  if (a.also[0]) _mm_sfence(); /* the streamed history before the row is done */
+  if (a.also[0]) hush__stream_fence(); /* the streamed history before the row is done */
 }
 
 /* Whether the AVX-512 loop takes two vectors of pixels at a time (lp's
