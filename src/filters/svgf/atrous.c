@@ -578,11 +578,12 @@ typedef struct avx_px {
   __m256 sw, s0, s1, s2, sv;
 } avx_px;
 
-/* One tap at offset off. FULL: all 8 lanes in the row; else the loads are
- * masked by m (lanes with the sign bit set). */
-static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m256 rdd, avx_px *p,
-                                       __m256 nbias, __m256 nfloor, __m256i m, const int FULL,
-                                       const int VALIDITY, const int WITH_VAR) {
+/* The exponent t (of the weight 2^t) of the tap at offset off. FULL: all 8
+ * lanes in the row; else the loads are masked by m (lanes with the sign bit
+ * set). */
+static HUSH_ALWAYS_INLINE __m256 avx_tap_exponent(const avx_row *r, ptrdiff_t off, __m256 rdd,
+                                                  const avx_px *p, __m256 nbias, __m256i m,
+                                                  const int FULL) {
 #define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
   const __m256 dz = svgf_avx2_abs(_mm256_sub_ps(p->zp, LD(r->z)));
   const __m256 dl = svgf_avx2_abs(_mm256_sub_ps(p->lp, LD(r->l)));
@@ -590,7 +591,16 @@ static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m256 r
   t = _mm256_fnmadd_ps(dz, rdd, t);
   t = _mm256_fmadd_ps(p->n0p, LD(r->n0), t);
   t = _mm256_fmadd_ps(p->n1p, LD(r->n1), t);
-  t = _mm256_fmadd_ps(p->n2p, LD(r->n2), t);
+  return _mm256_fmadd_ps(p->n2p, LD(r->n2), t);
+#undef LD
+}
+
+/* The weight of the tap at offset off from its exponent t, added to the
+ * sums. */
+static HUSH_ALWAYS_INLINE void avx_tap_add(const avx_row *r, ptrdiff_t off, __m256 t,
+                                           __m256 nfloor, avx_px *p, __m256i m, const int FULL,
+                                           const int VALIDITY, const int WITH_VAR) {
+#define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
   __m256 w = svgf_avx2_exp2_floored(t, nfloor);
   if (VALIDITY) w = _mm256_mul_ps(w, LD(r->ok));
   p->sw = _mm256_add_ps(p->sw, w);
@@ -715,14 +725,35 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   avx_px p;
   avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p);
   const avx_row rx = avx_row_at(r, x, VALIDITY);
-  if (p.surface || c->bias < S_FLOOR)
+  if (p.surface || c->bias < S_FLOOR) {
+    /* The pair loop is software-pipelined: pair k + 1's exponents are
+     * computed before pair k's weights and sums. Each tap is a chain of
+     * about 20 dependent operations, and on Zen 3 the loop in plain order
+     * was bound by how many of them the out-of-order window held (20
+     * cycles a tap in L1, against about 8 of operations); in this order
+     * the window holds work of two pairs (15 cycles a tap). The depth
+     * factors go first to free their three per-pixel registers. Same
+     * operations per tap, so the same bits. */
+    __m256 rdd[MAX_PAIRS];
+    for (int k = 0; k < npairs; k++) rdd[k] = avx_rdd(&p, &pairs[k]);
+    __m256 ta = avx_tap_exponent(&rx, pairs[0].a, rdd[0], &p, _mm256_set1_ps(pairs[0].nbias), m, FULL);
+    __m256 tb = avx_tap_exponent(&rx, pairs[0].b, rdd[0], &p, _mm256_set1_ps(pairs[0].nbias), m, FULL);
     for (int k = 0; k < npairs; k++) {
       const avx_pair *t = &pairs[k];
-      const __m256 rdd = avx_rdd(&p, t);
-      const __m256 nb = _mm256_set1_ps(t->nbias), nf = _mm256_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd, &p, nb, nf, m, FULL, VALIDITY, WITH_VAR);
-      avx_tap(&rx, t->b, rdd, &p, nb, nf, m, FULL, VALIDITY, WITH_VAR);
+      __m256 na = ta, nb = tb;
+      if (k + 1 < npairs) {
+        const avx_pair *u = &pairs[k + 1];
+        const __m256 bias = _mm256_set1_ps(u->nbias);
+        na = avx_tap_exponent(&rx, u->a, rdd[k + 1], &p, bias, m, FULL);
+        nb = avx_tap_exponent(&rx, u->b, rdd[k + 1], &p, bias, m, FULL);
+      }
+      const __m256 nf = _mm256_set1_ps(t->nfloor);
+      avx_tap_add(&rx, t->a, ta, nf, &p, m, FULL, VALIDITY, WITH_VAR);
+      avx_tap_add(&rx, t->b, tb, nf, &p, m, FULL, VALIDITY, WITH_VAR);
+      ta = na;
+      tb = nb;
     }
+  }
   avx_finish(&p, x, m, out, also, FULL, VALIDITY, WITH_VAR);
 }
 
