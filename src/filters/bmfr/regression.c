@@ -104,6 +104,10 @@ static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const
  * each column's update and dot product are the same operations in the same
  * order. */
 #define REFLECT_GROUP 2
+/* householder_r dispatches g of 1 or 2 only (a group of four with a correct
+ * dispatch was no faster on Zen 3 either: fit 8.45-9.0 against 8.5-8.9 ms,
+ * 640x360, 1 thread) */
+_Static_assert(REFLECT_GROUP == 1 || REFLECT_GROUP == 2, "householder_r calls g = 1 or 2");
 
 /* d[c] = sum_i t[i] r_c[i] over the ld rows for the three residuals, one
  * pass over t */

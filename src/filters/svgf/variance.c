@@ -323,16 +323,23 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
  * portable loop's bits.
  */
 
-static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const float *n1,
-                                        const float *n2, const float *m1, const float *m2,
-                                        ptrdiff_t go, ptrdiff_t mo, __m256 rdd, __m256 zp,
-                                        __m256 n0p, __m256 n1p, __m256 n2p, __m256 nbias,
-                                        __m256 *sw, __m256 *s1, __m256 *s2) {
+/* The exponent of the tap at guide offset go. */
+static HUSH_ALWAYS_INLINE __m256 avx_vtap_exponent(const float *z, const float *n0,
+                                                   const float *n1, const float *n2,
+                                                   ptrdiff_t go, __m256 rdd, __m256 zp,
+                                                   __m256 n0p, __m256 n1p, __m256 n2p,
+                                                   __m256 nbias) {
   const __m256 dz = svgf_avx2_abs(_mm256_sub_ps(zp, _mm256_loadu_ps(z + go)));
   __m256 t = _mm256_fnmadd_ps(dz, rdd, nbias);
   t = _mm256_fmadd_ps(n0p, _mm256_loadu_ps(n0 + go), t);
   t = _mm256_fmadd_ps(n1p, _mm256_loadu_ps(n1 + go), t);
-  t = _mm256_fmadd_ps(n2p, _mm256_loadu_ps(n2 + go), t);
+  return _mm256_fmadd_ps(n2p, _mm256_loadu_ps(n2 + go), t);
+}
+
+/* Its weight from the exponent t, added to the sums with the moments at
+ * offset mo. */
+static HUSH_ALWAYS_INLINE void avx_vtap_add(const float *m1, const float *m2, ptrdiff_t mo,
+                                            __m256 t, __m256 *sw, __m256 *s1, __m256 *s2) {
   const __m256 w = svgf_avx2_exp2_floored(t, _mm256_set1_ps(-20.0f * SVGF_LOG2E));
   *sw = _mm256_add_ps(*sw, w);
   *s1 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m1 + mo), *s1);
@@ -384,15 +391,32 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
                                                   _mm256_cmp_ps(n1p, zero, _CMP_NEQ_UQ)),
                                      _mm256_cmp_ps(n2p, zero, _CMP_NEQ_UQ));
     const int surface = _mm256_movemask_ps(_mm256_and_ps(surf, young)) != 0;
-    const int npairs = surface || !sky_skip ? NPAIRS : 0;
-    for (int p = 0; p < npairs; p++) {
-      const avx_vpair *t = &pairs[p];
-      const __m256 d = _mm256_fmadd_ps(sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(sgy, _mm256_set1_ps(t->fdy)));
-      const __m256 rdd = _mm256_mul_ps(zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(d), eps_z)));
-      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->ga, t->ma, rdd, zp, n0p, n1p, n2p,
-               nbias, &sw, &s1, &s2);
-      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->gb, t->mb, rdd, zp, n0p, n1p, n2p,
-               nbias, &sw, &s1, &s2);
+    if (surface || !sky_skip) {
+      /* software-pipelined as the a-trous's AVX2 pair loop (atrous.c):
+       * pair p + 1's exponents before pair p's weights; the depth factors
+       * first */
+      __m256 rdd[NPAIRS];
+      for (int p = 0; p < NPAIRS; p++) {
+        const avx_vpair *t = &pairs[p];
+        const __m256 d = _mm256_fmadd_ps(sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(sgy, _mm256_set1_ps(t->fdy)));
+        rdd[p] = _mm256_mul_ps(zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(d), eps_z)));
+      }
+      const float *zx = z + x, *n0x = n0 + x, *n1x = n1 + x, *n2x = n2 + x;
+      __m256 ta = avx_vtap_exponent(zx, n0x, n1x, n2x, pairs[0].ga, rdd[0], zp, n0p, n1p, n2p, nbias);
+      __m256 tb = avx_vtap_exponent(zx, n0x, n1x, n2x, pairs[0].gb, rdd[0], zp, n0p, n1p, n2p, nbias);
+      for (int p = 0; p < NPAIRS; p++) {
+        const avx_vpair *t = &pairs[p];
+        __m256 na = ta, nb = tb;
+        if (p + 1 < NPAIRS) {
+          const avx_vpair *u = &pairs[p + 1];
+          na = avx_vtap_exponent(zx, n0x, n1x, n2x, u->ga, rdd[p + 1], zp, n0p, n1p, n2p, nbias);
+          nb = avx_vtap_exponent(zx, n0x, n1x, n2x, u->gb, rdd[p + 1], zp, n0p, n1p, n2p, nbias);
+        }
+        avx_vtap_add(m1 + x, m2 + x, t->ma, ta, &sw, &s1, &s2);
+        avx_vtap_add(m1 + x, m2 + x, t->mb, tb, &sw, &s1, &s2);
+        ta = na;
+        tb = nb;
+      }
     }
     const __m256 inv = svgf_avx2_rcp(sw);
     const __m256 e1 = _mm256_mul_ps(s1, inv), e2 = _mm256_mul_ps(s2, inv);
