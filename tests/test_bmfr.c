@@ -369,6 +369,58 @@ static void test_fit_reference(void) {
   }
 }
 
+/* The fit of one 32x32 block laid out with column stride ld (rows 1024..ld-1
+ * of the inputs zero, as bmfr.c leaves them): coef and the fitted rows. */
+static void fit_with_ld(size_t ld, int refine, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                        float *y_out) {
+  bmfr_feature_set set;
+  default_set(&set);
+  const int M = set.count, n = 32 * 32;
+  float *base = calloc(BMFR_BASE_COUNT * ld, sizeof *base), *mask = calloc(ld, sizeof *mask);
+  float *T = calloc(BMFR_MAX_FEATURES * ld, sizeof *T), *noise = calloc(BMFR_MAX_FEATURES * ld, 4);
+  float *A = calloc((BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld, sizeof *A);
+  float *z = calloc(BMFR_CHANNELS * ld, sizeof *z), *y = calloc(BMFR_CHANNELS * ld, sizeof *y);
+  float *scratch = calloc(3 * ld, sizeof *scratch);
+  REQUIRE(base && mask && T && noise && A && z && y && scratch);
+  rng_state = 4242u;
+  int nvalid = 0;
+  for (int i = 0; i < n; i++) {
+    const float u = (float)(i % 32) / 32, v = (float)(i / 32) / 32;
+    for (int c = 0; c < 3; c++) {
+      base[(BMFR_BASE_NORMAL + c) * ld + i] = rnd() - 0.5f;
+      base[(BMFR_BASE_POSITION + c) * ld + i] = (float)c + u * (1.0f + (float)c) - v * v;
+    }
+    mask[i] = rnd() < 0.2f ? 0.0f : 1.0f;
+    nvalid += mask[i] > 0.0f;
+    for (int c = 0; c < 3; c++) z[c * ld + i] = (0.5f + u * v + 0.2f * (float)c) * (0.5f + rnd());
+  }
+  const float *zc[3] = {z, z + ld, z + 2 * ld};
+  float *yc[3] = {y, y + ld, y + 2 * ld};
+  hush__bmfr_noise_table(noise, M, n, ld, 5, 0.01f);
+  hush__bmfr_features_block(&set, base, mask, n, ld, T, scratch);
+  hush__bmfr_fit(T, M, zc, noise, mask, n, nvalid, ld, A, refine, scratch, coef);
+  hush__bmfr_synthesize(T, M, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
+  for (int c = 0; c < 3; c++) memcpy(y_out + c * n, yc[c], (size_t)n * sizeof *y_out);
+  free(base), free(mask), free(T), free(noise), free(A), free(z), free(y), free(scratch);
+}
+
+/* bmfr.c pads the block's column stride past a multiple of 1 KiB (4K
+ * aliasing): the zero rows it adds must not change a bit of the fit. */
+static void test_fit_padded_ld(void) {
+  for (int refine = 0; refine <= 2; refine++) {
+    float c0[BMFR_CHANNELS][BMFR_MAX_FEATURES], c1[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+    static float y0[3 * 1024], y1[3 * 1024];
+    memset(c0, 0, sizeof c0);
+    memset(c1, 0, sizeof c1);
+    fit_with_ld(1024, refine, c0, y0);
+    for (size_t ld = 1040; ld <= 1072; ld += 16) {
+      fit_with_ld(ld, refine, c1, y1);
+      CHECK_MSG(memcmp(c0, c1, sizeof c0) == 0, "refine %d: weights differ with ld %zu", refine, ld);
+      CHECK_MSG(memcmp(y0, y1, sizeof y0) == 0, "refine %d: fit differs with ld %zu", refine, ld);
+    }
+  }
+}
+
 /* 16 distinct offsets in [0, B)^2, period 16, for every block size. */
 static void test_offsets(void) {
   for (int B = 16; B <= 64; B += 8) {
@@ -1076,6 +1128,7 @@ int main(void) {
   test_holes_block();
   test_feature_sets();
   test_fit_reference();
+  test_fit_padded_ld();
   test_offsets();
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);

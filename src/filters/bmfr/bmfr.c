@@ -239,7 +239,7 @@ static const hush_filter_class_info bmfr_info = {
 #define SCRATCH_COLUMNS                                                                  \
   (BMFR_BASE_COUNT + BMFR_MAX_FEATURES + (BMFR_MAX_FEATURES + BMFR_CHANNELS) + BMFR_CHANNELS + \
    1 + BMFR_CHANNELS + 3)
-#define MAX_LD (64 * 64)
+#define MAX_LD (64 * 64 + 64) /* four blocks of 32x32 with their ld (1040), one of 64x64 */
 
 typedef struct bmfr_state {
   hush_reprojector rp;
@@ -665,6 +665,11 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   fr.outlier = hush__param_f(f, P_OUTLIER);
   fr.n = B * B;
   fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
+  /* columns a multiple of 1 KiB apart (B = 16, 32, 64) put the same
+   * rows of several columns at the same address bits 0-11, and a load
+   * after a store to another column then waits on a false dependency
+   * (4K aliasing) */
+  if (fr.ld % 256 == 0) fr.ld += 16;
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
   fr.depth = hush__gbuffer_depth_with_data(
       &st->gin, gb->depth.plane[0], st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,

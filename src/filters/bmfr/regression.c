@@ -109,20 +109,27 @@ static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const
  * 640x360, 1 thread) */
 _Static_assert(REFLECT_GROUP == 1 || REFLECT_GROUP == 2, "householder_r calls g = 1 or 2");
 
-/* d[c] = sum_i t[i] r_c[i] over the ld rows for the three residuals, one
- * pass over t */
-static void dot3_all(const float *restrict t, const float *restrict r0, const float *restrict r1,
-                     const float *restrict r2, size_t ld, float d[BMFR_CHANNELS]) {
-  vf s0 = {0}, s1 = {0}, s2 = {0};
+/* d[j][c] = sum_i t_j[i] r_c[i] over the ld rows for the three residuals
+ * and g <= 3 features t_j, one pass. Each of the 3 g sums is a chain of one
+ * FMA per vector, so a pass over one feature (three chains) waits on the
+ * FMA's latency; three features keep the FMA pipes busy. Each sum is the
+ * same operations in the same order whatever g (same bits). */
+static HUSH_INLINE void dot3_group(const float *const t[3], const int g,
+                                   const float *restrict r0, const float *restrict r1,
+                                   const float *restrict r2, size_t ld,
+                                   float d[3][BMFR_CHANNELS]) {
+  vf s[3][BMFR_CHANNELS] = {{{0}}};
   for (size_t i = 0; i < ld; i += VF_LANES) {
-    const vf tv = vf_load(t + i);
-    s0 = vf_fma(tv, vf_load(r0 + i), s0);
-    s1 = vf_fma(tv, vf_load(r1 + i), s1);
-    s2 = vf_fma(tv, vf_load(r2 + i), s2);
+    const vf a = vf_load(r0 + i), b = vf_load(r1 + i), c = vf_load(r2 + i);
+    for (int j = 0; j < g; j++) {
+      const vf tv = vf_load(t[j] + i);
+      s[j][0] = vf_fma(tv, a, s[j][0]);
+      s[j][1] = vf_fma(tv, b, s[j][1]);
+      s[j][2] = vf_fma(tv, c, s[j][2]);
+    }
   }
-  d[0] = vf_sum(s0);
-  d[1] = vf_sum(s1);
-  d[2] = vf_sum(s2);
+  for (int j = 0; j < g; j++)
+    for (int c = 0; c < BMFR_CHANNELS; c++) d[j][c] = vf_sum(s[j][c]);
 }
 
 /* One column of the augmented matrix: a = t + mask (u - mean) (t NULL: 0),
@@ -320,10 +327,18 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
       vf_store(r2 + i, s2);
     }
     double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-    for (int m = 0; m < count; m++) {
-      float d3[BMFR_CHANNELS];
-      dot3_all(T + (size_t)m * ld, r0, r1, r2, ld, d3);
-      for (int c = 0; c < BMFR_CHANNELS; c++) g[c][m] = d3[c];
+    for (int m = 0; m < count; m += 3) {
+      const int k = count - m < 3 ? count - m : 3;
+      const float *t[3] = {T + (size_t)m * ld, T + (size_t)(m + 1) * ld, T + (size_t)(m + 2) * ld};
+      float d3[3][BMFR_CHANNELS];
+      if (k == 3)
+        dot3_group(t, 3, r0, r1, r2, ld, d3);
+      else if (k == 2)
+        dot3_group(t, 2, r0, r1, r2, ld, d3);
+      else
+        dot3_group(t, 1, r0, r1, r2, ld, d3);
+      for (int j = 0; j < k; j++)
+        for (int c = 0; c < BMFR_CHANNELS; c++) g[c][m + j] = d3[j][c];
     }
     double u[BMFR_CHANNELS][BMFR_MAX_FEATURES], d[BMFR_CHANNELS][BMFR_MAX_FEATURES];
     forward_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])g, u);
