@@ -301,6 +301,9 @@ static void test_bench(void) {
   CHECK(strncmp(csv, "filter,stage,width,height,frames,threads,cpu,median_ms", 54) == 0);
   CHECK(strstr(csv, "accumulate,total,48,32,4,1,") != NULL);
   CHECK(strstr(csv, "accumulate,reproject,") != NULL);
+  /* the machine: the CPU's family and model and the build's vectors (the
+   * VMs' model names do not tell their generations apart) */
+  CHECK_MSG(strstr(r.out, " build)") && strstr(csv, " build)"), "bench's CPU: %.200s", r.out);
   /* the optional outputs bound too (fitted, history_length) */
   hush(&r, "bench --filters bmfr --size 64x48 --frames 2 --warmup 1 --distinct 2 --threads 1 "
            "--all-outputs");

@@ -73,7 +73,7 @@ part_speed() {
     echo "## Speed: \`hush bench --size 1280x720 --frames $frames\` ($today)"
     echo
     echo "Milliseconds per frame on synthetic frames in memory (no file I/O), warm-up excluded, on"
-    echo "$(sed -n 's/^model name[[:space:]]*: //p' /proc/cpuinfo | head -n 1) ($(nproc) cores; the project's VM, whose host CPU changes between sessions)."
+    echo "$(sed -n '1s/.*thread(s), //p' "$work/t1.txt") ($(nproc) cores; the project's VM, whose host CPU changes between sessions)."
     echo "Each bench ran ${SPEED_ROUNDS:-3} times; each filter's rows are from its run with the smallest"
     echo "total (the shared host's busy phases only add time). Each filter's required output only"
     echo "is bound (as a renderer would; \`--all-outputs\` would add the optional ones' exports)."
@@ -191,7 +191,8 @@ for p in $parts; do
   esac
 done
 
-cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')
+# the CPU as hush bench names it: model name, family and model, the build's vectors
+cpu=$("$hush" bench --filters taa --size 16x16 --frames 1 --warmup 0 --threads 1 | sed -n '1s/.*thread(s), //p')
 {
   echo "# Measured results"
   echo

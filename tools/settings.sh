@@ -92,7 +92,8 @@ done
 # the run with the smallest total: "total | stage ms"
 fastest() { tr ' ' '\n' | sed '/^$/d' | sort -t: -k1,1g | awk -F: -v s="$1" 'NR == 1 { printf "%.1f | %s %.1f", $1, s, $2 }'; }
 
-cpu=$(grep -m1 "model name" /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')
+# the CPU as hush bench names it: model name, family and model, the build's vectors
+cpu=$("$hush" bench --filters taa --size 16x16 --frames 1 --warmup 0 --threads 1 | sed -n '1s/.*thread(s), //p')
 {
   echo "# Settings: speed against quality for svgf and bmfr ($(date -u +%Y-%m-%d))"
   echo
