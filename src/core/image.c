@@ -358,6 +358,101 @@ static size_t import_spans(const hush_image_view *v, uint32_t y, int nc, float *
   _mm_sfence(); /* streamed stores are weakly ordered: visible before the row is done */
   return bad;
 }
+
+#if defined(__AVX2__)
+/*
+ * AVX2 builds: stream_row's one pass for rows of 1 to 3 packed float
+ * channels (8 pixels a step: the channels picked out by blends and a
+ * permute, NaN/Inf counted from the registers, streamed), optionally each
+ * channel divided by max(divisor, floor) as hush__view_import_row_divided's
+ * AVX-512 loop. import_spans made three passes over an L1 buffer for the
+ * same values. The pixels past the last whole vector go through the
+ * scalar loop.
+ */
+static HUSH_IMAGE_INLINE size_t count_nonfinite8(__m256 v) {
+  /* NaN fails the comparison, so it counts too */
+  const __m256 a = _mm256_and_ps(v, _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff)));
+  const int ok = _mm256_movemask_ps(_mm256_cmp_ps(a, _mm256_set1_ps(HUSH_INPUT_MAX), _CMP_LE_OQ));
+  return (size_t)__builtin_popcount((unsigned)~ok & 0xffu);
+}
+
+/* Channel k of 8 pixels of 3 floats (a|b|c: 24 floats): element 3j + k
+ * sits in lane (3j + k) mod 8, a different lane for each j, so one blend
+ * of a, b and c and one permute gather them. */
+static HUSH_IMAGE_INLINE __m256 rgb8_channel(__m256 a, __m256 b, __m256 c, const int k) {
+  if (k == 0)
+    return _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(a, b, 0x92), c, 0x24),
+                                    _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5));
+  if (k == 1)
+    return _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(a, b, 0x24), c, 0x49),
+                                    _mm256_setr_epi32(1, 4, 7, 2, 5, 0, 3, 6));
+  return _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(a, b, 0x49), c, 0x92),
+                                  _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7));
+}
+
+static size_t stream_row8(const float *restrict rf, int nc, uint32_t w, float *const *out,
+                          const float *const *divisor, float floor) {
+  const uint32_t w8 = w & ~7u;
+  const __m256 fl = _mm256_set1_ps(floor);
+  size_t bad = 0;
+  uint32_t x = 0;
+  if (nc == 1) {
+    for (; x < w8; x += 8) {
+      const __m256 a = _mm256_loadu_ps(rf + x);
+      bad += count_nonfinite8(a);
+      _mm256_stream_ps(out[0] + x, a);
+    }
+  } else if (nc == 2) {
+    for (; x < w8; x += 8) {
+      const float *p = rf + 2 * (size_t)x;
+      const __m256 a = _mm256_loadu_ps(p), b = _mm256_loadu_ps(p + 8);
+      /* per 128-bit lane [x0 x1 x4 x5 | x2 x3 x6 x7], then the pairs in order */
+      const __m256 r0 = _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(_mm256_shuffle_ps(a, b, 0x88)), 0xd8));
+      const __m256 r1 = _mm256_castpd_ps(_mm256_permute4x64_pd(_mm256_castps_pd(_mm256_shuffle_ps(a, b, 0xdd)), 0xd8));
+      bad += count_nonfinite8(r0) + count_nonfinite8(r1);
+      _mm256_stream_ps(out[0] + x, r0);
+      _mm256_stream_ps(out[1] + x, r1);
+    }
+  } else {
+    for (; x < w8; x += 8) {
+      const float *p = rf + 3 * (size_t)x;
+      const __m256 a = _mm256_loadu_ps(p), b = _mm256_loadu_ps(p + 8), c = _mm256_loadu_ps(p + 16);
+      __m256 r0 = rgb8_channel(a, b, c, 0), r1 = rgb8_channel(a, b, c, 1),
+             r2 = rgb8_channel(a, b, c, 2);
+      bad += count_nonfinite8(r0) + count_nonfinite8(r1) + count_nonfinite8(r2);
+      if (divisor) {
+        /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor) */
+        r0 = _mm256_div_ps(r0, _mm256_max_ps(_mm256_loadu_ps(divisor[0] + x), fl));
+        r1 = _mm256_div_ps(r1, _mm256_max_ps(_mm256_loadu_ps(divisor[1] + x), fl));
+        r2 = _mm256_div_ps(r2, _mm256_max_ps(_mm256_loadu_ps(divisor[2] + x), fl));
+      }
+      _mm256_stream_ps(out[0] + x, r0);
+      _mm256_stream_ps(out[1] + x, r1);
+      _mm256_stream_ps(out[2] + x, r2);
+    }
+  }
+  for (; x < w; x++)
+    for (int c = 0; c < nc; c++) {
+      float v = rf[(size_t)x * (size_t)nc + (size_t)c];
+      bad += !(fabsf(v) <= HUSH_INPUT_MAX);
+      if (divisor) v = v / (divisor[c][x] > floor ? divisor[c][x] : floor);
+      out[c][x] = v;
+    }
+  _mm_sfence(); /* streamed stores are weakly ordered: visible before the row is done */
+  return bad;
+}
+
+/* Whether stream_row8 takes row `row` of v: float32, 1 to 3 channels
+ * packed, the row float-aligned, the planes 32-byte aligned. */
+static int streamable8(const hush_image_view *v, int nc, const char *row, float *const *out) {
+  if (hush__format_element_size(v->format) != 4 || nc > 3 || (uintptr_t)row % sizeof(float) != 0 ||
+      hush__view_pixel_stride(v) != (size_t)nc * sizeof(float))
+    return 0;
+  for (int c = 0; c < nc; c++)
+    if ((uintptr_t)out[c] % 32 != 0) return 0;
+  return 1;
+}
+#endif
 #endif
 
 static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst,
@@ -374,6 +469,11 @@ static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar 
     return bad;
   }
 #elif defined(__x86_64__)
+#if defined(__AVX2__)
+  const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
+  if (stream && streamable8(v, nc, row, out))
+    return stream_row8((const float *)(const void *)row, nc, w, out, NULL, 0.0f);
+#endif
   if (stream && spans_streamable(v, nc, out)) return import_spans(v, y, nc, out, NULL, 0.0f);
 #else
   (void)stream;
@@ -431,6 +531,13 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
   *bad = n;
   return 1;
 #elif defined(__x86_64__)
+#if defined(__AVX2__)
+  const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
+  if (streamable8(v, 3, row, out)) {
+    *bad = stream_row8((const float *)(const void *)row, 3, w, out, div, floor);
+    return 1;
+  }
+#endif
   if (!spans_streamable(v, 3, out)) return 0;
   *bad = import_spans(v, y, 3, out, div, floor);
   return 1;
