@@ -269,6 +269,30 @@ static void spd_solve(const double *G, int m, const double *b, double *x) {
   }
 }
 
+/* The zeroed columns (ld floats each) of one block's fit: the base
+ * channels, mask, features, noise, augmented matrix, radiance, fit and
+ * scratch, in one struct so that each test allocates and frees them once. */
+typedef struct fit_bufs {
+  float *base, *mask, *T, *noise, *A, *z, *y, *scratch;
+} fit_bufs;
+
+static void fit_bufs_alloc(fit_bufs *b, size_t ld) {
+  b->base = calloc(BMFR_BASE_COUNT * ld, sizeof(float));
+  b->mask = calloc(ld, sizeof(float));
+  b->T = calloc(BMFR_MAX_FEATURES * ld, sizeof(float));
+  b->noise = calloc(BMFR_MAX_FEATURES * ld, sizeof(float));
+  b->A = calloc((BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld, sizeof(float));
+  b->z = calloc(BMFR_CHANNELS * ld, sizeof(float));
+  b->y = calloc(BMFR_CHANNELS * ld, sizeof(float));
+  b->scratch = calloc(3 * ld, sizeof(float));
+  REQUIRE(b->base && b->mask && b->T && b->noise && b->A && b->z && b->y && b->scratch);
+}
+
+static void fit_bufs_free(fit_bufs *b) {
+  free(b->base), free(b->mask), free(b->T), free(b->noise);
+  free(b->A), free(b->z), free(b->y), free(b->scratch);
+}
+
 /*
  * The block fit (vectorised Householder on R only, FMA, refinement) against
  * its definition solved in double: the least-squares weights of the
@@ -286,12 +310,10 @@ static void test_fit_reference(void) {
   for (int cfg = 0; cfg < 12; cfg++) {
     const int B = cfg < 6 ? 32 : 17, n = B * B, holes = cfg % 2, refine = (cfg / 2) % 3;
     const size_t ld = ((size_t)n + 15) & ~(size_t)15;
-    float *base = calloc(BMFR_BASE_COUNT * ld, sizeof *base), *mask = calloc(ld, sizeof *mask);
-    float *T = calloc(BMFR_MAX_FEATURES * ld, sizeof *T), *noise = calloc(BMFR_MAX_FEATURES * ld, 4);
-    float *A = calloc((BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld, sizeof *A);
-    float *z = calloc(BMFR_CHANNELS * ld, sizeof *z), *y = calloc(BMFR_CHANNELS * ld, sizeof *y);
-    float *scratch = calloc(3 * ld, sizeof *scratch);
-    REQUIRE(base && mask && T && noise && A && z && y && scratch);
+    fit_bufs fb;
+    fit_bufs_alloc(&fb, ld);
+    float *base = fb.base, *mask = fb.mask, *T = fb.T, *noise = fb.noise, *A = fb.A, *z = fb.z,
+          *y = fb.y, *scratch = fb.scratch;
     rng_state = 777u + (uint32_t)cfg;
     int nvalid = 0;
     for (int i = 0; i < n; i++) {
@@ -365,7 +387,7 @@ static void test_fit_reference(void) {
      * vectorised kernels */
     CHECK_MSG(worst <= 4e-6 * zmax, "B %d holes %d refine %d: worst |y - y_ref| %g of max z %g",
               B, holes, refine, worst, zmax);
-    free(base), free(mask), free(T), free(noise), free(A), free(z), free(y), free(scratch);
+    fit_bufs_free(&fb);
   }
 }
 
@@ -376,12 +398,10 @@ static void fit_with_ld(size_t ld, int refine, float coef[BMFR_CHANNELS][BMFR_MA
   bmfr_feature_set set;
   default_set(&set);
   const int M = set.count, n = 32 * 32;
-  float *base = calloc(BMFR_BASE_COUNT * ld, sizeof *base), *mask = calloc(ld, sizeof *mask);
-  float *T = calloc(BMFR_MAX_FEATURES * ld, sizeof *T), *noise = calloc(BMFR_MAX_FEATURES * ld, 4);
-  float *A = calloc((BMFR_MAX_FEATURES + BMFR_CHANNELS) * ld, sizeof *A);
-  float *z = calloc(BMFR_CHANNELS * ld, sizeof *z), *y = calloc(BMFR_CHANNELS * ld, sizeof *y);
-  float *scratch = calloc(3 * ld, sizeof *scratch);
-  REQUIRE(base && mask && T && noise && A && z && y && scratch);
+  fit_bufs fb;
+  fit_bufs_alloc(&fb, ld);
+  float *base = fb.base, *mask = fb.mask, *T = fb.T, *noise = fb.noise, *A = fb.A, *z = fb.z,
+        *y = fb.y, *scratch = fb.scratch;
   rng_state = 4242u;
   int nvalid = 0;
   for (int i = 0; i < n; i++) {
@@ -401,7 +421,7 @@ static void fit_with_ld(size_t ld, int refine, float coef[BMFR_CHANNELS][BMFR_MA
   hush__bmfr_fit(T, M, zc, noise, mask, n, nvalid, ld, A, refine, scratch, coef);
   hush__bmfr_synthesize(T, M, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   for (int c = 0; c < 3; c++) memcpy(y_out + c * n, yc[c], (size_t)n * sizeof *y_out);
-  free(base), free(mask), free(T), free(noise), free(A), free(z), free(y), free(scratch);
+  fit_bufs_free(&fb);
 }
 
 /* bmfr.c pads the block's column stride past a multiple of 1 KiB (4K

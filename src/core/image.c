@@ -601,18 +601,34 @@ static HUSH_IMAGE_INLINE void interleave_f32(const float *const *in, const size_
   }
 }
 
+#if defined(__x86_64__) && (defined(__AVX512F__) || defined(__AVX2__))
+/* Pixels [x0, x1) of three planes into an interleaved float row, plainly:
+ * the streaming interleaves' ends. */
+static void interleave3_plain(const float *const *in, uint32_t x0, uint32_t x1, float *rf) {
+  for (uint32_t x = x0; x < x1; x++) {
+    rf[3 * (size_t)x] = in[0][x];
+    rf[3 * (size_t)x + 1] = in[1][x];
+    rf[3 * (size_t)x + 2] = in[2][x];
+  }
+}
+
+/* The first pixel whose output rf + 3 x lies on an `align`-byte boundary
+ * (w if none), the pixels before it written plainly. */
+static uint32_t interleave3_head(const float *const *in, uint32_t w, float *rf, uintptr_t align) {
+  uint32_t x = 0;
+  while (x < w && ((uintptr_t)(rf + 3 * (size_t)x) & (align - 1u)) != 0) x++;
+  interleave3_plain(in, 0, x, rf);
+  return x;
+}
+#endif
+
 #if defined(__AVX512F__) && defined(__x86_64__)
 /* Pixels x0.. of three planes into an interleaved float row with streaming
  * stores (see stream_row: the caller does not read the output back): the
  * pixels before the first 64-byte boundary of the output and after the
  * last whole group of 16 as plain stores. rf: 4-byte aligned. */
 static void stream_interleave3(const float *const *in, uint32_t w, float *rf) {
-  uint32_t x = 0;
-  for (; x < w && ((uintptr_t)(rf + 3 * (size_t)x) & 63u) != 0; x++) {
-    rf[3 * (size_t)x] = in[0][x];
-    rf[3 * (size_t)x + 1] = in[1][x];
-    rf[3 * (size_t)x + 2] = in[2][x];
-  }
+  uint32_t x = interleave3_head(in, w, rf, 64);
   /* output element e = 3 j + k of a group is lane j of plane k: each output
    * vector takes planes 0 and 1 first, then plane 2 */
   const __m512i it0 = _mm512_setr_epi32(0, 16, 0, 1, 17, 0, 2, 18, 0, 3, 19, 0, 4, 20, 0, 5);
@@ -629,11 +645,7 @@ static void stream_interleave3(const float *const *in, uint32_t w, float *rf) {
     _mm512_stream_ps(p + 16, _mm512_permutex2var_ps(_mm512_permutex2var_ps(r0, it1, r1), iu1, r2));
     _mm512_stream_ps(p + 32, _mm512_permutex2var_ps(_mm512_permutex2var_ps(r0, it2, r1), iu2, r2));
   }
-  for (; x < w; x++) {
-    rf[3 * (size_t)x] = in[0][x];
-    rf[3 * (size_t)x + 1] = in[1][x];
-    rf[3 * (size_t)x + 2] = in[2][x];
-  }
+  interleave3_plain(in, x, w, rf);
   _mm_sfence();
 }
 #endif
@@ -646,12 +658,7 @@ static void stream_interleave3(const float *const *in, uint32_t w, float *rf) {
  * first 32-byte boundary of the output and after the last whole group of
  * 8 as plain stores. */
 static void stream_interleave3_avx2(const float *const *in, uint32_t w, float *rf) {
-  uint32_t x = 0;
-  for (; x < w && ((uintptr_t)(rf + 3 * (size_t)x) & 31u) != 0; x++) {
-    rf[3 * (size_t)x] = in[0][x];
-    rf[3 * (size_t)x + 1] = in[1][x];
-    rf[3 * (size_t)x + 2] = in[2][x];
-  }
+  uint32_t x = interleave3_head(in, w, rf, 32);
   const __m256i p0 = _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5);
   const __m256i p1 = _mm256_setr_epi32(5, 0, 3, 6, 1, 4, 7, 2);
   const __m256i p2 = _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7);
@@ -664,11 +671,7 @@ static void stream_interleave3_avx2(const float *const *in, uint32_t w, float *r
     _mm256_stream_ps(p + 8, _mm256_blend_ps(_mm256_blend_ps(a, b, 0x24), c, 0x49));
     _mm256_stream_ps(p + 16, _mm256_blend_ps(_mm256_blend_ps(a, b, 0x49), c, 0x92));
   }
-  for (; x < w; x++) {
-    rf[3 * (size_t)x] = in[0][x];
-    rf[3 * (size_t)x + 1] = in[1][x];
-    rf[3 * (size_t)x + 2] = in[2][x];
-  }
+  interleave3_plain(in, x, w, rf);
   _mm_sfence();
 }
 #endif

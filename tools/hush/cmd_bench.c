@@ -171,25 +171,24 @@ static double percentile(const double *sorted, uint32_t n, double q) {
   return i + 1 < n ? sorted[i] * (1.0 - f) + sorted[i + 1] * f : sorted[i];
 }
 
-/* The value of the first /proc/cpuinfo line whose key is `key` into buf
- * (empty when absent). */
-static void cpuinfo_value(const char *key, char *buf, size_t size) {
+/* The value of the first line of /proc/cpuinfo's text whose key is `key`
+ * into buf (empty when absent). */
+static void cpuinfo_value(const char *text, const char *key, char *buf, size_t size) {
   buf[0] = '\0';
-  FILE *f = fopen("/proc/cpuinfo", "r");
-  if (!f) return;
   const size_t klen = strlen(key);
-  char line[512];
-  while (fgets(line, sizeof line, f)) {
-    if (strncmp(line, key, klen) != 0 || (line[klen] != ' ' && line[klen] != '\t')) continue;
-    const char *colon = strchr(line, ':');
-    if (!colon) continue;
+  for (const char *line = text; line; line = strchr(line, '\n')) {
+    if (*line == '\n') line++;
+    if (strncmp(line, key, klen) != 0) continue;
+    /* the whole key: only blanks between it and the colon ("model" is not
+     * "model name") */
+    const char *colon = line + klen;
+    while (*colon == ' ' || *colon == '\t') colon++;
+    if (*colon != ':') continue;
     colon++;
     while (*colon == ' ') colon++;
-    snprintf(buf, size, "%s", colon);
-    buf[strcspn(buf, "\n")] = '\0';
-    break;
+    snprintf(buf, size, "%.*s", (int)strcspn(colon, "\n"), colon);
+    return;
   }
-  fclose(f);
 }
 
 /* The CPU as the bench reports it: its name, family and model (the VMs'
@@ -198,10 +197,17 @@ static void cpuinfo_value(const char *key, char *buf, size_t size) {
  * runs, which set most of the filters' speed. No commas: it is a CSV
  * field. */
 static void cpu_model(char *buf, size_t size) {
+  /* the first processor's lines are enough: read its part once */
+  char text[8192] = "";
+  FILE *f = fopen("/proc/cpuinfo", "r");
+  if (f) {
+    text[fread(text, 1, sizeof text - 1, f)] = '\0';
+    fclose(f);
+  }
   char name[128], family[16], model[16];
-  cpuinfo_value("model name", name, sizeof name);
-  cpuinfo_value("cpu family", family, sizeof family);
-  cpuinfo_value("model", model, sizeof model);
+  cpuinfo_value(text, "model name", name, sizeof name);
+  cpuinfo_value(text, "cpu family", family, sizeof family);
+  cpuinfo_value(text, "model", model, sizeof model);
 #if defined(__AVX512F__)
   const char *isa = "AVX-512";
 #elif defined(__AVX2__)
