@@ -1116,6 +1116,22 @@ static hush_filter make_emission(hush_device dev, const char *cls, scene *s, flo
 static svgf_padded wf_zn, wf_init, wf_buf[2];
 static float wf_gx[WFW * WFH], wf_gy[WFW * WFH], wf_zon[WFW * WFH];
 static float wf_last[2][3][WFW * WFH], wf_also[2][3][WFW * WFH];
+static float wf_ring[3][SVGF_WAVEFRONT_RING * WFW];
+
+/* The last level into wf_ring, each part of a row copied out to wf_last
+ * as it is finished (svgf.c's export): a ring too short for the threads'
+ * distance, or a split that moves under a row, shows as wrong bits. */
+typedef struct ring_export {
+  int slot, width;
+} ring_export;
+
+static void ring_span_done(void *ctx, int y, int xa, int xb) {
+  const ring_export *e = ctx;
+  const size_t r = (size_t)(y % SVGF_WAVEFRONT_RING) * e->width + xa;
+  for (int c = 0; c < 3; c++)
+    memcpy(wf_last[e->slot][c] + (size_t)y * e->width + xa, wf_ring[c] + r,
+           (size_t)(xb - xa) * sizeof(float));
+}
 
 /* A w x h frame (guide and first signal): two surfaces meeting at a
  * slanted depth and normal edge, sky in a corner, noisy colour, 30 % of
@@ -1153,11 +1169,11 @@ static svgf_guide wavefront_frame(hush_device dev, int w, int h) {
 }
 
 /* Levels of a tap order on the frame of wavefront_frame, the last one into
- * wf_last[slot] (unpadded, as svgf.c's result) and the first one's colour
- * also into wf_also[slot]. how: 0 one level at a time, 1
- * svgf_atrous_wavefront, 2 svgf_atrous_levels. */
+ * wf_last[slot] (unpadded, as svgf.c's result; ring: through wf_ring) and
+ * the first one's colour also into wf_also[slot]. how: 0 one level at a
+ * time, 1 svgf_atrous_wavefront (with jitter), 2 svgf_atrous_levels. */
 static void wavefront_run(const svgf_guide *g, int order, int valid, int portable, int how,
-                          int threads, int slot) {
+                          int threads, int slot, unsigned jitter, int ring) {
   /* steps per level: increasing, decreasing, 0-then-decreasing (5x5), and
    * the thesis's 6 levels of 3x3 */
   static const int steps[4][6] = {
@@ -1169,6 +1185,7 @@ static void wavefront_run(const svgf_guide *g, int order, int valid, int portabl
   svgf_level_out out[6];
   const svgf_padded *in[6];
   const svgf_level_out *outp[6];
+  ring_export rx = {slot, w};
   for (int k = 0; k < n; k++) {
     lp[k].kernel = order == 3 ? &svgf_kernel_3x3 : &svgf_kernel_5x5;
     lp[k].step = steps[order][k];
@@ -1187,13 +1204,19 @@ static void wavefront_run(const svgf_guide *g, int order, int valid, int portabl
       for (int c = 0; c < 3; c++) out[k].plane[c] = wf_last[slot][c];
       out[k].stride = (size_t)w;
       out[k].pad = 0;
+      if (ring) {
+        for (int c = 0; c < 3; c++) out[k].plane[c] = wf_ring[c];
+        out[k].ring = SVGF_WAVEFRONT_RING;
+        out[k].span_done = ring_span_done;
+        out[k].span_ctx = &rx;
+      }
     }
     outp[k] = &out[k];
   }
   if (how == 0)
     for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], outp[k], threads);
   else if (how == 1)
-    svgf_atrous_wavefront(g, lp, in, outp, n, threads);
+    svgf_atrous_wavefront(g, lp, in, outp, n, threads, jitter);
   else
     svgf_atrous_levels(g, lp, in, outp, n, threads);
 }
@@ -1207,27 +1230,33 @@ static int wavefront_same(int w, int h) {
 }
 
 /* Every tap order, both kernels, with and without validity, both loops, 2
- * and 3 threads (rows split in parts) on a small frame whose width is no
- * multiple of 32 (taps past every border); then svgf_atrous_levels above
- * SVGF_WAVEFRONT_MIN_PIXELS, where it takes the wavefront. */
+ * and 3 threads (rows split in parts: as svgf_atrous_levels splits them,
+ * and split at random, with the last level into wf_ring or not) on a small
+ * frame whose width is no multiple of 32 (taps past every border); then
+ * svgf_atrous_levels above SVGF_WAVEFRONT_MIN_PIXELS, where it takes the
+ * wavefront. */
 static void test_wavefront(hush_device dev) {
   const int w = 150, h = 100;
   svgf_guide g = wavefront_frame(dev, w, h);
   for (int order = 0; order < 4; order++)
     for (int valid = 0; valid <= 1; valid++)
       for (int portable = 0; portable <= 1; portable++) {
-        wavefront_run(&g, order, valid, portable, 0, 2, 0);
-        for (int threads = 2; threads <= 3; threads++) {
-          wavefront_run(&g, order, valid, portable, 1, threads, 1);
-          CHECK_MSG(wavefront_same(w, h),
-                    "wavefront order %d%s%s, %d threads: not the bits of one level at a time",
-                    order, valid ? " validity" : "", portable ? " portable" : "", threads);
-        }
+        wavefront_run(&g, order, valid, portable, 0, 2, 0, 0, 0);
+        for (int threads = 2; threads <= 3; threads++)
+          for (unsigned jitter = 0; jitter <= 2; jitter++) {
+            const int ring = (int)jitter == 1 + (order & 1);
+            wavefront_run(&g, order, valid, portable, 1, threads, 1, jitter, ring);
+            CHECK_MSG(wavefront_same(w, h),
+                      "wavefront order %d%s%s, %d threads, split %s%s: not the bits of one level "
+                      "at a time",
+                      order, valid ? " validity" : "", portable ? " portable" : "", threads,
+                      jitter ? "at random" : "adaptive", ring ? ", ring" : "");
+          }
       }
   REQUIRE((long long)WFW * WFH >= SVGF_WAVEFRONT_MIN_PIXELS);
   g = wavefront_frame(dev, WFW, WFH);
-  wavefront_run(&g, 0, 0, 0, 0, 2, 0);
-  wavefront_run(&g, 0, 0, 0, 2, 2, 1);
+  wavefront_run(&g, 0, 0, 0, 0, 2, 0, 0, 0);
+  wavefront_run(&g, 0, 0, 0, 2, 2, 1, 0, 1);
   CHECK_MSG(wavefront_same(WFW, WFH), "svgf_atrous_levels at %dx%d: not the bits of one level at a time",
             WFW, WFH);
   svgf_padded_free(&wf_zn);

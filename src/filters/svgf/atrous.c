@@ -6,10 +6,12 @@
 
 #include "core/hmath.h"
 #include "core/stream.h"
+#include "core/timer.h"
 
 #include <omp.h>
 #include <sched.h>
 #include <stdatomic.h>
+#include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -150,7 +152,7 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, int xa, int 
   const size_t pi = (size_t)y * W;
   const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
   const float *restrict eps = c->eps_l ? c->eps_l + pi : NULL;
-  const size_t o = (size_t)y * c->out->stride;
+  const size_t o = svgf_level_out_row(c->out, y);
   float *restrict out_r = c->out->plane[SVGF_R] + o, *restrict out_g = c->out->plane[SVGF_G] + o,
                   *restrict out_b = c->out->plane[SVGF_B] + o;
   float *restrict out_v = c->out->plane[SVGF_VAR] ? c->out->plane[SVGF_VAR] + o : NULL;
@@ -307,7 +309,7 @@ static void avx_args_of(const level_ctx *c, int y, int validity, avx_args *a) {
   a->gy = g->gy + pi;
   a->zon = g->zon + pi;
   a->eps = c->eps_l ? c->eps_l + pi : NULL;
-  a->o = (size_t)y * c->out->stride;
+  a->o = svgf_level_out_row(c->out, y);
   for (int ch = 0; ch < SVGF_SIGNAL_CHANNELS; ch++)
     a->out[ch] = c->out->plane[ch] ? c->out->plane[ch] + a->o : NULL;
   for (int ch = 0; ch < 3; ch++) a->also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
@@ -863,29 +865,64 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
 
 /*
  * The wavefront (atrous.h). Level k runs row y at time y + lag[k]; lag[k]
- * = lag[k-1] + reach + 1 + WAVE_SLACK with reach = radius * max(step k,
- * step k-1), so that at that time level k-1 has written every row level k
- * reads (y +- radius * step k, and the variance's y +- 1) and has read for
- * the last time the rows of its input that level k overwrites (level k
- * writes the buffer level k-2 wrote), even in the part of a thread up to
- * WAVE_SLACK times behind. The rows run at one time are of different
- * levels and touch disjoint rows, so they run together; each is split into
- * one column part per thread, thread i always taking part i (it keeps its
- * part's rows in its own L2). Instead of a barrier per time, a thread
- * starts time t once every other has finished time t - 1 - WAVE_SLACK
- * (wave_wait): the parts of a row never take exactly the same time (the
- * sky skips its taps, misses differ), and with a barrier the faster thread
- * waited at every row, 6-7 % of the a-trous on the bench's frames
- * (docs/svgf-speed.md, thirteenth round); the slack lets the threads
- * drift apart by a few rows instead and the differences average out.
+ * = lag[k-1] + reach + 1 + SVGF_WAVEFRONT_SLACK with reach = radius *
+ * max(step k, step k-1), so that at that time level k-1 has written every
+ * row level k reads (y +- radius * step k, and the variance's y +- 1) and
+ * has read for the last time the rows of its input that level k
+ * overwrites (level k writes the buffer level k-2 wrote), even in the part
+ * of a thread up to SVGF_WAVEFRONT_SLACK times behind. The rows run at one
+ * time are of different levels and touch disjoint rows, so they run
+ * together; each is split into one column part per thread, thread i
+ * always taking part i (it keeps its part's rows in its own L2). Instead
+ * of a barrier per time, a thread starts time t once every other has
+ * finished time t - 1 - SVGF_WAVEFRONT_SLACK (wave_wait): the parts of a
+ * row never take exactly the same time (the sky skips its taps, misses
+ * differ), and with a barrier the faster thread waited at every row, 6-7 %
+ * of the a-trous on the bench's frames (docs/svgf-speed.md, thirteenth
+ * round); the slack lets the threads drift apart by a few rows instead
+ * and the differences average out.
+ *
+ * The split moves (wave_edge): on a shared machine one core is often
+ * slower than the other for seconds at a time (2 threads on the Zen 3 VM:
+ * one thread waited 8-22 ms of a 60-75 ms a-trous in some runs, none in
+ * others), and with fixed halves the faster one waits for it at every
+ * row. Each part keeps its time per column (a running mean over the last
+ * ~8 times); every WAVE_PERIOD times the split between two parts moves by
+ * 32 columns towards the point where both would take as long, when that
+ * is over WAVE_DEADBAND columns away (differences between the parts' rows
+ * average out within the slack; following them cost more than it saved).
+ * With one core slowed by 30 % (a spin in the thread, for the test): a-trous
+ * 64.4 -> 59.0 ms; unloaded, the same as fixed halves within the noise
+ * (docs/svgf-speed.md, seventeenth round). The rows of a time are split
+ * alike for every level, and every pixel is computed the same way whatever
+ * its part, so the split changes no bit.
  */
-#define WAVE_SLACK 4
 
-/* One thread's progress: the last time it finished, on a cache line of its
- * own (no false sharing between the spinning readers and the writer). */
+/* Times per decision on the split; how far (columns) the balance point
+ * must be for the split to move. */
+#define WAVE_PERIOD 8
+#define WAVE_DEADBAND 64
+
+/* One thread's progress, on a cache line of its own (no false sharing
+ * between the spinning readers and the other threads' lines): the last
+ * time it finished; its part's width then and its time per column (float
+ * bits; 0 until measured). */
 typedef struct wave_progress {
   _Alignas(64) atomic_int done;
+  atomic_int width;
+  atomic_uint cost;
 } wave_progress;
+
+/* The state the threads share. edge[e * (parts + 1) + i]: column where
+ * part i starts at the times e * period .. (e + 1) * period - 1 (-1 until
+ * decided; part parts starts at W). */
+typedef struct wave_ctx {
+  wave_progress *progress;
+  atomic_int *edge;
+  int parts, W;
+  int period; /* times per decision */
+  unsigned jitter;
+} wave_ctx;
 
 /* Spins until every part but `self` has finished time `t` (a no-op for t <
  * 0). The acquire pairs with the release in wavefront: the rows a part
@@ -906,9 +943,100 @@ static void wave_wait(wave_progress *progress, int parts, int self, int t) {
   }
 }
 
+static float bits_float(unsigned u) {
+  float f;
+  memcpy(&f, &u, sizeof f);
+  return f;
+}
+
+static unsigned float_bits(float f) {
+  unsigned u;
+  memcpy(&u, &f, sizeof u);
+  return u;
+}
+
+/* Where edge i (0 < i < parts) may lie: from the middle of the fixed part
+ * i - 1 to the middle of part i, on 32-column boundaries (so every part
+ * keeps the AVX-512 loop's pairs of vectors); the edges never cross. */
+static int edge_lo(const wave_ctx *w, int i) {
+  return (int)((long long)w->W * (2 * i - 1) / (2 * w->parts) / 32 * 32);
+}
+
+static int edge_hi(const wave_ctx *w, int i) {
+  return (int)((long long)w->W * (2 * i + 1) / (2 * w->parts) / 32 * 32);
+}
+
+static int edge_clamped(const wave_ctx *w, int i, int x) {
+  const int lo = edge_lo(w, i), hi = edge_hi(w, i);
+  return x < lo ? lo : x > hi ? hi : x;
+}
+
+/* A random edge in its range (jitter: tests). */
+static int edge_jittered(const wave_ctx *w, int t, int i) {
+  uint32_t h = w->jitter * 0x9E3779B1u ^ (uint32_t)t * 0x85EBCA77u ^ (uint32_t)i * 0xC2B2AE3Du;
+  h ^= h >> 15;
+  h *= 0x2C1B3C6Du;
+  h ^= h >> 12;
+  const int lo = edge_lo(w, i), hi = edge_hi(w, i);
+  return lo + (int)(h % (uint32_t)((hi - lo) / 32 + 1)) * 32;
+}
+
+/* Edge i of period e > 0 as the first of its two parts to reach it
+ * proposes it: the last period's edge moved by 32 columns towards where
+ * the parts' times per column say both would take as long, when that is
+ * over WAVE_DEADBAND columns away. */
+static int edge_proposed(const wave_ctx *w, int e, int i) {
+  const int last = atomic_load_explicit(&w->edge[(size_t)(e - 1) * (w->parts + 1) + i],
+                                        memory_order_relaxed);
+  const wave_progress *a = &w->progress[i - 1], *b = &w->progress[i];
+  const float ca = bits_float(atomic_load_explicit(&a->cost, memory_order_relaxed));
+  const float cb = bits_float(atomic_load_explicit(&b->cost, memory_order_relaxed));
+  if (!(ca > 0.0f && cb > 0.0f)) return last;
+  /* the two parts' columns, split in inverse proportion to their costs */
+  const int wa = atomic_load_explicit(&a->width, memory_order_relaxed);
+  const int wb = atomic_load_explicit(&b->width, memory_order_relaxed);
+  const float target = (float)(last - wa) + (float)(wa + wb) * (cb / (ca + cb));
+  if (target > (float)(last + WAVE_DEADBAND)) return last + 32;
+  if (target < (float)(last - WAVE_DEADBAND)) return last - 32;
+  return last;
+}
+
+/* Where part i starts at time t (i = parts: the row's end). Decided once
+ * per period and edge, by the first of its two parts to ask (every part
+ * asks at the start of every period). */
+static int wave_edge(const wave_ctx *w, int t, int i) {
+  if (i == 0) return 0;
+  if (i == w->parts) return w->W;
+  const int period = t / w->period;
+  atomic_int *e = &w->edge[(size_t)period * (w->parts + 1) + i];
+  int x = atomic_load_explicit(e, memory_order_relaxed);
+  if (x >= 0) return x;
+  int proposal;
+  if (w->jitter)
+    proposal = edge_jittered(w, period, i);
+  else if (period == 0)
+    proposal = edge_clamped(w, i, part_edge(w->W, i, w->parts));
+  else
+    proposal = edge_clamped(w, i, edge_proposed(w, period, i));
+  if (atomic_compare_exchange_strong_explicit(e, &x, proposal, memory_order_relaxed,
+                                              memory_order_relaxed))
+    return proposal;
+  return x;
+}
+
+/* A part's time per column: the running mean over about 8 times. */
+static void wave_measured(wave_progress *p, int width, double ms) {
+  if (width <= 0) return;
+  const float now = (float)(ms / width);
+  const float was = bits_float(atomic_load_explicit(&p->cost, memory_order_relaxed));
+  const float mean = was > 0.0f ? was + 0.125f * (now - was) : now;
+  atomic_store_explicit(&p->cost, float_bits(mean), memory_order_relaxed);
+  atomic_store_explicit(&p->width, width, memory_order_relaxed);
+}
+
 static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
                       const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                      int threads) {
+                      int threads, unsigned jitter) {
   level_ctx c[SVGF_WAVEFRONT_LEVELS];
   row_fn row[SVGF_WAVEFRONT_LEVELS];
   int lag[SVGF_WAVEFRONT_LEVELS];
@@ -921,21 +1049,39 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
     const int step = lp[k].step > lp[k - 1].step ? lp[k].step : lp[k - 1].step;
     const int radius = lp[k].kernel->radius > lp[k - 1].kernel->radius ? lp[k].kernel->radius
                                                                         : lp[k - 1].kernel->radius;
-    lag[k] = lag[k - 1] + radius * step + 1 + WAVE_SLACK;
+    lag[k] = lag[k - 1] + radius * step + 1 + SVGF_WAVEFRONT_SLACK;
   }
   const int W = g->width, H = g->height, times = H + lag[n - 1];
   if (threads < 1) threads = 1;
-  wave_progress *progress =
-      aligned_alloc(_Alignof(wave_progress), (size_t)threads * sizeof(wave_progress));
-  if (!progress) threads = 1; /* nothing to wait for with one part */
-  for (int q = 0; progress && q < threads; q++) atomic_init(&progress[q].done, -1);
+  wave_ctx w;
+  w.W = W;
+  w.jitter = jitter;
+  w.period = jitter ? 1 : WAVE_PERIOD;
+  w.progress = aligned_alloc(_Alignof(wave_progress), (size_t)threads * sizeof(wave_progress));
+  w.edge = malloc((size_t)times * (size_t)(threads + 1) * sizeof *w.edge);
+  if (!w.progress || !w.edge) threads = 1; /* nothing to wait for with one part */
+  for (int q = 0; w.progress && q < threads; q++) {
+    atomic_init(&w.progress[q].done, -1);
+    atomic_init(&w.progress[q].width, 0);
+    atomic_init(&w.progress[q].cost, 0u);
+  }
+  for (size_t i = 0; w.edge && i < (size_t)times * (size_t)(threads + 1); i++)
+    atomic_init(&w.edge[i], -1);
 #pragma omp parallel num_threads(threads)
   {
     const int parts = omp_get_num_threads(), part = omp_get_thread_num();
-    /* parts of whole 32-pixel pairs of vectors */
-    const int xa = part_edge(W, part, parts), xb = part_edge(W, part + 1, parts);
+#pragma omp single
+    w.parts = parts;
+    int xa = 0, xb = W;
     for (int t = 0; t < times; t++) {
-      if (parts > 1) wave_wait(progress, parts, part, t - 1 - WAVE_SLACK);
+      if (parts > 1) {
+        wave_wait(w.progress, parts, part, t - 1 - SVGF_WAVEFRONT_SLACK);
+        if (t % w.period == 0) {
+          xa = wave_edge(&w, t, part);
+          xb = wave_edge(&w, t, part + 1);
+        }
+      }
+      const double start = parts > 1 ? hush__now_ms() : 0.0;
       for (int k = 0; k < n; k++) {
         const int y = t - lag[k];
         if (y >= 0 && y < H && xa < xb) {
@@ -943,25 +1089,29 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
           if (out[k]->span_done) out[k]->span_done(out[k]->span_ctx, y, xa, xb);
         }
       }
-      if (parts > 1) atomic_store_explicit(&progress[part].done, t, memory_order_release);
+      if (parts > 1) {
+        wave_measured(&w.progress[part], xb - xa, hush__now_ms() - start);
+        atomic_store_explicit(&w.progress[part].done, t, memory_order_release);
+      }
     }
   }
-  free(progress);
+  free(w.progress);
+  free(w.edge);
 }
 
 void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
                            const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                           int threads) {
+                           int threads, unsigned jitter) {
   for (int k = 0; k < n; k += SVGF_WAVEFRONT_LEVELS)
     wavefront(g, lp + k, in + k, out + k,
-              n - k < SVGF_WAVEFRONT_LEVELS ? n - k : SVGF_WAVEFRONT_LEVELS, threads);
+              n - k < SVGF_WAVEFRONT_LEVELS ? n - k : SVGF_WAVEFRONT_LEVELS, threads, jitter);
 }
 
 void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads) {
   if (svgf_atrous_levels_wavefront(g->width, g->height)) {
-    svgf_atrous_wavefront(g, lp, in, out, n, threads);
+    svgf_atrous_wavefront(g, lp, in, out, n, threads, 0);
     return;
   }
   for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], out[k], threads);

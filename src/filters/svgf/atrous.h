@@ -39,18 +39,21 @@ enum { SVGF_R = 0, SVGF_G, SVGF_B, SVGF_VAR, SVGF_LUM, SVGF_VALID, SVGF_SIGNAL_C
 
 /* Where a level writes: SVGF_SIGNAL_CHANNELS planes at pixel (0, 0) with a
  * row stride; var and lum may be NULL (the last level needs neither); with
- * pad > 0 every written row's pad of that many pixels is filled too. */
+ * pad > 0 every written row's pad of that many pixels is filled too. ring
+ * 0: the planes hold the frame; ring > 0: they hold that many rows, row y
+ * at y % ring (see svgf_atrous_levels_wavefront). */
 typedef struct svgf_level_out {
   float *plane[SVGF_SIGNAL_CHANNELS];
   size_t stride;
   int pad;
+  int ring;
   /* optional (NULL: none): the colour also into these 3 unpadded planes
    * of width floats a row (svgf's feedback of the first level into the
    * colour history, without a copy pass) */
   float *also[3];
   /* optional (NULL: none): called by the thread that wrote pixels [xa, xb)
    * of row y, right after (svgf's export of the last level's rows while
-   * they are in cache; with stride 0 the planes are then one row) */
+   * they are in cache, from a ring of rows) */
   void (*span_done)(void *ctx, int y, int xa, int xb);
   void *span_ctx;
 } svgf_level_out;
@@ -60,6 +63,7 @@ static inline svgf_level_out svgf_level_out_padded(svgf_padded *p) {
   for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) o.plane[c] = p->plane[c];
   o.stride = p->stride;
   o.pad = p->pad;
+  o.ring = 0;
   o.also[0] = o.also[1] = o.also[2] = NULL;
   o.span_done = NULL;
   o.span_ctx = NULL;
@@ -106,18 +110,33 @@ void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads);
 
+/* The offset of row y in a level's output planes. */
+static inline size_t svgf_level_out_row(const svgf_level_out *o, int y) {
+  return (size_t)(o->ring > 0 ? y % o->ring : y) * o->stride;
+}
+
+/* How many rows apart the wavefront's threads can be: a thread starts a
+ * row once every other has finished the rows this many before it. */
+#define SVGF_WAVEFRONT_SLACK 4
+/* The rows of an output ring that the wavefront's threads never write at
+ * once (rows less than SVGF_WAVEFRONT_SLACK + 1 apart). */
+#define SVGF_WAVEFRONT_RING (SVGF_WAVEFRONT_SLACK + 1)
+
 /* Whether svgf_atrous_levels runs a width x height image as a wavefront,
- * whose threads split every row into column parts: then (only) a level's
- * output may be a single row (stride 0) that its span_done empties before
- * the thread writes the next. */
+ * whose threads split every row into column parts (the split moves from
+ * row to row): then (only) a level's output may be a ring of at least
+ * SVGF_WAVEFRONT_RING rows that its span_done empties. */
 static inline int svgf_atrous_levels_wavefront(int width, int height) {
   return (long long)width * height >= SVGF_WAVEFRONT_MIN_PIXELS;
 }
 
 /* The wavefront whatever the frame's size (svgf_atrous_levels keeps one
- * level at a time below SVGF_WAVEFRONT_MIN_PIXELS); for tests. */
+ * level at a time below SVGF_WAVEFRONT_MIN_PIXELS); for tests. jitter 0:
+ * the split between threads as in svgf_atrous_levels; else every row's
+ * split drawn at random (from the seed jitter), to test that any split
+ * gives the same bits. */
 void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
                            const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                           int threads);
+                           int threads, unsigned jitter);
 
 #endif

@@ -97,7 +97,7 @@ typedef struct svgf_state {
   hush_planar spp, sample_var; /* 1 each: the 'spp' and 'variance' inputs */
   hush_gbuffer_inputs gin; /* position and motion between import and build */
   hush_taa taa; /* its planes allocated when "taa" is first on */
-  float *line;  /* 3 rows of width floats: the last level's rows on their way out */
+  float *line;  /* 3 planes of SVGF_WAVEFRONT_RING rows: the last level's rows on their way out */
 } svgf_state;
 
 static void component_free(svgf_component *c) {
@@ -259,7 +259,7 @@ typedef struct frame_ctx {
 
 /* Where the last level's finished rows go (svgf_level_out.span_done). */
 typedef struct row_export {
-  const float *line[3]; /* the level's output: one row, stride 0 */
+  const float *line[3]; /* the level's output: a ring of SVGF_WAVEFRONT_RING rows */
   const hush_planar *albedo;
   const hush_image_view *view;
 } row_export;
@@ -267,7 +267,8 @@ typedef struct row_export {
 static void export_span(void *ctx, int y, int xa, int xb) {
   const row_export *e = ctx;
   const size_t at = (size_t)y * e->view->width + (size_t)xa;
-  const float *const in[3] = {e->line[0] + xa, e->line[1] + xa, e->line[2] + xa};
+  const size_t r = (size_t)(y % SVGF_WAVEFRONT_RING) * e->view->width + (size_t)xa;
+  const float *const in[3] = {e->line[0] + r, e->line[1] + r, e->line[2] + r};
   const float *const alb[3] = {e->albedo ? e->albedo->plane[0] + at : NULL,
                                e->albedo ? e->albedo->plane[1] + at : NULL,
                                e->albedo ? e->albedo->plane[2] + at : NULL};
@@ -365,18 +366,20 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   last.plane[SVGF_VAR] = last.plane[SVGF_LUM] = last.plane[SVGF_VALID] = NULL;
   last.stride = (size_t)W;
   last.pad = 0;
+  last.ring = 0;
   last.also[0] = last.also[1] = last.also[2] = NULL;
   last.span_done = NULL;
   last.span_ctx = NULL;
   row_export rx;
   if (fc->out_view) {
-    for (int k = 0; k < 3; k++) rx.line[k] = st->line + (size_t)k * W;
+    const size_t ring = (size_t)SVGF_WAVEFRONT_RING * (size_t)W;
+    for (int k = 0; k < 3; k++) rx.line[k] = st->line + (size_t)k * ring;
     rx.albedo = fc->out_albedo;
     rx.view = fc->out_view;
     last.plane[SVGF_R] = st->line;
-    last.plane[SVGF_G] = st->line + W;
-    last.plane[SVGF_B] = st->line + 2 * (size_t)W;
-    last.stride = 0;
+    last.plane[SVGF_G] = st->line + ring;
+    last.plane[SVGF_B] = st->line + 2 * ring;
+    last.ring = SVGF_WAVEFRONT_RING;
     last.span_done = export_span;
     last.span_ctx = &rx;
   }
@@ -602,14 +605,14 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
    * remodulation: no TAA, emission or second component, a last level
    * whose rows nothing reads again (with holes and the feedback, a single
    * level is copied into the history afterwards), and the wavefront, whose
-   * threads share the one row buffer column by column */
+   * threads share a ring of rows (SVGF_WAVEFRONT_RING) */
   const int feedback_alone =
       hush__param_i(f, P_FEEDBACK_FIRST_LEVEL) && holes && iterations == 1;
   fc.out_view = NULL;
   fc.out_albedo = demod ? &st->albedo : NULL;
   if (!with_taa && !emis && !split && iterations > 0 && !feedback_alone &&
       svgf_atrous_levels_wavefront(W, H)) {
-    if (!st->line) st->line = hush__alloc_floats((size_t)3 * W);
+    if (!st->line) st->line = hush__alloc_floats((size_t)3 * SVGF_WAVEFRONT_RING * W);
     fc.out_view = st->line ? hush__filter_view(f, I_OUTPUT) : NULL;
   }
   filter_component(&fc, &st->comp[0], 1);
