@@ -565,8 +565,8 @@ AVX_ROW(avx_row_valid_novar, 1, 0)
  * vectors of 8 pixels, with what AVX2 lacks spelled out: the weight floor
  * as a compare and an AND, 2^floor(t) added into the exponent bits
  * (vscalefps), the fraction t - floor(t) by vroundps (vreduceps), vrcpps
- * (12 bits, where vrcp14ps has 14) for the depth denominators, masked
- * loads and stores at a row's end. In a v3 build on
+ * (12 bits, where vrcp14ps has 14) with a Newton step for the depth
+ * denominators, masked loads and stores at a row's end. In a v3 build on
  * the Zen 4 VM the a-trous stage went from 98-108 to 83-84 ms (2 threads,
  * 1280x720; docs/svgf-speed.md, tenth round). The same formulas as the
  * portable loop within the tests' tolerance (tests/test_svgf.c), not its
@@ -665,14 +665,11 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
 #undef LDX
 }
 
-/* The depth factor of pair t: vrcpps alone (within 3.7e-4 relative; the
- * AVX-512 loop's vrcp14ps within 6.1e-5). An exponent at the weight floor
- * (-29) moves by at most 0.011, a weight there by 0.75 %; on the frames of
- * docs/svgf-speed.md (seventeenth round) the output moved by an RMSE of
- * 1e-7, while the Newton step cost 2 % of the a-trous on Zen 3. */
+/* The depth factor of pair t (vrcpps and a Newton step: the depth term of
+ * the exponent within 1e-6 relative). */
 static HUSH_ALWAYS_INLINE __m256 avx_rdd(const avx_px *p, const avx_pair *t) {
   const __m256 a = _mm256_fmadd_ps(p->sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(p->sgy, _mm256_set1_ps(t->fdy)));
-  return _mm256_mul_ps(p->zl, _mm256_rcp_ps(_mm256_add_ps(svgf_avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z))));
+  return _mm256_mul_ps(p->zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z))));
 }
 
 static HUSH_ALWAYS_INLINE void avx2_store(float *p, __m256 v, __m256i m, const int FULL) {

@@ -317,8 +317,8 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
 #elif defined(__AVX2__) && defined(__FMA__) && defined(__x86_64__)
 /*
  * The same in AVX2 + FMA intrinsics (x86-64-v3 builds), on vectors of 8
- * pixels: the weight floor as a compare and an AND, vrcpps alone for the
- * depth denominators (as the a-trous, atrous.c), masked loads and stores
+ * pixels: the weight floor as a compare and an AND, vrcpps with a Newton
+ * step for the depth denominators (weights.h), masked loads and stores
  * where a row ends. The formulas within the tests' tolerance, not the
  * portable loop's bits.
  */
@@ -399,7 +399,7 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
       for (int p = 0; p < NPAIRS; p++) {
         const avx_vpair *t = &pairs[p];
         const __m256 d = _mm256_fmadd_ps(sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(sgy, _mm256_set1_ps(t->fdy)));
-        rdd[p] = _mm256_mul_ps(zl, _mm256_rcp_ps(_mm256_add_ps(svgf_avx2_abs(d), eps_z)));
+        rdd[p] = _mm256_mul_ps(zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(d), eps_z)));
       }
       const float *zx = z + x, *n0x = n0 + x, *n1x = n1 + x, *n2x = n2 + x;
       __m256 ta = avx_vtap_exponent(zx, n0x, n1x, n2x, pairs[0].ga, rdd[0], zp, n0p, n1p, n2p, nbias);
