@@ -955,29 +955,26 @@ static unsigned float_bits(float f) {
   return u;
 }
 
-/* Where edge i (0 < i < parts) may lie: from the middle of the fixed part
- * i - 1 to the middle of part i, on 32-column boundaries (so every part
- * keeps the AVX-512 loop's pairs of vectors); the edges never cross. */
-static int edge_lo(const wave_ctx *w, int i) {
-  return (int)((long long)w->W * (2 * i - 1) / (2 * w->parts) / 32 * 32);
-}
-
-static int edge_hi(const wave_ctx *w, int i) {
-  return (int)((long long)w->W * (2 * i + 1) / (2 * w->parts) / 32 * 32);
+/* The middle of fixed part j, on a 32-column boundary. Edge i (0 < i <
+ * parts) lies from the middle of part i - 1 to the middle of part i, so
+ * the edges never cross, and on 32-column boundaries (every part keeps the
+ * AVX-512 loop's pairs of vectors). */
+static int part_middle(const wave_ctx *w, int j) {
+  return (int)((long long)w->W * (2 * j + 1) / (2 * w->parts) / 32 * 32);
 }
 
 static int edge_clamped(const wave_ctx *w, int i, int x) {
-  const int lo = edge_lo(w, i), hi = edge_hi(w, i);
+  const int lo = part_middle(w, i - 1), hi = part_middle(w, i);
   return x < lo ? lo : x > hi ? hi : x;
 }
 
-/* A random edge in its range (jitter: tests). */
-static int edge_jittered(const wave_ctx *w, int t, int i) {
-  uint32_t h = w->jitter * 0x9E3779B1u ^ (uint32_t)t * 0x85EBCA77u ^ (uint32_t)i * 0xC2B2AE3Du;
+/* A random edge of period e in its range (jitter: tests). */
+static int edge_jittered(const wave_ctx *w, int e, int i) {
+  uint32_t h = w->jitter * 0x9E3779B1u ^ (uint32_t)e * 0x85EBCA77u ^ (uint32_t)i * 0xC2B2AE3Du;
   h ^= h >> 15;
   h *= 0x2C1B3C6Du;
   h ^= h >> 12;
-  const int lo = edge_lo(w, i), hi = edge_hi(w, i);
+  const int lo = part_middle(w, i - 1), hi = part_middle(w, i);
   return lo + (int)(h % (uint32_t)((hi - lo) / 32 + 1)) * 32;
 }
 
@@ -1007,18 +1004,18 @@ static int edge_proposed(const wave_ctx *w, int e, int i) {
 static int wave_edge(const wave_ctx *w, int t, int i) {
   if (i == 0) return 0;
   if (i == w->parts) return w->W;
-  const int period = t / w->period;
-  atomic_int *e = &w->edge[(size_t)period * (w->parts + 1) + i];
-  int x = atomic_load_explicit(e, memory_order_relaxed);
+  const int e = t / w->period;
+  atomic_int *slot = &w->edge[(size_t)e * (w->parts + 1) + i];
+  int x = atomic_load_explicit(slot, memory_order_relaxed);
   if (x >= 0) return x;
   int proposal;
   if (w->jitter)
-    proposal = edge_jittered(w, period, i);
-  else if (period == 0)
+    proposal = edge_jittered(w, e, i);
+  else if (e == 0)
     proposal = edge_clamped(w, i, part_edge(w->W, i, w->parts));
   else
-    proposal = edge_clamped(w, i, edge_proposed(w, period, i));
-  if (atomic_compare_exchange_strong_explicit(e, &x, proposal, memory_order_relaxed,
+    proposal = edge_clamped(w, i, edge_proposed(w, e, i));
+  if (atomic_compare_exchange_strong_explicit(slot, &x, proposal, memory_order_relaxed,
                                               memory_order_relaxed))
     return proposal;
   return x;

@@ -259,7 +259,7 @@ typedef struct frame_ctx {
 
 /* Where the last level's finished rows go (svgf_level_out.span_done). */
 typedef struct row_export {
-  const float *line[3]; /* the level's output: a ring of SVGF_WAVEFRONT_RING rows */
+  const svgf_level_out *level; /* where the rows are: a ring of SVGF_WAVEFRONT_RING rows */
   const hush_planar *albedo;
   const hush_image_view *view;
 } row_export;
@@ -267,8 +267,9 @@ typedef struct row_export {
 static void export_span(void *ctx, int y, int xa, int xb) {
   const row_export *e = ctx;
   const size_t at = (size_t)y * e->view->width + (size_t)xa;
-  const size_t r = (size_t)(y % SVGF_WAVEFRONT_RING) * e->view->width + (size_t)xa;
-  const float *const in[3] = {e->line[0] + r, e->line[1] + r, e->line[2] + r};
+  const size_t r = svgf_level_out_row(e->level, y) + (size_t)xa;
+  const float *const in[3] = {e->level->plane[SVGF_R] + r, e->level->plane[SVGF_G] + r,
+                              e->level->plane[SVGF_B] + r};
   const float *const alb[3] = {e->albedo ? e->albedo->plane[0] + at : NULL,
                                e->albedo ? e->albedo->plane[1] + at : NULL,
                                e->albedo ? e->albedo->plane[2] + at : NULL};
@@ -373,7 +374,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   row_export rx;
   if (fc->out_view) {
     const size_t ring = (size_t)SVGF_WAVEFRONT_RING * (size_t)W;
-    for (int k = 0; k < 3; k++) rx.line[k] = st->line + (size_t)k * ring;
+    rx.level = &last;
     rx.albedo = fc->out_albedo;
     rx.view = fc->out_view;
     last.plane[SVGF_R] = st->line;
