@@ -728,32 +728,26 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p);
   const avx_row rx = avx_row_at(r, x, VALIDITY);
   if (p.surface || c->bias < S_FLOOR) {
-    /* The pair loop is software-pipelined: pair k + 1's exponents are
-     * computed before pair k's weights and sums. Each tap is a chain of
-     * about 20 dependent operations, and on Zen 3 the loop in plain order
-     * was bound by how many of them the out-of-order window held (20
-     * cycles a tap in L1, against about 8 of operations); in this order
-     * the window holds work of two pairs (15 cycles a tap). The depth
-     * factors go first to free their three per-pixel registers. Same
-     * operations per tap, so the same bits. */
-    __m256 rdd[MAX_PAIRS];
-    for (int k = 0; k < npairs; k++) rdd[k] = avx_rdd(&p, &pairs[k]);
-    __m256 ta = avx_tap_exponent(&rx, pairs[0].a, rdd[0], &p, _mm256_set1_ps(pairs[0].nbias), m, FULL);
-    __m256 tb = avx_tap_exponent(&rx, pairs[0].b, rdd[0], &p, _mm256_set1_ps(pairs[0].nbias), m, FULL);
+    /* Every tap's exponent first, then the weights and sums in the same
+     * order: the same operations as one tap after another, so the same
+     * bits. Each tap is a chain of about 20 dependent operations; in tap
+     * order Zen 3 ran 20 cycles a tap in L1 (about 8 of operations), as
+     * the out-of-order window filled with operations waiting on each
+     * other. Pipelined one pair ahead, 15; with the 24 exponents apart,
+     * which depend on nothing but loads, the window fills with independent
+     * work (a-trous 4.9 -> 4.1 ms at 320x180 on one thread;
+     * docs/svgf-speed.md, eighteenth round). */
+    __m256 t[2 * MAX_PAIRS];
     for (int k = 0; k < npairs; k++) {
-      const avx_pair *t = &pairs[k];
-      __m256 na = ta, nb = tb;
-      if (k + 1 < npairs) {
-        const avx_pair *u = &pairs[k + 1];
-        const __m256 bias = _mm256_set1_ps(u->nbias);
-        na = avx_tap_exponent(&rx, u->a, rdd[k + 1], &p, bias, m, FULL);
-        nb = avx_tap_exponent(&rx, u->b, rdd[k + 1], &p, bias, m, FULL);
-      }
-      const __m256 nf = _mm256_set1_ps(t->nfloor);
-      avx_tap_add(&rx, t->a, ta, nf, &p, m, FULL, VALIDITY, WITH_VAR);
-      avx_tap_add(&rx, t->b, tb, nf, &p, m, FULL, VALIDITY, WITH_VAR);
-      ta = na;
-      tb = nb;
+      const __m256 rdd = avx_rdd(&p, &pairs[k]);
+      const __m256 bias = _mm256_set1_ps(pairs[k].nbias);
+      t[2 * k] = avx_tap_exponent(&rx, pairs[k].a, rdd, &p, bias, m, FULL);
+      t[2 * k + 1] = avx_tap_exponent(&rx, pairs[k].b, rdd, &p, bias, m, FULL);
+    }
+    for (int k = 0; k < npairs; k++) {
+      const __m256 nf = _mm256_set1_ps(pairs[k].nfloor);
+      avx_tap_add(&rx, pairs[k].a, t[2 * k], nf, &p, m, FULL, VALIDITY, WITH_VAR);
+      avx_tap_add(&rx, pairs[k].b, t[2 * k + 1], nf, &p, m, FULL, VALIDITY, WITH_VAR);
     }
   }
   avx_finish(&p, x, m, out, also, FULL, VALIDITY, WITH_VAR);
