@@ -868,13 +868,22 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
  * time are of different levels and touch disjoint rows, so they run
  * together; each is split into one column part per thread, thread i
  * always taking part i (it keeps its part's rows in its own L2). Instead
- * of a barrier per time, a thread starts time t once every other has
- * finished time t - 1 - SVGF_WAVEFRONT_SLACK (wave_wait): the parts of a
- * row never take exactly the same time (the sky skips its taps, misses
- * differ), and with a barrier the faster thread waited at every row, 6-7 %
- * of the a-trous on the bench's frames (docs/svgf-speed.md, thirteenth
- * round); the slack lets the threads drift apart by a few rows instead
- * and the differences average out.
+ * of a barrier per time, a thread starts the block of times t0..t1-1
+ * once every other has finished time t1 - 2 - SVGF_WAVEFRONT_SLACK
+ * (wave_wait: what a row of time t needs done in another part, the lags
+ * put at time t - 1 - SVGF_WAVEFRONT_SLACK or before): the parts of a row never take exactly
+ * the same time (the sky skips its taps, misses differ), and with a
+ * barrier the faster thread waited at every row, 6-7 % of the a-trous on
+ * the bench's frames (docs/svgf-speed.md, thirteenth round); the slack
+ * lets the threads drift apart by a block instead and the differences
+ * average out.
+ *
+ * Within a block a thread runs level after level, SVGF_WAVEFRONT_BLOCK
+ * rows of each (any order of a time's rows is correct: every level reads
+ * only rows its predecessor finished times before). One row of each level
+ * in turn broke each level's 45 tap streams at every row; in blocks of 4
+ * the a-trous took 5 % less on the Zen 3 (2 threads, 1280x720:
+ * docs/svgf-speed.md, eighteenth round).
  *
  * The split moves (wave_edge): on a shared machine one core is often
  * slower than the other for seconds at a time (2 threads on the Zen 3 VM:
@@ -896,6 +905,7 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
  * must be for the split to move. */
 #define WAVE_PERIOD 8
 #define WAVE_DEADBAND 64
+_Static_assert(WAVE_PERIOD % SVGF_WAVEFRONT_BLOCK == 0, "a split holds for whole blocks");
 
 /* One thread's progress, on a cache line of its own (no false sharing
  * between the spinning readers and the other threads' lines): the last
@@ -1020,7 +1030,8 @@ static void wave_measured(wave_progress *p, int width, double ms) {
   if (width <= 0) return;
   const float now = (float)(ms / width);
   const float was = bits_float(atomic_load_explicit(&p->cost, memory_order_relaxed));
-  const float mean = was > 0.0f ? was + 0.125f * (now - was) : now;
+  /* a running mean over about WAVE_PERIOD times */
+  const float mean = was > 0.0f ? was + ((float)SVGF_WAVEFRONT_BLOCK / WAVE_PERIOD) * (now - was) : now;
   atomic_store_explicit(&p->cost, float_bits(mean), memory_order_relaxed);
   atomic_store_explicit(&p->width, width, memory_order_relaxed);
 }
@@ -1047,7 +1058,7 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
   wave_ctx w;
   w.W = W;
   w.jitter = jitter;
-  w.period = jitter ? 1 : WAVE_PERIOD;
+  w.period = jitter ? SVGF_WAVEFRONT_BLOCK : WAVE_PERIOD;
   w.progress = aligned_alloc(_Alignof(wave_progress), (size_t)threads * sizeof(wave_progress));
   w.edge = malloc((size_t)times * (size_t)(threads + 1) * sizeof *w.edge);
   if (!w.progress || !w.edge) threads = 1; /* nothing to wait for with one part */
@@ -1064,25 +1075,27 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
 #pragma omp single
     w.parts = parts;
     int xa = 0, xb = W;
-    for (int t = 0; t < times; t++) {
+    for (int t0 = 0; t0 < times; t0 += SVGF_WAVEFRONT_BLOCK) {
+      const int t1 = t0 + SVGF_WAVEFRONT_BLOCK < times ? t0 + SVGF_WAVEFRONT_BLOCK : times;
       if (parts > 1) {
-        wave_wait(w.progress, parts, part, t - 1 - SVGF_WAVEFRONT_SLACK);
-        if (t % w.period == 0) {
-          xa = wave_edge(&w, t, part);
-          xb = wave_edge(&w, t, part + 1);
+        wave_wait(w.progress, parts, part, t1 - 2 - SVGF_WAVEFRONT_SLACK);
+        if (t0 % w.period == 0) {
+          xa = wave_edge(&w, t0, part);
+          xb = wave_edge(&w, t0, part + 1);
         }
       }
       const double start = parts > 1 ? hush__now_ms() : 0.0;
-      for (int k = 0; k < n; k++) {
-        const int y = t - lag[k];
-        if (y >= 0 && y < H && xa < xb) {
-          row[k](&c[k], y, xa, xb);
-          if (out[k]->span_done) out[k]->span_done(out[k]->span_ctx, y, xa, xb);
+      for (int k = 0; k < n; k++)
+        for (int t = t0; t < t1; t++) {
+          const int y = t - lag[k];
+          if (y >= 0 && y < H && xa < xb) {
+            row[k](&c[k], y, xa, xb);
+            if (out[k]->span_done) out[k]->span_done(out[k]->span_ctx, y, xa, xb);
+          }
         }
-      }
       if (parts > 1) {
         wave_measured(&w.progress[part], xb - xa, hush__now_ms() - start);
-        atomic_store_explicit(&w.progress[part].done, t, memory_order_release);
+        atomic_store_explicit(&w.progress[part].done, t1 - 1, memory_order_release);
       }
     }
   }
