@@ -564,9 +564,11 @@ AVX_ROW(avx_row_valid_novar, 1, 0)
  * x86-64-v3 builds (AVX2 CPUs without AVX-512): the AVX-512 loop above on
  * vectors of 8 pixels, with what AVX2 lacks spelled out: the weight floor
  * as a compare and an AND, 2^floor(t) added into the exponent bits
- * (vscalefps), the fraction t - floor(t) by vroundps (vreduceps), vrcpps
- * (12 bits, where vrcp14ps has 14) with a Newton step for the depth
- * denominators, masked loads and stores at a row's end. In a v3 build on
+ * (vscalefps), the fraction t - floor(t) by vroundps (vreduceps), masked
+ * loads and stores at a row's end; the per-pixel square root and the depth
+ * denominators are exact (vsqrtps, vdivps: on Zen 3 the divider is idle
+ * otherwise, where vrcpps with a Newton step took three operations of the
+ * FMA pipes per pair). In a v3 build on
  * the Zen 4 VM the a-trous stage went from 98-108 to 83-84 ms (2 threads,
  * 1280x720; docs/svgf-speed.md, tenth round). The same formulas as the
  * portable loop within the tests' tolerance (tests/test_svgf.c), not its
@@ -626,17 +628,15 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
   const __m256 var3 = _mm256_max_ps(_mm256_fmadd_ps(h, hm, _mm256_mul_ps(q, _mm256_add_ps(hu, hd))),
                                     _mm256_setzero_ps());
   const __m256 e = eps ? LDX(eps, 0) : _mm256_set1_ps(SVGF_EPS_L);
-  /* sqrt(v) = v / sqrt(v) by vrsqrtps and two Newton steps (0 for 0) */
-  const __m256 vs = _mm256_max_ps(var3, _mm256_set1_ps(1e-30f));
-  __m256 rs = _mm256_rsqrt_ps(vs);
-  rs = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5f), rs),
-                     _mm256_fnmadd_ps(_mm256_mul_ps(vs, rs), rs, _mm256_set1_ps(3.0f)));
-  rs = _mm256_mul_ps(_mm256_mul_ps(_mm256_set1_ps(0.5f), rs),
-                     _mm256_fnmadd_ps(_mm256_mul_ps(vs, rs), rs, _mm256_set1_ps(3.0f)));
-  const __m256 sd = _mm256_mul_ps(var3, rs);
+  /* an exact square root and division: each one operation on its own
+   * unit, where vrsqrtps with two Newton steps and vrcpps with one took 11
+   * operations of the FMA pipes at every vector's start (a-trous 4.1 ->
+   * 3.9 ms at 320x180 on one thread; docs/svgf-speed.md, eighteenth
+   * round) */
+  const __m256 sd = _mm256_sqrt_ps(var3);
   const __m256 dl = _mm256_min_ps(_mm256_fmadd_ps(_mm256_set1_ps(c->sigma_l), sd, e),
                                   _mm256_set1_ps(1e30f));
-  p->inv_l = _mm256_mul_ps(_mm256_set1_ps(SVGF_LOG2E), svgf_avx2_rcp(dl));
+  p->inv_l = _mm256_div_ps(_mm256_set1_ps(SVGF_LOG2E), dl);
   if (VALIDITY) p->inv_l = _mm256_mul_ps(p->inv_l, LDX(r->ok, 0));
   const __m256 sz = _mm256_set1_ps(c->g->sigma_z);
   p->sgx = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDX(gx, 0)), _mm256_set1_ps(1e20f)),
@@ -665,11 +665,11 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
 #undef LDX
 }
 
-/* The depth factor of pair t (vrcpps and a Newton step: the depth term of
- * the exponent within 1e-6 relative). */
+/* The depth factor of pair t (a division: a-trous 4.0 -> 3.8 ms at 320x180
+ * on one thread against vrcpps and a Newton step). */
 static HUSH_ALWAYS_INLINE __m256 avx_rdd(const avx_px *p, const avx_pair *t) {
   const __m256 a = _mm256_fmadd_ps(p->sgx, _mm256_set1_ps(t->fdx), _mm256_mul_ps(p->sgy, _mm256_set1_ps(t->fdy)));
-  return _mm256_mul_ps(p->zl, svgf_avx2_rcp(_mm256_add_ps(svgf_avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z))));
+  return _mm256_div_ps(p->zl, _mm256_add_ps(svgf_avx2_abs(a), _mm256_set1_ps(SVGF_EPS_Z)));
 }
 
 static HUSH_ALWAYS_INLINE void avx2_store(float *p, __m256 v, __m256i m, const int FULL) {
