@@ -871,12 +871,12 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
  * of a barrier per time, a thread starts the block of times t0..t1-1
  * once every other has finished time t1 - 2 - SVGF_WAVEFRONT_SLACK
  * (wave_wait: what a row of time t needs done in another part, the lags
- * put at time t - 1 - SVGF_WAVEFRONT_SLACK or before): the parts of a row never take exactly
- * the same time (the sky skips its taps, misses differ), and with a
- * barrier the faster thread waited at every row, 6-7 % of the a-trous on
- * the bench's frames (docs/svgf-speed.md, thirteenth round); the slack
- * lets the threads drift apart by a block instead and the differences
- * average out.
+ * put at time t - 1 - SVGF_WAVEFRONT_SLACK or before): the parts of a row
+ * never take exactly the same time (the sky skips its taps, misses
+ * differ), and with a barrier the faster thread waited at every row, 6-7 %
+ * of the a-trous on the bench's frames (docs/svgf-speed.md, thirteenth
+ * round); the slack lets the threads drift apart by a block instead and
+ * the differences average out.
  *
  * Within a block a thread runs level after level, SVGF_WAVEFRONT_BLOCK
  * rows of each (any order of a time's rows is correct: every level reads
@@ -1025,12 +1025,12 @@ static int wave_edge(const wave_ctx *w, int t, int i) {
   return x;
 }
 
-/* A part's time per column: the running mean over about 8 times. */
+/* A part's time per column (ms: one block's), the running mean over about
+ * WAVE_PERIOD times. */
 static void wave_measured(wave_progress *p, int width, double ms) {
   if (width <= 0) return;
   const float now = (float)(ms / width);
   const float was = bits_float(atomic_load_explicit(&p->cost, memory_order_relaxed));
-  /* a running mean over about WAVE_PERIOD times */
   const float mean = was > 0.0f ? was + ((float)SVGF_WAVEFRONT_BLOCK / WAVE_PERIOD) * (now - was) : now;
   atomic_store_explicit(&p->cost, float_bits(mean), memory_order_relaxed);
   atomic_store_explicit(&p->width, width, memory_order_relaxed);
@@ -1060,15 +1060,16 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
   w.jitter = jitter;
   w.period = jitter ? SVGF_WAVEFRONT_BLOCK : WAVE_PERIOD;
   w.progress = aligned_alloc(_Alignof(wave_progress), (size_t)threads * sizeof(wave_progress));
-  w.edge = malloc((size_t)times * (size_t)(threads + 1) * sizeof *w.edge);
+  /* one set of edges per period (wave_edge) */
+  const size_t edges = (size_t)(times / w.period + 1) * (size_t)(threads + 1);
+  w.edge = malloc(edges * sizeof *w.edge);
   if (!w.progress || !w.edge) threads = 1; /* nothing to wait for with one part */
   for (int q = 0; w.progress && q < threads; q++) {
     atomic_init(&w.progress[q].done, -1);
     atomic_init(&w.progress[q].width, 0);
     atomic_init(&w.progress[q].cost, 0u);
   }
-  for (size_t i = 0; w.edge && i < (size_t)times * (size_t)(threads + 1); i++)
-    atomic_init(&w.edge[i], -1);
+  for (size_t i = 0; w.edge && i < edges; i++) atomic_init(&w.edge[i], -1);
 #pragma omp parallel num_threads(threads)
   {
     const int parts = omp_get_num_threads(), part = omp_get_thread_num();

@@ -119,16 +119,12 @@ static inline size_t svgf_level_out_row(const svgf_level_out *o, int y) {
  * moves on: each level's 45 tap streams (9 planes x 5 rows) then run on
  * for this many rows before the next level's take over the cache and the
  * prefetchers. */
-#ifndef SVGF_WAVEFRONT_BLOCK
 #define SVGF_WAVEFRONT_BLOCK 4
-#endif
 /* How many times apart the wavefront's threads can be: a thread starts a
  * block once every other has finished the time this many before the
  * block's last. One block and three rows: a thread can be a whole block
  * behind without the other waiting. */
-#ifndef SVGF_WAVEFRONT_SLACK
 #define SVGF_WAVEFRONT_SLACK (2 * SVGF_WAVEFRONT_BLOCK - 1)
-#endif
 /* The rows of an output ring that the wavefront's threads never write at
  * once (rows less than SVGF_WAVEFRONT_SLACK + 1 apart). */
 #define SVGF_WAVEFRONT_RING (SVGF_WAVEFRONT_SLACK + 1)
