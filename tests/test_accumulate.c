@@ -1862,6 +1862,51 @@ static int chunk_class(const hush_reproject_plan *plan, size_t i0) {
              : 0;
 }
 
+/* hush__reproject_diagonals (vector operations where the CPU has them)
+ * gives hush__reproject_diagonals_scalar's results, with the pixels in
+ * use given by kinds and by flags, on origins on one, two or three
+ * diagonals, with pixels not in use anywhere, and near the plane's ends;
+ * and where it finds diagonals, every pixel in use lies on one of them. */
+static void test_module_diagonals(void) {
+  uint32_t rng = 5;
+  int same = 1, on = 1, found[3] = {0, 0, 0};
+  for (int it = 0; it < 20000; it++) {
+    const int32_t W = 20 + (int32_t)(urand(&rng) * 200.0f);
+    const size_t size = (size_t)W * (size_t)(3 + (int)(urand(&rng) * 5.0f));
+    const int32_t start = (int32_t)(urand(&rng) * (float)size) - 8;
+    /* a second diagonal a column or a row on from pixel `step` */
+    const int step = (int)(urand(&rng) * 20.0f);
+    const int32_t shift = urand(&rng) < 0.5f ? 1 : W + (urand(&rng) < 0.5f ? -1 : 1);
+    int32_t origin[HUSH_DIAGONAL_CHUNK], flag[HUSH_DIAGONAL_CHUNK];
+    uint8_t kind[HUSH_DIAGONAL_CHUNK];
+    for (int k = 0; k < HUSH_DIAGONAL_CHUNK; k++) {
+      origin[k] = start + k + (k >= step ? shift : 0) + (urand(&rng) < 0.03f ? 2 : 0);
+      const float u = urand(&rng);
+      kind[k] = u < 0.1f ? HUSH_FOOTPRINT_NONE : u < 0.15f ? HUSH_FOOTPRINT_3X3
+                                                          : HUSH_FOOTPRINT_BILINEAR;
+      flag[k] = kind[k] == HUSH_FOOTPRINT_BILINEAR ? (u < 0.5f ? 1 : -7) : 0;
+      if (kind[k] != HUSH_FOOTPRINT_BILINEAR && urand(&rng) < 0.5f) origin[k] = 0;
+    }
+    if (it % 97 == 0) memset(kind, HUSH_FOOTPRINT_NONE, sizeof kind), memset(flag, 0, sizeof flag);
+    int32_t b1[2] = {-1, -1}, b2[2] = {-1, -1}, b3[2] = {-1, -1};
+    const int r1 = hush__reproject_diagonals_scalar(origin, kind, NULL, W, size, b1);
+    const int r2 = hush__reproject_diagonals(origin, kind, NULL, W, size, b2);
+    const int r3 = hush__reproject_diagonals(origin, NULL, flag, W, size, b3);
+    same &= r1 == r2 && r1 == r3;
+    if (r1) same &= b1[0] == b2[0] && b1[1] == b2[1] && b1[0] == b3[0] && b1[1] == b3[1];
+    found[r1]++;
+    for (int k = 0; r1 && k < HUSH_DIAGONAL_CHUNK; k++) {
+      if (kind[k] != HUSH_FOOTPRINT_BILINEAR) continue;
+      on &= origin[k] == b1[0] + k || origin[k] == b1[1] + k;
+      on &= b1[0] >= 0 && (int64_t)b1[1] + HUSH_DIAGONAL_CHUNK - 1 + W + 1 < (int64_t)size;
+    }
+  }
+  CHECK(same);
+  CHECK(on);
+  CHECK_MSG(found[0] > 1000 && found[1] > 1000 && found[2] > 1000,
+            "chunks on 0/1/2 diagonals: %d %d %d", found[0], found[1], found[2]);
+}
+
 /* hush__reproject_window16 (vector operations where the CPU has them) gives
  * hush__reproject_window's results on origins that form windows, nearly
  * do, or lie near the plane's ends. */
@@ -2154,6 +2199,7 @@ int main(void) {
   test_module_fast_paths(dev, 160, 48, 1);
   test_module_plan_layouts(dev);
   test_module_window16();
+  test_module_diagonals();
   test_module_emission_rows(dev);
   test_convergence(dev);
   test_static_jitter(dev);

@@ -222,7 +222,8 @@ static void test_resolve(hush_device dev, hush_taa_box box, int tonemap, int thr
  * Smooth motion: rows whose block origins run consecutively (a whole-pixel
  * shift: the contiguous-load chunks), rows whose shift steps by one pixel
  * part-way (chunks whose taps form a window, read with permutes where
- * AVX-512 is built, else gathered), a band of 3x3 and no-history pixels; on
+ * AVX-512 is built, else from two diagonals), a band of 3x3 and no-history
+ * pixels; on
  * a frame of odd size, against reference(); the result is the same bit for
  * bit whatever the thread count (each thread resolves its own band of
  * rows), down to a frame too short for one band per thread.

@@ -153,9 +153,29 @@ static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
 _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
 
 /* How blend_pixels reads a chunk's taps: gathered one by one, as vectors
- * (the footprints follow each other), or from a window of 1 or 2 rows
- * (hush__reproject_window). */
-enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW };
+ * (the footprints follow each other), from a window of 1 or 2 rows
+ * (hush__reproject_window; AVX-512 builds), or as two vectors per tap
+ * picked per pixel (hush__reproject_diagonals; the others). */
+enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW, MODE_DIAGONALS };
+
+#ifdef HUSH_HAVE_DIAGONALS
+/* How a full chunk from pixel x0 of a row that is not contiguous reads
+ * its taps (x86-64-v3 builds): from two diagonals (reproject.h; base[0],
+ * base[1] relative to the row) when its BILINEAR footprints lie on them,
+ * else gathered. */
+static HUSH_ALWAYS_INLINE int chunk_diagonals(const hush_reproject_plan *plan, size_t row, int x0,
+                                              int32_t base[2]) {
+  _Static_assert(CHUNK == HUSH_DIAGONAL_CHUNK, "a chunk is the diagonals' chunk");
+  int32_t b[2];
+  const int n = hush__reproject_diagonals(plan->origin + row + x0, plan->kind + row + x0, NULL,
+                                          (int32_t)plan->width, (size_t)plan->width * plan->height,
+                                          b);
+  if (!n) return MODE_GATHER;
+  base[0] = b[0] - x0;
+  base[1] = b[1] - x0;
+  return n == 1 ? MODE_CONTIGUOUS : MODE_DIAGONALS;
+}
+#endif
 
 /* A blend's outputs, staged in L1 (plane t at st + t * stride: colour
  * 0..3, moments 4 and 5, variance 6, age 7), streamed out to pixels
@@ -182,11 +202,12 @@ static HUSH_ALWAYS_INLINE void stream_staged(float *const out[8], const float *s
  * never written here).
  */
 static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int x_begin,
-                                            int len, int32_t base, const int mode,
+                                            int len, int32_t base, int32_t base1, const int mode,
                                             const float (*restrict tb)[4][CHUNK],
                                             const int nc, const int mom) {
   const int contiguous = mode == MODE_CONTIGUOUS;
   const int window = mode == MODE_WINDOW;
+  const int diagonals = mode == MODE_DIAGONALS;
   const int x_end = x_begin + len;
   const hush_reproject_plan *plan = b->plan;
   const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
@@ -212,12 +233,20 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   float st[8][CHUNK] __attribute__((aligned(64)));
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
-    const int32_t o = contiguous ? base + x
-                                 : origin[x] & -(int32_t)(kind[x] == HUSH_FOOTPRINT_BILINEAR);
+    const int32_t o = contiguous | diagonals
+                          ? base + x
+                          : origin[x] & -(int32_t)(kind[x] == HUSH_FOOTPRINT_BILINEAR);
+    /* MODE_DIAGONALS: the footprint on the second diagonal */
+    const int second = diagonals & (origin[x] == base1 + x);
+    const int32_t os = base1 + x;
     const float a0 = w0[x], a1 = w1[x], a2 = w2[x], a3 = w3[x];
     const int k = x - x_begin;
-    /* tap (tx, ty) of plane t, window plane index pi */
-#define HUSH_TAP(t, pi, tx, ty) (window ? tb[pi][(ty) * 2 + (tx)][k] : (t)[o + (ty) * W + (tx)])
+    /* tap (tx, ty) of plane t, window plane index pi; with diagonals,
+     * both loaded and one picked */
+#define HUSH_TAP(t, pi, tx, ty)                                                                 \
+  (window      ? tb[pi][(ty) * 2 + (tx)][k]                                                     \
+   : diagonals ? hush__select_bits(second, (t)[os + (ty) * W + (tx)], (t)[o + (ty) * W + (tx)])  \
+               : (t)[o + (ty) * W + (tx)])
 #define HUSH_APPLY4(t, pi)                                                                      \
   (a0 * HUSH_TAP(t, pi, 0, 0) + a1 * HUSH_TAP(t, pi, 1, 0) + a2 * HUSH_TAP(t, pi, 0, 1) +      \
    a3 * HUSH_TAP(t, pi, 1, 1))
@@ -270,11 +299,11 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
     /* a constant length for full chunks: one vector iteration, no
      * alignment peeling or scalar epilogue */
     if (x1 - x0 < CHUNK) {
-      blend_pixels(b, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc, mom);
+      blend_pixels(b, row, x0, x1 - x0, 0, 0, MODE_GATHER, NULL, nc, mom);
       continue;
     }
     if (contiguous) {
-      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL, nc, mom);
+      blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, 0, MODE_CONTIGUOUS, NULL, nc, mom);
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
@@ -285,11 +314,22 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
                               mom ? b->pm1 : NULL, mom ? b->pm2 : NULL,
                               b->pa};
     if (hush__window_read(b->plan, row + (size_t)x0, planes, 7, tb)) {
-      blend_pixels(b, row, x0, CHUNK, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc, mom);
+      blend_pixels(b, row, x0, CHUNK, 0, 0, MODE_WINDOW, (const float(*)[4][CHUNK])tb, nc, mom);
       continue;
     }
+#elif defined(HUSH_HAVE_DIAGONALS)
+    int32_t base[2];
+    switch (chunk_diagonals(b->plan, row, x0, base)) {
+    case MODE_CONTIGUOUS:
+      blend_pixels(b, row, x0, CHUNK, base[0], 0, MODE_CONTIGUOUS, NULL, nc, mom);
+      continue;
+    case MODE_DIAGONALS:
+      blend_pixels(b, row, x0, CHUNK, base[0], base[1], MODE_DIAGONALS, NULL, nc, mom);
+      continue;
+    default: break;
+    }
 #endif
-    blend_pixels(b, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc, mom);
+    blend_pixels(b, row, x0, CHUNK, 0, 0, MODE_GATHER, NULL, nc, mom);
   }
   const size_t end = row + (size_t)W;
   for (size_t i = hush__reproject_next_3x3(b->plan, row, end); i < end;
@@ -608,10 +648,11 @@ typedef struct tblend_ctx {
 static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *const *prev,
                                              const float *const *sample, float *const *out,
                                              size_t row, int x_begin, int len, int32_t base,
-                                             const int mode,
+                                             int32_t base1, const int mode,
                                              const float (*restrict tb)[4][CHUNK], const int nc) {
   const int contiguous = mode == MODE_CONTIGUOUS;
   const int window = mode == MODE_WINDOW;
+  const int diagonals = mode == MODE_DIAGONALS;
   const int x_end = x_begin + len;
   const hush_reproject_plan *plan = t->plan;
   const int W = (int)t->W;
@@ -633,11 +674,16 @@ static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *c
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
     const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
-    const int32_t o = contiguous ? base + x : origin[x] & -(int32_t)bil;
+    const int32_t o = contiguous | diagonals ? base + x : origin[x] & -(int32_t)bil;
+    const int second = diagonals & (origin[x] == base1 + x); /* as blend_pixels */
+    const int32_t os = base1 + x;
     const float a0 = w0[x], a1 = w1[x], a2 = w2[x], a3 = w3[x];
     const int k = x - x_begin;
     const float a = blend_alpha(age[x], alpha_min);
-#define HUSH_TAP(p, c, tx, ty) (window ? tb[c][(ty) * 2 + (tx)][k] : (p)[o + (ty) * W + (tx)])
+#define HUSH_TAP(p, c, tx, ty)                                                                  \
+  (window      ? tb[c][(ty) * 2 + (tx)][k]                                                      \
+   : diagonals ? hush__select_bits(second, (p)[os + (ty) * W + (tx)], (p)[o + (ty) * W + (tx)])  \
+               : (p)[o + (ty) * W + (tx)])
     /* computed for every pixel, then selected: no load under a branch */
 #define HUSH_BLEND(p, s, c)                                                                     \
   hush__select_bits(bil,                                                                        \
@@ -673,26 +719,38 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
   for (int x0 = 0; x0 < W; x0 += CHUNK) {
     const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
     if (x1 - x0 < CHUNK) {
-      tblend_pixels(t, prev, sample, out, row, x0, x1 - x0, 0, MODE_GATHER, NULL, nc);
+      tblend_pixels(t, prev, sample, out, row, x0, x1 - x0, 0, 0, MODE_GATHER, NULL, nc);
       continue;
     }
     int contiguous = 1;
     for (int x = x0; x < x1; x++)
       contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
     if (contiguous) {
-      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, origin[x0] - x0, MODE_CONTIGUOUS, NULL,
-                    nc);
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, origin[x0] - x0, 0, MODE_CONTIGUOUS,
+                    NULL, nc);
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
     float tb[4][4][CHUNK] __attribute__((aligned(64)));
     if (hush__window_read(plan, row + (size_t)x0, prev, nc, tb)) {
-      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_WINDOW,
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, 0, MODE_WINDOW,
                     (const float(*)[4][CHUNK])tb, nc);
       continue;
     }
+#elif defined(HUSH_HAVE_DIAGONALS)
+    int32_t base[2];
+    switch (chunk_diagonals(plan, row, x0, base)) {
+    case MODE_CONTIGUOUS:
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, base[0], 0, MODE_CONTIGUOUS, NULL, nc);
+      continue;
+    case MODE_DIAGONALS:
+      tblend_pixels(t, prev, sample, out, row, x0, CHUNK, base[0], base[1], MODE_DIAGONALS, NULL,
+                    nc);
+      continue;
+    default: break;
+    }
 #endif
-    tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, MODE_GATHER, NULL, nc);
+    tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, 0, MODE_GATHER, NULL, nc);
   }
   const size_t end = row + (size_t)W;
   for (size_t i = hush__reproject_next_3x3(plan, row, end); i < end;

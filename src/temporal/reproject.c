@@ -693,8 +693,10 @@ static void span_footprints(int W, int H, const float *restrict spx, const float
 /* How a chunk's taps are read: gathered one by one, as vectors (the
  * footprints follow each other: base + k), as vectors twice (the pixels
  * split between two such bases, as where the motion carries the footprints
- * a column or a row further; test_chunk), or from a window (reproject.h). */
-enum { TAPS_GATHER, TAPS_CONTIGUOUS, TAPS_TWO, TAPS_WINDOW };
+ * a column or a row further; test_chunk), from a window (reproject.h), or
+ * as two vectors per tap picked per pixel (the same split; x86-64-v3
+ * builds, reproject.h's diagonals). */
+enum { TAPS_GATHER, TAPS_CONTIGUOUS, TAPS_TWO, TAPS_WINDOW, TAPS_DIAGONALS };
 
 /* The planes a window of the tap tests reads: depth, normal, id. */
 #define WINDOW_PLANES 5
@@ -714,10 +716,11 @@ enum { TAPS_GATHER, TAPS_CONTIGUOUS, TAPS_TWO, TAPS_WINDOW };
  */
 static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k_begin, int len,
                                            const float *restrict sze, span_taps *restrict o,
-                                           int32_t base, const int mode,
+                                           int32_t base, int32_t base1, const int mode,
                                            const float (*restrict tb)[4][CHUNK], const int use_id,
                                            const int grad_test) {
   const int contiguous = mode == TAPS_CONTIGUOUS, window = mode == TAPS_WINDOW;
+  const int diagonals = mode == TAPS_DIAGONALS;
   const int k_end = k_begin + len;
   const hush_gbuffer *cur = &c->in->cur, *pg = c->prev;
   const int W = c->W;
@@ -742,20 +745,27 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
     const float fx = o->fx[k], fy = o->fy[k];
     float bw[4];
     hush__reproject_bilinear(fx, fy, bw);
-    const int32_t j0 = contiguous ? base + k : o->origin[k];
+    const int32_t j0 = contiguous | diagonals ? base + k : o->origin[k];
+    /* TAPS_DIAGONALS: the pixel's footprint on the second diagonal */
+    const int second = diagonals & (o->origin[k] == base1 + k);
+    const int32_t j1 = base1 + k;
     const int kk = k - k_begin;
     unsigned q0 = 0, q1 = 0, q2 = 0, q3 = 0;
-    /* tap t (0..3: top left, top right, bottom left, bottom right) of the
-     * window's plane pi, or at index J of plane P */
-#define TAP(P, pi, t, J) (window ? tb[pi][t][kk] : (P)[J])
-#define SPAN_TAP(t, J, ox, oy, q)                                                               \
-  span_tap(&pv, TAP(pv.depth, 0, t, J), TAP(pv.normal[0], 1, t, J), TAP(pv.normal[1], 2, t, J), \
-           TAP(pv.normal[2], 3, t, J), use_id ? TAP(pv.id, 4, t, J) : 0.0f, bw[t], ox, oy, &r,   \
+    /* tap t (0..3: top left, top right, bottom left, bottom right, at
+     * offset D from the footprint's origin) of the window's plane pi, or
+     * of plane P: both diagonals' taps loaded, one picked */
+#define TAP(P, pi, t, D)                                                                         \
+  (window      ? tb[pi][t][kk]                                                                   \
+   : diagonals ? hush__select_bits(second, (P)[j1 + (D)], (P)[j0 + (D)])                         \
+               : (P)[j0 + (D)])
+#define SPAN_TAP(t, D, ox, oy, q)                                                               \
+  span_tap(&pv, TAP(pv.depth, 0, t, D), TAP(pv.normal[0], 1, t, D), TAP(pv.normal[1], 2, t, D), \
+           TAP(pv.normal[2], 3, t, D), use_id ? TAP(pv.id, 4, t, D) : 0.0f, bw[t], ox, oy, &r,   \
            use_id, grad_test, q)
-    const unsigned m = SPAN_TAP(0, j0, 0.0f - fx, 0.0f - fy, &q0) |
-                       SPAN_TAP(1, j0 + 1, 1.0f - fx, 0.0f - fy, &q1) << 1 |
-                       SPAN_TAP(2, j0 + W, 0.0f - fx, 1.0f - fy, &q2) << 2 |
-                       SPAN_TAP(3, j0 + W + 1, 1.0f - fx, 1.0f - fy, &q3) << 3;
+    const unsigned m = SPAN_TAP(0, 0, 0.0f - fx, 0.0f - fy, &q0) |
+                       SPAN_TAP(1, 1, 1.0f - fx, 0.0f - fy, &q1) << 1 |
+                       SPAN_TAP(2, W, 0.0f - fx, 1.0f - fy, &q2) << 2 |
+                       SPAN_TAP(3, W + 1, 1.0f - fx, 1.0f - fy, &q3) << 3;
 #undef SPAN_TAP
 #undef TAP
     if (!grad_test) o->retry[k] = (int32_t)(q0 | q1 | q2 | q3);
@@ -776,16 +786,19 @@ static HUSH_ALWAYS_INLINE void test_chunk(const build_ctx *c, size_t row, int k0
   /* a constant length for full chunks: one vector iteration, no
    * alignment peeling or scalar epilogue */
   if (k1 - k0 < CHUNK)
-    test_pixels(c, row, k0, k1 - k0, sze, o, 0, TAPS_GATHER, NULL, use_id, grad_test);
+    test_pixels(c, row, k0, k1 - k0, sze, o, 0, 0, TAPS_GATHER, NULL, use_id, grad_test);
   else if (mode == TAPS_CONTIGUOUS)
-    test_pixels(c, row, k0, CHUNK, sze, o, base[0], TAPS_CONTIGUOUS, NULL, use_id, grad_test);
+    test_pixels(c, row, k0, CHUNK, sze, o, base[0], 0, TAPS_CONTIGUOUS, NULL, use_id, grad_test);
+  else if (mode == TAPS_DIAGONALS)
+    test_pixels(c, row, k0, CHUNK, sze, o, base[0], base[1], TAPS_DIAGONALS, NULL, use_id,
+                grad_test);
   else if (mode == TAPS_TWO) {
     int32_t mask[CHUNK], kind[CHUNK], retry[CHUNK];
-    test_pixels(c, row, k0, CHUNK, sze, o, base[0], TAPS_CONTIGUOUS, NULL, use_id, grad_test);
+    test_pixels(c, row, k0, CHUNK, sze, o, base[0], 0, TAPS_CONTIGUOUS, NULL, use_id, grad_test);
     memcpy(mask, o->mask + k0, sizeof mask);
     memcpy(kind, o->kind + k0, sizeof kind);
     memcpy(retry, o->retry + k0, sizeof retry);
-    test_pixels(c, row, k0, CHUNK, sze, o, base[1], TAPS_CONTIGUOUS, NULL, use_id, grad_test);
+    test_pixels(c, row, k0, CHUNK, sze, o, base[1], 0, TAPS_CONTIGUOUS, NULL, use_id, grad_test);
     for (int k = 0; k < CHUNK; k++) {
       const int first = o->origin[k0 + k] != base[1] + (k0 + k);
       o->mask[k0 + k] = first ? mask[k] : o->mask[k0 + k];
@@ -793,9 +806,9 @@ static HUSH_ALWAYS_INLINE void test_chunk(const build_ctx *c, size_t row, int k0
       o->retry[k0 + k] = first ? retry[k] : o->retry[k0 + k];
     }
   } else if (mode == TAPS_WINDOW)
-    test_pixels(c, row, k0, CHUNK, sze, o, 0, TAPS_WINDOW, tb, use_id, grad_test);
+    test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, TAPS_WINDOW, tb, use_id, grad_test);
   else
-    test_pixels(c, row, k0, CHUNK, sze, o, 0, TAPS_GATHER, NULL, use_id, grad_test);
+    test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, TAPS_GATHER, NULL, use_id, grad_test);
 }
 
 #ifdef HUSH_HAVE_WINDOW
@@ -859,6 +872,24 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
 }
 #endif
 
+#ifdef HUSH_HAVE_DIAGONALS
+/* How a full chunk of pixels k0.. that is not contiguous reads its taps
+ * (x86-64-v3 builds): from two diagonals (TAPS_DIAGONALS, base[0] and
+ * base[1] relative to the span) when its footprints inside the image lie on
+ * them, else gathered. */
+static HUSH_ALWAYS_INLINE int span_diagonals(const build_ctx *c, const span_taps *o, int k0,
+                                             int32_t base[2]) {
+  _Static_assert(CHUNK == HUSH_DIAGONAL_CHUNK, "a chunk is the diagonals' chunk");
+  int32_t b[2];
+  const int n = hush__reproject_diagonals(o->origin + k0, NULL, o->inside + k0, c->W,
+                                          (size_t)c->W * (size_t)c->H, b);
+  if (!n) return TAPS_GATHER;
+  base[0] = b[0] - k0;
+  base[1] = b[1] - k0;
+  return n == 1 ? TAPS_CONTIGUOUS : TAPS_DIAGONALS;
+}
+#endif
+
 /* The span test: footprints, then the tap tests chunk by chunk (with the
  * depth slopes where they can matter). */
 static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin, int n,
@@ -885,10 +916,15 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
 #ifdef HUSH_HAVE_WINDOW
     const int mode =
         k1 - k0 < CHUNK ? TAPS_GATHER : chunk_mode(c, o, k0, contiguous, use_id, base, tb);
+#elif defined(HUSH_HAVE_DIAGONALS)
+    /* (x86-64-v3, 8-float vectors: two passes, and even a scalar search for
+     * the bases, were slower than the gathers: reproject stage 16.6-16.8 ->
+     * 17.3-17.4 ms with the search alone; AVX2 windows of 3 permutes per
+     * tap, too: 7.0 -> 7.3-7.8 ms on the bench frames) */
+    const int mode = k1 - k0 < CHUNK ? TAPS_GATHER
+                     : contiguous    ? TAPS_CONTIGUOUS
+                                     : span_diagonals(c, o, k0, base);
 #else
-    /* (x86-64-v3, 8-float vectors: two passes, and even the search for the
-     * bases, were slower than the gathers: reproject stage 16.6-16.8 ->
-     * 17.3-17.4 ms with the search alone) */
     const int mode = k1 - k0 < CHUNK || !contiguous ? TAPS_GATHER : TAPS_CONTIGUOUS;
 #endif
     test_chunk(c, row, k0, k1, sze, o, mode, base, (const float(*)[4][CHUNK])tb, use_id, 0);

@@ -194,6 +194,36 @@ static HUSH_ALWAYS_INLINE void span_run(const taa_row *t, const hush_reproject_p
   }
 }
 
+#ifdef HUSH_HAVE_DIAGONALS
+_Static_assert(TAA_RUN == HUSH_DIAGONAL_CHUNK, "a TAA chunk is the diagonals' chunk");
+/* TAA_RUN columns from x0 whose 2x2 blocks lie on two diagonals
+ * (reproject.h; base[] relative to x0): each tap picked from two vector
+ * loads instead of gathered. The same arithmetic as span_gather (a pixel
+ * without history weighs some tap by 0, and resolve_pixel ignores it), so
+ * the same result bit for bit. */
+static HUSH_ALWAYS_INLINE void span_diagonals(const taa_row *t, const hush_reproject_plan *plan,
+                                              const float *const *prev, size_t row, int W, int x0,
+                                              const int32_t base[2], const int32_t *restrict has,
+                                              const int clip, const int tonemap) {
+  const int32_t Wi = (int32_t)W, b0 = base[0], b1 = base[1];
+  const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
+  const int32_t *origin = plan->origin + row + x0;
+  const float *w0 = plan->w[0] + row + x0, *w1 = plan->w[1] + row + x0,
+              *w2 = plan->w[2] + row + x0, *w3 = plan->w[3] + row + x0;
+#pragma omp simd
+  for (int l = 0; l < TAA_RUN; l++) {
+    const int second = origin[l] == b1 + l;
+    const int32_t i = b0 + l, s = b1 + l;
+#define TAP(p, d) hush__select_bits(second, (p)[s + (d)], (p)[i + (d)])
+    const float hr = w0[l] * TAP(p0, 0) + w1[l] * TAP(p0, 1) + w2[l] * TAP(p0, Wi) + w3[l] * TAP(p0, Wi + 1);
+    const float hg = w0[l] * TAP(p1, 0) + w1[l] * TAP(p1, 1) + w2[l] * TAP(p1, Wi) + w3[l] * TAP(p1, Wi + 1);
+    const float hb = w0[l] * TAP(p2, 0) + w1[l] * TAP(p2, 1) + w2[l] * TAP(p2, Wi) + w3[l] * TAP(p2, Wi + 1);
+#undef TAP
+    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, has[l], hr, hg, hb);
+  }
+}
+#endif
+
 #ifdef HUSH_HAVE_WINDOW
 _Static_assert(TAA_RUN == HUSH_WINDOW_MAX, "a TAA chunk is one window");
 /* TAA_RUN columns from x0 whose 2x2 blocks form a window (reproject.h):
@@ -247,6 +277,13 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
     float tb[3][4][TAA_RUN] __attribute__((aligned(64)));
     if (hush__window_read(plan, row + (size_t)x, prev, 3, tb)) {
       span_window(t, plan, row, x, (const float(*)[4][TAA_RUN])tb, has, clip, tonemap);
+      continue;
+    }
+#elif defined(HUSH_HAVE_DIAGONALS)
+    int32_t base[2];
+    if (hush__reproject_diagonals(origin + x, kind + x, NULL, (int32_t)W, (size_t)W * plan->height,
+                                  base)) {
+      span_diagonals(t, plan, prev, row, W, x, base, has, clip, tonemap);
       continue;
     }
 #endif
