@@ -920,7 +920,7 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
     /* (x86-64-v3, 8-float vectors: two passes, and even a scalar search for
      * the bases, were slower than the gathers: reproject stage 16.6-16.8 ->
      * 17.3-17.4 ms with the search alone; AVX2 windows of 3 permutes per
-     * tap, too: 7.0 -> 7.3-7.8 ms on the bench frames) */
+     * tap, too: 6.9-7.1 -> 7.3-8.0 ms on the bench frames) */
     const int mode = k1 - k0 < CHUNK ? TAPS_GATHER
                      : contiguous    ? TAPS_CONTIGUOUS
                                      : span_diagonals(c, o, k0, base);
