@@ -173,56 +173,39 @@ static HUSH_ALWAYS_INLINE void span_gather(const taa_row *t, const hush_reprojec
   }
 }
 
-/* TAA_RUN columns from x0 whose block origins are j0, j0 + 1, ... (all
- * BILINEAR): the common case of smooth motion, where the history's 2x2
- * taps are contiguous vector loads instead of gathers. The same arithmetic
- * as span_gather, so the same result bit for bit. */
+/* TAA_RUN columns from x0 whose block origins are b0, b0 + 1, ... (the
+ * common case of smooth motion: the history's 2x2 taps are contiguous
+ * vector loads instead of gathers), or with `two` each on one of two such
+ * diagonals, b0 + l or b1 + l (reproject.h; each tap picked from two
+ * vector loads). `every`: every pixel is BILINEAR (has[] is not read).
+ * The same arithmetic as span_gather (a pixel without history weighs some
+ * tap by 0, and resolve_pixel ignores it), so the same result bit for
+ * bit. */
 enum { TAA_RUN = 16 };
 static HUSH_ALWAYS_INLINE void span_run(const taa_row *t, const hush_reproject_plan *plan,
                                         const float *const *prev, size_t row, int W, int x0,
-                                        int32_t j0, const int clip, const int tonemap) {
-  const float *p0 = prev[0] + j0, *p1 = prev[1] + j0, *p2 = prev[2] + j0;
-  const float *q0 = p0 + W, *q1 = p1 + W, *q2 = p2 + W;
-  const float *w0 = plan->w[0] + row + x0, *w1 = plan->w[1] + row + x0,
-              *w2 = plan->w[2] + row + x0, *w3 = plan->w[3] + row + x0;
-#pragma omp simd
-  for (int l = 0; l < TAA_RUN; l++) {
-    const float hr = w0[l] * p0[l] + w1[l] * p0[l + 1] + w2[l] * q0[l] + w3[l] * q0[l + 1];
-    const float hg = w0[l] * p1[l] + w1[l] * p1[l + 1] + w2[l] * q1[l] + w3[l] * q1[l + 1];
-    const float hb = w0[l] * p2[l] + w1[l] * p2[l + 1] + w2[l] * q2[l] + w3[l] * q2[l + 1];
-    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, 1, hr, hg, hb);
-  }
-}
-
-#ifdef HUSH_HAVE_DIAGONALS
-_Static_assert(TAA_RUN == HUSH_DIAGONAL_CHUNK, "a TAA chunk is the diagonals' chunk");
-/* TAA_RUN columns from x0 whose 2x2 blocks lie on two diagonals
- * (reproject.h; base[] relative to x0): each tap picked from two vector
- * loads instead of gathered. The same arithmetic as span_gather (a pixel
- * without history weighs some tap by 0, and resolve_pixel ignores it), so
- * the same result bit for bit. */
-static HUSH_ALWAYS_INLINE void span_diagonals(const taa_row *t, const hush_reproject_plan *plan,
-                                              const float *const *prev, size_t row, int W, int x0,
-                                              const int32_t base[2], const int32_t *restrict has,
-                                              const int clip, const int tonemap) {
-  const int32_t Wi = (int32_t)W, b0 = base[0], b1 = base[1];
+                                        int32_t b0, int32_t b1, const int32_t *restrict has,
+                                        const int two, const int every, const int clip,
+                                        const int tonemap) {
+  const int32_t Wi = (int32_t)W;
   const float *p0 = prev[0], *p1 = prev[1], *p2 = prev[2];
   const int32_t *origin = plan->origin + row + x0;
   const float *w0 = plan->w[0] + row + x0, *w1 = plan->w[1] + row + x0,
               *w2 = plan->w[2] + row + x0, *w3 = plan->w[3] + row + x0;
 #pragma omp simd
   for (int l = 0; l < TAA_RUN; l++) {
-    const int second = origin[l] == b1 + l;
+    const int second = two & (origin[l] == b1 + l);
     const int32_t i = b0 + l, s = b1 + l;
-#define TAP(p, d) hush__select_bits(second, (p)[s + (d)], (p)[i + (d)])
+#define TAP(p, d) (two ? hush__select_bits(second, (p)[s + (d)], (p)[i + (d)]) : (p)[i + (d)])
     const float hr = w0[l] * TAP(p0, 0) + w1[l] * TAP(p0, 1) + w2[l] * TAP(p0, Wi) + w3[l] * TAP(p0, Wi + 1);
     const float hg = w0[l] * TAP(p1, 0) + w1[l] * TAP(p1, 1) + w2[l] * TAP(p1, Wi) + w3[l] * TAP(p1, Wi + 1);
     const float hb = w0[l] * TAP(p2, 0) + w1[l] * TAP(p2, 1) + w2[l] * TAP(p2, Wi) + w3[l] * TAP(p2, Wi + 1);
 #undef TAP
-    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, has[l], hr, hg, hb);
+    resolve_pixel(t, clip, tonemap, x0 + l, x0 + l - 1, x0 + l + 1, every ? 1 : has[l], hr, hg,
+                  hb);
   }
 }
-#endif
+
 
 #ifdef HUSH_HAVE_WINDOW
 _Static_assert(TAA_RUN == HUSH_WINDOW_MAX, "a TAA chunk is one window");
@@ -266,7 +249,7 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
       run &= has[l] & (j[l] == origin[x] + l);
     }
     if (run) {
-      span_run(t, plan, prev, row, W, x, j[0], clip, tonemap);
+      span_run(t, plan, prev, row, W, x, j[0], j[0], has, 0, 1, clip, tonemap);
       continue;
     }
     if (n < TAA_RUN) {
@@ -280,10 +263,16 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
       continue;
     }
 #elif defined(HUSH_HAVE_DIAGONALS)
+    _Static_assert(TAA_RUN == HUSH_DIAGONAL_CHUNK, "a TAA chunk is the diagonals' chunk");
     int32_t base[2];
-    if (hush__reproject_diagonals(origin + x, kind + x, NULL, (int32_t)W, (size_t)W * plan->height,
-                                  base)) {
-      span_diagonals(t, plan, prev, row, W, x, base, has, clip, tonemap);
+    const int diagonals = hush__reproject_diagonals(origin + x, kind + x, NULL, (int32_t)W,
+                                                    (size_t)W * plan->height, base);
+    if (diagonals == 2) {
+      span_run(t, plan, prev, row, W, x, base[0], base[1], has, 1, 0, clip, tonemap);
+      continue;
+    }
+    if (diagonals == 1) {
+      span_run(t, plan, prev, row, W, x, base[0], base[0], has, 0, 0, clip, tonemap);
       continue;
     }
 #endif
