@@ -206,7 +206,6 @@ static HUSH_ALWAYS_INLINE void span_run(const taa_row *t, const hush_reproject_p
   }
 }
 
-
 #ifdef HUSH_HAVE_WINDOW
 _Static_assert(TAA_RUN == HUSH_WINDOW_MAX, "a TAA chunk is one window");
 /* TAA_RUN columns from x0 whose 2x2 blocks form a window (reproject.h):
