@@ -898,8 +898,14 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
                                          const int use_id, const int grad_test) {
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   span_footprints(c->W, c->H, spx, spy, o, n);
+  const hush_gbuffer *pg = c->prev;
+  const float *const prev_planes[WINDOW_PLANES] = {pg->depth, pg->normal[0], pg->normal[1],
+                                                   pg->normal[2], use_id ? pg->id : NULL};
+  const size_t size = (size_t)c->W * (size_t)c->H;
   for (int k0 = 0; k0 < n; k0 += CHUNK) {
     const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
+    hush__prefetch_taps(prev_planes, WINDOW_PLANES, hush__prefetch_origin(o->origin, k0, n), c->W,
+                        size);
     int contiguous = 1;
     for (int k = k0; k < k1; k++)
       contiguous &= o->inside[k] & (o->origin[k] == o->origin[k0] + (k - k0));

@@ -287,6 +287,42 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
   return w[0] * p[o] + w[1] * p[o + 1] + w[2] * p[o + width] + w[3] * p[o + width + 1];
 }
 
+/* ---- prefetching the history's taps ----------------------------------------
+ * A row's chunk loops (the plan's tap tests, the blends, TAA) read the
+ * previous frame's planes at each footprint's two rows: with 5 to 7 planes
+ * that is 10 to 14 streams at once beside the current frame's, more than
+ * the hardware prefetchers follow, and the loads waited on L2 and L3 (the
+ * samples of a profile of the plan's tap tests piled on them). Each chunk
+ * asks for the lines of the chunk HUSH_PREFETCH_AHEAD pixels further on
+ * (1280x720, 2 threads, Zen 3, medians of alternated runs; docs/svgf-speed.md,
+ * twenty-first round): svgf's reprojection 7.9 -> 7.6 ms, its blend 5.3 ->
+ * 4.9, TAA's resolve 5.8 -> 4.9, bmfr's phase III 3.0 -> 2.75. 16 pixels
+ * ahead was slower, 48 or 64 the same. */
+#define HUSH_PREFETCH_AHEAD 32
+
+/* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped), j
+ * clamped into planes of `size` floats, so that no address outside them
+ * is formed (a prefetch does not fault, but the pointer would be
+ * undefined). */
+static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, int n, int64_t j,
+                                                   int32_t W, size_t size) {
+  const int64_t last = (int64_t)size - W - 1;
+  j = j < 0 ? 0 : j > last ? last : j;
+  for (int p = 0; p < n; p++)
+    if (planes[p]) {
+      __builtin_prefetch(planes[p] + j);
+      __builtin_prefetch(planes[p] + j + W);
+    }
+}
+
+/* The footprint origin HUSH_PREFETCH_AHEAD pixels after pixel k of a run
+ * of n origins: its own, or past the run's end the last one's moved on by
+ * as many pixels (the next run, under smooth motion). */
+static inline int64_t hush__prefetch_origin(const int32_t *origin, int k, int n) {
+  const int kp = k + HUSH_PREFETCH_AHEAD;
+  return kp < n ? (int64_t)origin[kp] : (int64_t)origin[n - 1] + (kp - (n - 1));
+}
+
 /* ---- a chunk of footprints on two diagonals --------------------------------
  * Under smooth motion a chunk's footprints mostly follow each other
  * (origin = base + k for pixel k), and where the motion carries them a

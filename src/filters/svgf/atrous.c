@@ -713,6 +713,9 @@ static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __m256i m,
   }
 }
 
+/* Pixels past a row's rightmost bottom tap whose lines avx_vector prefetches. */
+#define SVGF_PREFETCH_AHEAD 32
+
 /* The 8 pixels from x (n of them, n < 8 only at the row's end). A vector
  * without a surface skips its taps as the AVX-512 loop's does. */
 static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, const float *vu,
@@ -727,6 +730,29 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   avx_px p;
   avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p);
   const avx_row rx = avx_row_at(r, x, VALIDITY);
+  /* The taps' bottom row (y + 2 step) is the one this row reads first of
+   * all rows (the others were bottom rows of earlier ones); its lines
+   * SVGF_PREFETCH_AHEAD pixels past the rightmost tap are asked for ahead
+   * of its 9 streams, which the hardware prefetchers did not keep up
+   * with: a-trous 40.3-40.6 -> 38.4-39.2 ms at 1280x720 on 2 threads
+   * (Zen 3; docs/svgf-speed.md, twenty-first round; the tap rows y + step
+   * as well, or 64 or 128 pixels ahead: no better). As integers: past the
+   * last row the address lies outside the planes (a prefetch does not
+   * fault; the pointer would be undefined). */
+  const uintptr_t ahead =
+      (uintptr_t)((pairs[npairs - 1].a + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float));
+#define PREFETCH(P) __builtin_prefetch((const void *)((uintptr_t)(P) + ahead))
+  PREFETCH(rx.z);
+  PREFETCH(rx.n0);
+  PREFETCH(rx.n1);
+  PREFETCH(rx.n2);
+  PREFETCH(rx.l);
+  PREFETCH(rx.c0);
+  PREFETCH(rx.c1);
+  PREFETCH(rx.c2);
+  PREFETCH(rx.v);
+  if (VALIDITY) PREFETCH(rx.ok);
+#undef PREFETCH
   if (p.surface || c->bias < S_FLOOR) {
     /* Every tap's exponent first, then the weights and sums in the same
      * order: the same operations as one tap after another, so the same
