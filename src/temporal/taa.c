@@ -243,6 +243,7 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
   for (int x = 1; x < W - 1; x += TAA_RUN) {
     const int n = W - 1 - x < TAA_RUN ? W - 1 - x : TAA_RUN;
     hush__prefetch_taps(prev, 3, hush__prefetch_origin(origin, x, W), W, size);
+    hush__prefetch_row(plan, NULL, 0, row + (size_t)x);
     int run = n == TAA_RUN;
     for (int l = 0; l < n; l++) {
       has[l] = kind[x + l] == HUSH_FOOTPRINT_BILINEAR;
