@@ -303,11 +303,12 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
 /* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped), j
  * clamped into planes of `size` floats, so that no address outside them
  * is formed (a prefetch does not fault, but the pointer would be
- * undefined). */
+ * undefined; in a 1-row plane j + W is one past the end, which C allows). */
 static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, int n, int64_t j,
                                                    int32_t W, size_t size) {
   const int64_t last = (int64_t)size - W - 1;
-  j = j < 0 ? 0 : j > last ? last : j;
+  j = j > last ? last : j;
+  j = j < 0 ? 0 : j;
   for (int p = 0; p < n; p++)
     if (planes[p]) {
       __builtin_prefetch(planes[p] + j);
