@@ -8,6 +8,8 @@
 #ifndef HUSH_CORE_STREAM_H
 #define HUSH_CORE_STREAM_H
 
+#include "core/vecmath.h" /* HUSH_ALWAYS_INLINE */
+
 #include <stddef.h>
 #include <stdint.h>
 #include <string.h>
@@ -15,6 +17,16 @@
 #if defined(__x86_64__)
 #include <immintrin.h> /* SSE2 at least: part of x86-64 */
 #endif
+
+/* Asks for the cache line at p + bytes ahead of its use. Computed on
+ * integers: the address may lie outside the object p points into (past a
+ * row's or the frame's end, before a margin), which a prefetch does not
+ * fault on but which a pointer could not be formed to. Always inlined: GCC
+ * finds an out-of-line copy free of side effects and deletes its calls
+ * (every prefetch of the reprojection plan was gone). */
+static HUSH_ALWAYS_INLINE void hush__prefetch(const void *p, ptrdiff_t bytes) {
+  __builtin_prefetch((const void *)((uintptr_t)p + (uintptr_t)bytes));
+}
 
 /* dst[0..bytes) = src[0..bytes) for bytes < 64: two overlapping copies of
  * a fixed size each (a branch on the size class), no loop. gcc turned the

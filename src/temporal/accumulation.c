@@ -294,12 +294,11 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
   const float *const history[7] = {b->pc[0], nc > 1 ? b->pc[1] : NULL, nc > 2 ? b->pc[2] : NULL,
                                    nc > 3 ? b->pc[3] : NULL, mom ? b->pm1 : NULL,
                                    mom ? b->pm2 : NULL, b->pa};
-  const size_t size = (size_t)W * b->plan->height;
   const float *const samples[4] = {b->sample[0], nc > 1 ? b->sample[1] : NULL,
                                    nc > 2 ? b->sample[2] : NULL, nc > 3 ? b->sample[3] : NULL};
   for (int x0 = 0; x0 < W; x0 += CHUNK) {
     const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
-    hush__prefetch_taps(history, 7, hush__prefetch_origin(origin, x0, W), W, size);
+    hush__prefetch_taps(history, 7, hush__prefetch_origin(origin, x0, W), W);
     hush__prefetch_row(b->plan, samples, nc, row + (size_t)x0);
     int contiguous = 1;
     for (int x = x0; x < x1; x++)
@@ -724,10 +723,9 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
   const hush_reproject_plan *plan = t->plan;
   const int32_t *origin = plan->origin + row;
   const uint8_t *kind = plan->kind + row;
-  const size_t size = (size_t)W * plan->height;
   for (int x0 = 0; x0 < W; x0 += CHUNK) {
     const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
-    hush__prefetch_taps(prev, nc, hush__prefetch_origin(origin, x0, W), W, size);
+    hush__prefetch_taps(prev, nc, hush__prefetch_origin(origin, x0, W), W);
     hush__prefetch_row(plan, sample, nc, row + (size_t)x0);
     if (x1 - x0 < CHUNK) {
       tblend_pixels(t, prev, sample, out, row, x0, x1 - x0, 0, 0, MODE_GATHER, NULL, nc);

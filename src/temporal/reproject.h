@@ -47,6 +47,7 @@
 
 #include "hush.h"
 #include "core/image.h"
+#include "core/stream.h" /* hush__prefetch */
 #include "core/vecmath.h" /* HUSH_ALWAYS_INLINE, hush__select_bits, hush__floorf_vec */
 
 #include <math.h>
@@ -300,19 +301,16 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
  * ahead was slower, 48 or 64 the same. */
 #define HUSH_PREFETCH_AHEAD 32
 
-/* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped), j
- * clamped into planes of `size` floats, so that no address outside them
- * is formed (a prefetch does not fault, but the pointer would be
- * undefined; in a 1-row plane j + W is one past the end, which C allows). */
+/* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped); j may
+ * lie outside the planes (hush__prefetch). */
 static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, int n, int64_t j,
-                                                   int32_t W, size_t size) {
-  const int64_t last = (int64_t)size - W - 1;
-  j = j > last ? last : j;
-  j = j < 0 ? 0 : j;
+                                                   int32_t W) {
+  const ptrdiff_t top = (ptrdiff_t)j * (ptrdiff_t)sizeof(float);
+  const ptrdiff_t bottom = top + (ptrdiff_t)W * (ptrdiff_t)sizeof(float);
   for (int p = 0; p < n; p++)
     if (planes[p]) {
-      __builtin_prefetch(planes[p] + j);
-      __builtin_prefetch(planes[p] + j + W);
+      hush__prefetch(planes[p], top);
+      hush__prefetch(planes[p], bottom);
     }
 }
 
@@ -324,18 +322,17 @@ static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, i
 #define HUSH_PREFETCH_ROW_AHEAD 64
 
 /* Prefetches pixel i + HUSH_PREFETCH_ROW_AHEAD of the plan's origins and
- * weights and of planes[0..n-1] (NULL: skipped). As integers: near the
- * frame's end the address may lie past the arrays (a prefetch does not
- * fault; the pointer would be undefined). */
+ * weights and of planes[0..n-1] (NULL: skipped); near the frame's end it
+ * lies past them (hush__prefetch). */
 static HUSH_ALWAYS_INLINE void hush__prefetch_row(const hush_reproject_plan *plan,
                                                   const float *const *planes, int n, size_t i) {
-  const size_t q = i + HUSH_PREFETCH_ROW_AHEAD;
-#define HUSH_PREFETCH_AT(P) __builtin_prefetch((const void *)((uintptr_t)(P) + q * sizeof *(P)))
-  HUSH_PREFETCH_AT(plan->origin);
-  for (int t = 0; t < 4; t++) HUSH_PREFETCH_AT(plan->w[t]);
+  const ptrdiff_t q = (ptrdiff_t)(i + HUSH_PREFETCH_ROW_AHEAD);
+  _Static_assert(sizeof *plan->origin == sizeof(float), "origins and weights alike");
+  const ptrdiff_t bytes = q * (ptrdiff_t)sizeof(float);
+  hush__prefetch(plan->origin, bytes);
+  for (int t = 0; t < 4; t++) hush__prefetch(plan->w[t], bytes);
   for (int p = 0; p < n; p++)
-    if (planes[p]) HUSH_PREFETCH_AT(planes[p]);
-#undef HUSH_PREFETCH_AT
+    if (planes[p]) hush__prefetch(planes[p], bytes);
 }
 
 /* The footprint origin HUSH_PREFETCH_AHEAD pixels after pixel k of a run

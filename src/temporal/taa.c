@@ -239,10 +239,9 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
   const uint8_t *kind = plan->kind + row;
   const int32_t *origin = plan->origin + row;
   int32_t j[TAA_RUN], has[TAA_RUN];
-  const size_t size = (size_t)W * plan->height;
   for (int x = 1; x < W - 1; x += TAA_RUN) {
     const int n = W - 1 - x < TAA_RUN ? W - 1 - x : TAA_RUN;
-    hush__prefetch_taps(prev, 3, hush__prefetch_origin(origin, x, W), W, size);
+    hush__prefetch_taps(prev, 3, hush__prefetch_origin(origin, x, W), W);
     hush__prefetch_row(plan, NULL, 0, row + (size_t)x);
     int run = n == TAA_RUN;
     for (int l = 0; l < n; l++) {

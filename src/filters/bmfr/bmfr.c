@@ -31,6 +31,7 @@
  * Deterministic and independent of the thread count: every block is fitted
  * on its own and the noise depends on the frame index only.
  */
+#include "core/stream.h" /* hush__prefetch */
 #include "filters/albedo.h"
 #include "filters/bmfr/adaptive.h"
 #include "filters/emission.h"
@@ -362,13 +363,12 @@ static void gather_strip(const float *plane, int W, const block_geom *g, int cou
      * row's run is a new stream of 8 lines, too short for the hardware
      * prefetchers to pick up (fit stage 13.0-13.25 -> 12.55-13.0 ms on 2
      * threads, 24.2-25.0 -> 23.5-24.3 on one; 1280x720, Zen 3, alternated
-     * runs; 8 rows ahead the same). As integers: a margin column may lie
-     * before the row (x0 < 0), which a prefetch does not fault on. */
+     * runs; 8 rows ahead the same). */
     if (r + GATHER_AHEAD < B) {
-      const uintptr_t ahead = (uintptr_t)(plane + (size_t)g[0].ys[r + GATHER_AHEAD] * W);
+      const float *ahead = plane + (size_t)g[0].ys[r + GATHER_AHEAD] * W;
       const int xa = g[0].x0 + g[0].c0, xe = g[count - 1].x0 + g[count - 1].c1;
       for (int x = xa; x < xe + 16; x += 16)
-        __builtin_prefetch((const void *)(ahead + (uintptr_t)(ptrdiff_t)x * sizeof(float)));
+        hush__prefetch(ahead, (ptrdiff_t)x * (ptrdiff_t)sizeof(float));
     }
     for (int k = 0; k < count; k++) {
       const block_geom *b = &g[k];

@@ -736,23 +736,12 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
    * of its 9 streams, which the hardware prefetchers did not keep up
    * with: a-trous 40.3-40.6 -> 38.4-39.2 ms at 1280x720 on 2 threads
    * (Zen 3; docs/svgf-speed.md, twenty-first round; the tap rows y + step
-   * as well, or 64 or 128 pixels ahead: no better). As integers: past the
-   * last row the address lies outside the planes (a prefetch does not
-   * fault; the pointer would be undefined). */
-  const uintptr_t ahead =
-      (uintptr_t)((pairs[npairs - 1].a + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float));
-#define PREFETCH(P) __builtin_prefetch((const void *)((uintptr_t)(P) + ahead))
-  PREFETCH(rx.z);
-  PREFETCH(rx.n0);
-  PREFETCH(rx.n1);
-  PREFETCH(rx.n2);
-  PREFETCH(rx.l);
-  PREFETCH(rx.c0);
-  PREFETCH(rx.c1);
-  PREFETCH(rx.c2);
-  PREFETCH(rx.v);
-  if (VALIDITY) PREFETCH(rx.ok);
-#undef PREFETCH
+   * as well, or 64 or 128 pixels ahead: no better). Past the last row the
+   * address lies outside the planes (hush__prefetch). */
+  const ptrdiff_t ahead = (pairs[npairs - 1].a + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float);
+  const float *const ahead_of[9] = {rx.z, rx.n0, rx.n1, rx.n2, rx.l, rx.c0, rx.c1, rx.c2, rx.v};
+  for (int k = 0; k < 9; k++) hush__prefetch(ahead_of[k], ahead);
+  if (VALIDITY) hush__prefetch(rx.ok, ahead);
   if (p.surface || c->bias < S_FLOOR) {
     /* Every tap's exponent first, then the weights and sums in the same
      * order: the same operations as one tap after another, so the same

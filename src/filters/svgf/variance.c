@@ -4,6 +4,8 @@
  */
 #include "filters/svgf/variance.h"
 
+#include "core/stream.h" /* hush__prefetch */
+
 #define BLOCK 128
 #define R SVGF_SPATIAL_VARIANCE_RADIUS
 
@@ -375,14 +377,14 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
        * rendered frames (2 threads, 1280x720, Zen 3, alternated runs),
        * unchanged on the bench's frames, where fewer pixels are young */
       const avx_vpair *last = &pairs[NPAIRS - 1];
-      const uintptr_t ga = (uintptr_t)((last->ga + 32) * (ptrdiff_t)sizeof(float));
-      const uintptr_t ma = (uintptr_t)((last->ma + 32) * (ptrdiff_t)sizeof(float));
-      __builtin_prefetch((const void *)((uintptr_t)(z + x) + ga));
-      __builtin_prefetch((const void *)((uintptr_t)(n0 + x) + ga));
-      __builtin_prefetch((const void *)((uintptr_t)(n1 + x) + ga));
-      __builtin_prefetch((const void *)((uintptr_t)(n2 + x) + ga));
-      __builtin_prefetch((const void *)((uintptr_t)(m1 + x) + ma));
-      __builtin_prefetch((const void *)((uintptr_t)(m2 + x) + ma));
+      const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
+      const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
+      hush__prefetch(z + x, ga);
+      hush__prefetch(n0 + x, ga);
+      hush__prefetch(n1 + x, ga);
+      hush__prefetch(n2 + x, ga);
+      hush__prefetch(m1 + x, ma);
+      hush__prefetch(m2 + x, ma);
     }
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
       variance_row_valid(g, m, age, min_age, var, y, x, n, poly, SVGF_NORMAL_EXP);
