@@ -1521,6 +1521,119 @@ static int color_only_same(hush_accum *with, hush_accum *without, const float *v
   return same;
 }
 
+/* The plan's rule (reproject.h) for pixel i, written out tap by tap as
+ * Higginson §1.3.1 states it, without the depth gradient: the bilinear
+ * taps that are on-screen, consistent and of weight >= MIN_WEIGHT; else the
+ * consistent on-screen taps of the 3x3 around the pixel containing the
+ * back-projected point; else none. The data of test_module_plan_rule keep
+ * every depth test far from its tolerance, so the expected depth may be
+ * taken as this frame's. */
+static int rule_tap_ok(const gpair *g, size_t i, int xt, int yt) {
+  if (xt < 0 || xt >= g->W || yt < 0 || yt >= g->H) return 0;
+  const size_t j = (size_t)yt * (size_t)g->W + (size_t)xt;
+  if (g->cid[i] != g->pid[j]) return 0;
+  if (!(g->cz[i] > 0.0f)) return !(g->pz[j] > 0.0f);
+  if (!(g->pz[j] > 0.0f) || fabsf(g->pz[j] - g->cz[i]) > 0.1f * g->cz[i]) return 0;
+  const float d = g->cn[0][i] * g->pn[0][j] + g->cn[1][i] * g->pn[1][j] + g->cn[2][i] * g->pn[2][j];
+  return d >= 0.9f;
+}
+
+/* light: the 3x3 footprint took a bilinear tap whose weight was too small
+ * for the 2x2 one. */
+static void rule_pixel(const gpair *g, int x, int y, int *kind, unsigned *mask, int32_t *origin,
+                       int *light) {
+  const int W = g->W, H = g->H;
+  const size_t i = (size_t)y * (size_t)W + (size_t)x;
+  const float px = (float)x + 0.5f + g->mot[0][i], py = (float)y + 0.5f + g->mot[1][i];
+  const int x0 = (int)floorf(px - 0.5f), y0 = (int)floorf(py - 0.5f);
+  float bw[4];
+  hush__reproject_bilinear(px - 0.5f - (float)x0, py - 0.5f - (float)y0, bw);
+  unsigned m = 0;
+  for (int t = 0; t < 4; t++)
+    if (bw[t] >= HUSH_REPROJECT_MIN_WEIGHT && rule_tap_ok(g, i, x0 + (t & 1), y0 + (t >> 1)))
+      m |= 1u << t;
+  if (m) {
+    int bx = x0, by = y0;
+    if (bx < 0) bx = 0, m = (m & 0xau) >> 1;
+    else if (bx > W - 2) bx = W - 2, m = (m & 0x5u) << 1;
+    if (by < 0) by = 0, m = (m & 0xcu) >> 2;
+    else if (by > H - 2) by = H - 2, m = (m & 0x3u) << 2;
+    *kind = HUSH_FOOTPRINT_BILINEAR, *mask = m, *origin = by * W + bx, *light = 0;
+    return;
+  }
+  const int cx = (int)floorf(px), cy = (int)floorf(py);
+  for (int t = 0; t < 9; t++)
+    if (rule_tap_ok(g, i, cx - 1 + t % 3, cy - 1 + t / 3)) m |= 1u << t;
+  *light = 0;
+  for (int t = 0; t < 4; t++)
+    if (bw[t] < HUSH_REPROJECT_MIN_WEIGHT)
+      *light |= m >> ((y0 + (t >> 1) - (cy - 1)) * 3 + (x0 + (t & 1) - (cx - 1))) & 1u;
+  *kind = m ? HUSH_FOOTPRINT_3X3 : HUSH_FOOTPRINT_NONE;
+  *mask = m;
+  *origin = m ? (cy - 1) * W + (cx - 1) : 0;
+}
+
+/* The built plan (span tests, vector paths, plan_pixel's shortcuts) against
+ * rule_pixel on a G-buffer with every kind of footprint: disocclusions
+ * whose bilinear taps all fail next to 3x3 taps that pass, points on a tap
+ * centre (weights below MIN_WEIGHT, which the 3x3 must still try),
+ * footprints over the borders, background, other ids and normals. */
+static void test_module_plan_rule(hush_device dev, int W, int H) {
+  const size_t n = (size_t)W * H;
+  gpair g;
+  gpair_init(&g, W, H, 0.0f, 0.0f);
+  uint32_t rng = 1000;
+  const float depths[3] = {2.0f, 3.0f, 4.0f};
+  for (size_t i = 0; i < n; i++) {
+    /* depths from a few values 1.5x apart, so no test sits near 10 % */
+    g.cz[i] = depths[(int)(3.0f * urand(&rng)) % 3];
+    g.pz[i] = urand(&rng) < 0.6f ? g.cz[i] : depths[(int)(3.0f * urand(&rng)) % 3];
+    if (urand(&rng) < 0.05f) g.cz[i] = 0.0f;
+    if (urand(&rng) < 0.05f) g.pz[i] = 0.0f;
+    if (urand(&rng) < 0.05f) g.pid[i] = 2.0f;
+    if (urand(&rng) < 0.05f) g.pn[2][i] = 0.0f, g.pn[0][i] = 1.0f;
+    /* fractions k/8 + 1/16 (every bilinear weight >= 1/256), or 0 */
+    float m[2];
+    for (int a = 0; a < 2; a++) {
+      const float q = urand(&rng);
+      m[a] = floorf(6.0f * urand(&rng)) - 3.0f + (q < 0.15f ? 0.0f : floorf(8.0f * q) / 8.0f + 0.0625f);
+    }
+    if (urand(&rng) < 0.3f) m[0] = m[1] = 0.3125f; /* runs of consecutive footprints */
+    g.mot[0][i] = m[0];
+    g.mot[1][i] = m[1];
+  }
+  hush_reproject_plan plan;
+  REQUIRE(hush__reproject_plan_init(dev, &plan, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_reproject_params p;
+  hush__reproject_params_default(&p);
+  p.depth_gradient = 0.0f;
+  REQUIRE(gpair_build(dev, &g, &plan, &p) == HUSH_OK);
+  size_t bad = 0, count[3] = {0, 0, 0}, light = 0;
+  for (int y = 0; y < H; y++)
+    for (int x = 0; x < W; x++) {
+      const size_t i = (size_t)y * W + x;
+      int kind;
+      unsigned mask;
+      int32_t origin;
+      int lt;
+      rule_pixel(&g, x, y, &kind, &mask, &origin, &lt);
+      count[kind]++;
+      light += (size_t)lt;
+      if (plan.kind[i] != kind || plan.mask[i] != mask || (kind && plan.origin[i] != origin)) {
+        if (bad++ < 5)
+          fprintf(stderr, "plan (%d, %d): kind %d mask %x origin %d, rule: %d %x %d\n", x, y,
+                  plan.kind[i], plan.mask[i], plan.origin[i], kind, mask, origin);
+      }
+    }
+  CHECK_MSG(bad == 0, "%dx%d: %zu of %zu pixels differ from the rule", W, H, bad, n);
+  CHECK_MSG(count[0] > 0 && count[1] > 0 && count[2] > n / 100,
+            "every kind of footprint: %zu none, %zu bilinear, %zu 3x3", count[0], count[1],
+            count[2]);
+  CHECK_MSG(light > 0, "no 3x3 footprint took a tap too light for the 2x2 one");
+  hush__reproject_plan_free(&plan);
+  gpair_free(&g);
+}
+
 static void test_module_fast_paths(hush_device dev, int W, int H, int smooth) {
   const size_t n = (size_t)W * H;
   gpair g;
@@ -2198,6 +2311,8 @@ int main(void) {
   test_module_fast_paths(dev, 2, 2, 0);
   test_module_fast_paths(dev, 160, 48, 1);
   test_module_plan_layouts(dev);
+  test_module_plan_rule(dev, 300, 40);
+  test_module_plan_rule(dev, 37, 9);
   test_module_window16();
   test_module_diagonals();
   test_module_emission_rows(dev);

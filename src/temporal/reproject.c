@@ -528,9 +528,19 @@ static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float 
     } else if (c->fallback) {
       /* 3x3 around the pixel that contains p. */
       const int cx = (int)floorf(px), cy = (int)floorf(py);
+      /* The bilinear taps lie among these (x0 is cx - 1 or cx), and those
+       * of them with their weight were tested above (or by the span test,
+       * bit for bit) and failed: tap_ok gives the same answer here, its
+       * offsets (xt - sx against (t & 1) - fx) being the same floats. On
+       * rendered frames most open pixels are disocclusions that come here
+       * (13 % of the classroom's). */
+      unsigned failed = 0;
+      for (int t = 0; t < 4; t++)
+        if (bw[t] >= HUSH_REPROJECT_MIN_WEIGHT)
+          failed |= 1u << ((y0 + (t >> 1) - (cy - 1)) * 3 + (x0 + (t & 1) - (cx - 1)));
       for (int t = 0; t < 9; t++) {
         const int xt = cx - 1 + t % 3, yt = cy - 1 + t / 3;
-        if (xt < 0 || xt >= W || yt < 0 || yt >= H) continue;
+        if (xt < 0 || xt >= W || yt < 0 || yt >= H || (failed >> t & 1u)) continue;
         if (tap_ok(c, &r, (int32_t)yt * W + xt, (float)xt - sx, (float)yt - sy))
           mask |= 1u << t;
       }
@@ -907,6 +917,30 @@ static HUSH_ALWAYS_INLINE void prefetch_inputs(const build_ctx *c, size_t i, con
     if (planes[p]) hush__prefetch(planes[p], (ptrdiff_t)i * (ptrdiff_t)sizeof(float));
 }
 
+/* Pixels ahead of a chunk whose row below prefetch_below asks for. */
+#define BELOW_AHEAD 64
+
+/*
+ * Prefetches pixel i + BELOW_AHEAD of the row below (past the frame's end:
+ * outside the planes, hush__prefetch) in the planes span_slopes reads
+ * there. That row is read for the first time by the slopes of a chunk with
+ * a pixel left open or a tap to retry, and on rendered frames those are
+ * common (31 % of the classroom's chunks): a profile put a tenth of
+ * build_row's samples on the loads of that row's normals. Reprojection on
+ * the classroom's frames 23.2 -> 21.7 ms on one thread, 12.5 -> 12.1 on two;
+ * the bench's frames, with few such chunks, unchanged (1280x720, Zen 3,
+ * alternated runs; docs/svgf-speed.md, twenty-second round). The lines are
+ * the next row's own inputs as well.
+ */
+static HUSH_ALWAYS_INLINE void prefetch_below(const build_ctx *c, size_t i, const int use_id) {
+  const hush_gbuffer *g = &c->in->cur;
+  const float *const planes[5] = {g->depth, g->normal[0], g->normal[1], g->normal[2],
+                                  use_id ? g->id : NULL};
+  const ptrdiff_t bytes = (ptrdiff_t)(i + (size_t)c->W + BELOW_AHEAD) * (ptrdiff_t)sizeof(float);
+  for (int p = 0; p < 5; p++)
+    if (planes[p]) hush__prefetch(planes[p], bytes);
+}
+
 /* The span test: footprints, then the tap tests chunk by chunk (with the
  * depth slopes where they can matter). */
 static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin, int n,
@@ -922,6 +956,7 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
     const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
     hush__prefetch_taps(prev_planes, WINDOW_PLANES, hush__prefetch_origin(o->origin, k0, n), c->W);
     prefetch_inputs(c, row + (size_t)k0 + SPAN, use_id);
+    prefetch_below(c, row + (size_t)k0, use_id);
     int contiguous = 1;
     for (int k = k0; k < k1; k++)
       contiguous &= o->inside[k] & (o->origin[k] == o->origin[k0] + (k - k0));
