@@ -441,6 +441,37 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
 }
 
 /*
+ * A superset of the 3x3 fallback's taps (bit t: tap (cx - 1 + t % 3,
+ * cy - 1 + t / 3)) that tap_ok passes, from their depths alone, for a pixel
+ * whose depth slopes are given (or the gradient test is off): on-screen,
+ * background or not as the pixel is, and for a surface within the
+ * gradient's tolerance, widened by 1e-4 of itself so that no rounding of
+ * tap_ok's own sum can pass a tap this leaves out. Most open pixels are
+ * disocclusions whose every tap fails on its depth: one branch-free pass
+ * over 9 depths, and tap_ok only for the few candidates (classroom frames,
+ * one thread: the reprojection 21.4 -> 20.9 ms).
+ */
+static unsigned fallback_depths(const build_ctx *c, const pixel_ref *r, int cx, int cy, float sx,
+                                float sy) {
+  const float *pz = c->prev->depth;
+  const int W = c->W, H = c->H;
+  const float gx = r->slopes ? r->gx : 0.0f, gy = r->slopes ? r->gy : 0.0f;
+  unsigned pass = 0;
+  for (int t = 0; t < 9; t++) {
+    const int xt = cx - 1 + t % 3, yt = cy - 1 + t / 3;
+    const int in = (xt >= 0) & (xt < W) & (yt >= 0) & (yt < H);
+    const float zt = pz[(yt * W + xt) & -(int32_t)in]; /* off-screen: any tap, ignored */
+    const float dz = fabsf(zt - r->ze);
+    const float tol = r->tolz + gx * fabsf((float)xt - sx) + gy * fabsf((float)yt - sy);
+    const int surface = zt > 0.0f;
+    /* NaN passes, as in tap_ok */
+    const int ok = r->bg ? !surface : surface & ((dz > tol * 1.0001f) == 0);
+    pass |= (unsigned)(ok & in) << t;
+  }
+  return pass;
+}
+
+/*
  * The full per-pixel rule, for any pixel: the bilinear footprint of the
  * back-projected point (px, py) with each tap tested by tap_ok (the depth
  * gradient computed lazily), moved inside the image when it overhangs the
@@ -538,9 +569,12 @@ static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float 
       for (int t = 0; t < 4; t++)
         if (bw[t] >= HUSH_REPROJECT_MIN_WEIGHT)
           failed |= 1u << ((y0 + (t >> 1) - (cy - 1)) * 3 + (x0 + (t & 1) - (cx - 1)));
-      for (int t = 0; t < 9; t++) {
+      unsigned cand = 0x1ffu & ~failed;
+      if (r.slopes || !(c->grad > 0.0f)) cand &= fallback_depths(c, &r, cx, cy, sx, sy);
+      for (; cand; cand &= cand - 1) {
+        const int t = __builtin_ctz(cand);
         const int xt = cx - 1 + t % 3, yt = cy - 1 + t / 3;
-        if (xt < 0 || xt >= W || yt < 0 || yt >= H || (failed >> t & 1u)) continue;
+        if (xt < 0 || xt >= W || yt < 0 || yt >= H) continue;
         if (tap_ok(c, &r, (int32_t)yt * W + xt, (float)xt - sx, (float)yt - sy))
           mask |= 1u << t;
       }
