@@ -444,12 +444,13 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
  * A superset of the 3x3 fallback's taps (bit t: tap (cx - 1 + t % 3,
  * cy - 1 + t / 3)) that tap_ok passes, from their depths alone, for a pixel
  * whose depth slopes are given (or the gradient test is off): on-screen,
- * background or not as the pixel is, and for a surface within the
- * gradient's tolerance, widened by 1e-4 of itself so that no rounding of
- * tap_ok's own sum can pass a tap this leaves out. Most open pixels are
- * disocclusions whose every tap fails on its depth: one branch-free pass
- * over 9 depths, and tap_ok only for the few candidates (classroom frames,
- * one thread: the reprojection 21.4 -> 20.9 ms).
+ * background or not as the pixel is, and for a surface within the depth
+ * tolerance or the gradient's, the latter widened by 1e-4 of itself so
+ * that no rounding of tap_ok's own sum can pass a tap this leaves out.
+ * Most open pixels are disocclusions whose every tap fails on its depth:
+ * one branch-free pass over 9 depths, and tap_ok only for the few
+ * candidates (classroom frames, one thread: the reprojection 21.4 -> 20.9
+ * ms).
  */
 static unsigned fallback_depths(const build_ctx *c, const pixel_ref *r, int cx, int cy, float sx,
                                 float sy) {
@@ -464,8 +465,10 @@ static unsigned fallback_depths(const build_ctx *c, const pixel_ref *r, int cx, 
     const float dz = fabsf(zt - r->ze);
     const float tol = r->tolz + gx * fabsf((float)xt - sx) + gy * fabsf((float)yt - sy);
     const int surface = zt > 0.0f;
-    /* NaN passes, as in tap_ok */
-    const int ok = r->bg ? !surface : surface & ((dz > tol * 1.0001f) == 0);
+    /* tap_ok's plain test as it is, its gradient test widened; NaN
+     * passes, as in tap_ok */
+    const int near = ((dz > r->tolz) == 0) | ((dz > tol + fabsf(tol) * 1e-4f) == 0);
+    const int ok = r->bg ? !surface : surface & near;
     pass |= (unsigned)(ok & in) << t;
   }
   return pass;
