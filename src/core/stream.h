@@ -28,6 +28,14 @@ static HUSH_ALWAYS_INLINE void hush__prefetch(const void *p, ptrdiff_t bytes) {
   __builtin_prefetch((const void *)((uintptr_t)p + (uintptr_t)bytes));
 }
 
+/* hush__prefetch of the same byte offset in each of planes[0..n-1]
+ * (NULL: skipped): a row's streams, asked for together. */
+static HUSH_ALWAYS_INLINE void hush__prefetch_planes(const float *const *planes, int n,
+                                                     ptrdiff_t bytes) {
+  for (int p = 0; p < n; p++)
+    if (planes[p]) hush__prefetch(planes[p], bytes);
+}
+
 /* dst[0..bytes) = src[0..bytes) for bytes < 64: two overlapping copies of
  * a fixed size each (a branch on the size class), no loop. gcc turned the
  * variable-size memcpy this replaces into `rep movsl`, whose start-up

@@ -937,45 +937,37 @@ static HUSH_ALWAYS_INLINE int span_diagonals(const build_ctx *c, const span_taps
 }
 #endif
 
-/* Prefetches pixel i (past the frame's end: outside the planes,
- * hush__prefetch) of this frame's planes that the back-projection and the span test read: called a span
- * ahead (the next span's pixel, or the next row's), so that their ten
- * sequential streams, with the history's, do not wait on the hardware
- * prefetchers: reprojection 7.75 -> 7.26 ms on 2 threads, 14.4 -> 13.5 on
- * one (1280x720, Zen 3, medians of alternated runs; docs/svgf-speed.md,
- * twenty-first round). */
-static HUSH_ALWAYS_INLINE void prefetch_inputs(const build_ctx *c, size_t i, const int use_id) {
+/* Pixels ahead of a chunk whose row below prefetch_inputs asks for. */
+#define BELOW_AHEAD 64
+
+/*
+ * Prefetches, in this frame's planes that the back-projection and the span
+ * test read, pixel `ahead` (the next span's pixel, or the next row's), so
+ * that their ten sequential streams, with the history's, do not wait on
+ * the hardware prefetchers: reprojection 7.75 -> 7.26 ms on 2 threads,
+ * 14.4 -> 13.5 on one (1280x720, Zen 3, medians of alternated runs;
+ * docs/svgf-speed.md, twenty-first round). Also pixel `i` + BELOW_AHEAD of
+ * the row below in the planes span_slopes reads there (depth, normal, id):
+ * that row is read for the first time by the slopes of a chunk with a pixel
+ * left open or a tap to retry, and on rendered frames those are common (31
+ * % of the classroom's chunks): a profile put a tenth of build_row's
+ * samples on the loads of that row's normals. Reprojection on the
+ * classroom's frames 23.2 -> 21.7 ms on one thread, 12.5 -> 12.1 on two;
+ * the bench's frames, with few such chunks, unchanged (twenty-second
+ * round). Past the frame's end the addresses lie outside the planes
+ * (hush__prefetch).
+ */
+static HUSH_ALWAYS_INLINE void prefetch_inputs(const build_ctx *c, size_t ahead, size_t i,
+                                               const int use_id) {
   const hush_gbuffer *g = &c->in->cur;
+  /* the first five: what span_slopes reads */
   const float *const planes[10] = {g->depth,          g->normal[0],       g->normal[1],
                                    g->normal[2],      use_id ? g->id : NULL,
                                    c->in->motion[0],  c->in->motion[1],   c->in->position[0],
                                    c->in->position[1], c->in->position[2]};
-  for (int p = 0; p < 10; p++)
-    if (planes[p]) hush__prefetch(planes[p], (ptrdiff_t)i * (ptrdiff_t)sizeof(float));
-}
-
-/* Pixels ahead of a chunk whose row below prefetch_below asks for. */
-#define BELOW_AHEAD 64
-
-/*
- * Prefetches pixel i + BELOW_AHEAD of the row below (past the frame's end:
- * outside the planes, hush__prefetch) in the planes span_slopes reads
- * there. That row is read for the first time by the slopes of a chunk with
- * a pixel left open or a tap to retry, and on rendered frames those are
- * common (31 % of the classroom's chunks): a profile put a tenth of
- * build_row's samples on the loads of that row's normals. Reprojection on
- * the classroom's frames 23.2 -> 21.7 ms on one thread, 12.5 -> 12.1 on two;
- * the bench's frames, with few such chunks, unchanged (1280x720, Zen 3,
- * alternated runs; docs/svgf-speed.md, twenty-second round). The lines are
- * the next row's own inputs as well.
- */
-static HUSH_ALWAYS_INLINE void prefetch_below(const build_ctx *c, size_t i, const int use_id) {
-  const hush_gbuffer *g = &c->in->cur;
-  const float *const planes[5] = {g->depth, g->normal[0], g->normal[1], g->normal[2],
-                                  use_id ? g->id : NULL};
-  const ptrdiff_t bytes = (ptrdiff_t)(i + (size_t)c->W + BELOW_AHEAD) * (ptrdiff_t)sizeof(float);
-  for (int p = 0; p < 5; p++)
-    if (planes[p]) hush__prefetch(planes[p], bytes);
+  hush__prefetch_planes(planes, 10, (ptrdiff_t)ahead * (ptrdiff_t)sizeof(float));
+  hush__prefetch_planes(planes, 5,
+                        (ptrdiff_t)(i + (size_t)c->W + BELOW_AHEAD) * (ptrdiff_t)sizeof(float));
 }
 
 /* The span test: footprints, then the tap tests chunk by chunk (with the
@@ -992,8 +984,7 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
   for (int k0 = 0; k0 < n; k0 += CHUNK) {
     const int k1 = n - k0 < CHUNK ? n : k0 + CHUNK;
     hush__prefetch_taps(prev_planes, WINDOW_PLANES, hush__prefetch_origin(o->origin, k0, n), c->W);
-    prefetch_inputs(c, row + (size_t)k0 + SPAN, use_id);
-    prefetch_below(c, row + (size_t)k0, use_id);
+    prefetch_inputs(c, row + (size_t)k0 + SPAN, row + (size_t)k0, use_id);
     int contiguous = 1;
     for (int k = k0; k < k1; k++)
       contiguous &= o->inside[k] & (o->origin[k] == o->origin[k0] + (k - k0));

@@ -331,8 +331,7 @@ static HUSH_ALWAYS_INLINE void hush__prefetch_row(const hush_reproject_plan *pla
   const ptrdiff_t bytes = q * (ptrdiff_t)sizeof(float);
   hush__prefetch(plan->origin, bytes);
   for (int t = 0; t < 4; t++) hush__prefetch(plan->w[t], bytes);
-  for (int p = 0; p < n; p++)
-    if (planes[p]) hush__prefetch(planes[p], bytes);
+  hush__prefetch_planes(planes, n, bytes);
 }
 
 /* The footprint origin HUSH_PREFETCH_AHEAD pixels after pixel k of a run

@@ -740,7 +740,7 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
    * address lies outside the planes (hush__prefetch). */
   const ptrdiff_t ahead = (pairs[npairs - 1].a + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float);
   const float *const ahead_of[9] = {rx.z, rx.n0, rx.n1, rx.n2, rx.l, rx.c0, rx.c1, rx.c2, rx.v};
-  for (int k = 0; k < 9; k++) hush__prefetch(ahead_of[k], ahead);
+  hush__prefetch_planes(ahead_of, 9, ahead);
   if (VALIDITY) hush__prefetch(rx.ok, ahead);
   if (p.surface || c->bias < S_FLOOR) {
     /* Every tap's exponent first, then the weights and sums in the same

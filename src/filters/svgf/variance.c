@@ -379,12 +379,10 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
       const avx_vpair *last = &pairs[NPAIRS - 1];
       const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
       const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
-      hush__prefetch(z + x, ga);
-      hush__prefetch(n0 + x, ga);
-      hush__prefetch(n1 + x, ga);
-      hush__prefetch(n2 + x, ga);
-      hush__prefetch(m1 + x, ma);
-      hush__prefetch(m2 + x, ma);
+      const float *const guide[4] = {z + x, n0 + x, n1 + x, n2 + x};
+      const float *const moments[2] = {m1 + x, m2 + x};
+      hush__prefetch_planes(guide, 4, ga);
+      hush__prefetch_planes(moments, 2, ma);
     }
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
       variance_row_valid(g, m, age, min_age, var, y, x, n, poly, SVGF_NORMAL_EXP);
