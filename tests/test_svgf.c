@@ -742,6 +742,13 @@ static void test_taa_smooths(hush_device dev) {
  * against libm in double: the Newton reciprocal, h 2^-s with its clamp,
  * and the whole tap weight: exactly 0 at or below h e^-20, else accurate,
  * and never with a subnormal square. */
+/* The fast weight's model (weights.h, svgf_exp2_neg_fast) in double:
+ * 2^floor(u) (1 + frac(u)), u = t + SVGF_FAST_EXP_SHIFT. */
+static double fast_exp2_model(double t) {
+  const double u = t + (double)SVGF_FAST_EXP_SHIFT, fl = floor(u);
+  return ldexp(1.0 + (u - fl), (int)fl);
+}
+
 static void test_weight_math(void) {
   double worst = 0.0;
   for (int i = 0; i <= 20000; i++) { /* 1e-30 .. 1e30, log-spaced */
@@ -768,6 +775,36 @@ static void test_weight_math(void) {
     CHECK(svgf_exp2_neg_h(1e30f, SVGF_S_MAX, &p) == at_max);
     CHECK(svgf_exp2_neg_h(NAN, SVGF_S_MAX, &p) == at_max);
     CHECK(svgf_exp2_neg_h(INFINITY, SVGF_S_MAX, &p) == at_max);
+  }
+
+  /* the fast weight (weight_exp=fast): its model to float rounding (the
+   * fused multiply-add rounds (t + 127) 2^23 to 64 at most: 8e-6 of the
+   * mantissa), within 2.98 % of 2^-s, and never increasing with s (a
+   * weight must not grow as a tap differs more) */
+  {
+    double worst_model = 0.0, worst_exp = 0.0;
+    float prev = INFINITY;
+    int monotone = 1;
+    for (int i = 0; i <= 64000; i++) {
+      const float s = -2.0f + (float)i * (32.0f / 64000.0f);
+      const float w = svgf_exp2_neg_fast(s);
+      const double em = fabs(w / fast_exp2_model(-(double)s) - 1.0);
+      const double ee = fabs(w / exp2(-(double)s) - 1.0);
+      worst_model = em > worst_model ? em : worst_model;
+      worst_exp = ee > worst_exp ? ee : worst_exp;
+      monotone &= w <= prev;
+      prev = w;
+    }
+    CHECK_MSG(worst_model < 1e-5, "fast exp2: %g from its model", worst_model);
+    CHECK_MSG(worst_exp < 0.0299 && worst_exp > 0.029, "fast exp2: worst relative error %g",
+              worst_exp);
+    CHECK(monotone);
+    /* out of range and NaN: clamped, finite, not negative */
+    const float odd[5] = {NAN, INFINITY, -INFINITY, 1e30f, -1e30f};
+    for (int k = 0; k < 5; k++) {
+      const float w = svgf_exp2_neg_fast(odd[k]);
+      CHECK(isfinite(w) && w >= 0.0f);
+    }
   }
 
   /* the tap weight: h dot^sigma_n 2^-s for both ways of raising the dot */
@@ -810,7 +847,7 @@ static void test_weight_math(void) {
 /* A level computed in double straight from the formulas of atrous.h and
  * weights.h (rows and columns clamped at the border). */
 static void level_reference(const svgf_guide *g, const svgf_padded *in, const svgf_kernel *k,
-                            int step, float sigma_l, const float *eps, int normal_exp,
+                            int step, float sigma_l, const float *eps, int normal_exp, int fast,
                             int validity, double *out /* LW * LH * 4: r g b var */) {
   const int r = k->radius;
 #define AT(P, C, X, Y) ((double)(P)->plane[C][(size_t)(Y) * (P)->stride + (size_t)(X)])
@@ -843,7 +880,10 @@ static void level_reference(const svgf_guide *g, const svgf_padded *in, const sv
             const double sn = g->np.sigma_n;
             const double wn = normal_exp ? exp(-sn * (1.0 - dot)) : pow(dot > 0 ? dot : 0, sn);
             w = h * wn * exp(-ez - el);
-            if (w <= h * exp(-20.0)) w = 0.0;
+            if (w <= h * exp(-20.0))
+              w = 0.0;
+            else if (fast)
+              w = fast_exp2_model(log2(w));
             if (validity) w *= AT(in, SVGF_VALID, qx, qy);
           } else {
             w *= okp;
@@ -933,9 +973,10 @@ static void test_level_formula(hush_device dev) {
   const svgf_kernel *kernels[2] = {&svgf_kernel_5x5, &svgf_kernel_3x3};
   for (int kk = 0; kk < 2; kk++)
     for (int step = 1; step <= 16; step *= 4)
-      for (int nexp = 0; nexp <= 1; nexp++)
+      for (int form = 0; form < 3; form++) /* pow, exp, exp with the fast weight */
         for (int valid = 0; valid <= 1; valid++)
           for (int loop = 0; loop < 3; loop++) {
+            const int nexp = form > 0, fast = form == 2;
             /* loop 0, 1: the AVX-512 loop (where built) with one and two
              * vectors at a time, the same bits; 2: the portable loop */
             const int portable = loop == 2;
@@ -947,6 +988,7 @@ static void test_level_formula(hush_device dev) {
             lp.eps_l = valid ? eps : NULL;
             lp.validity = valid;
             lp.normal_exp = nexp;
+            lp.fast_exp = fast;
             lp.portable = portable;
             lp.vectors = loop == 1 ? 2 : 1;
             const svgf_level_out o = svgf_level_out_padded(&out);
@@ -962,7 +1004,7 @@ static void test_level_formula(hush_device dev) {
               }
             CHECK_MSG(same, "level %s step %d: two vectors at a time differ from one",
                       kk ? "3x3" : "5x5", step);
-            level_reference(&g, &in, kernels[kk], step, 4.0f, lp.eps_l, nexp, valid, ref);
+            level_reference(&g, &in, kernels[kk], step, 4.0f, lp.eps_l, nexp, fast, valid, ref);
             double worst = 0.0;
             int holes_ok = 1;
             for (int y = 0; y < LH; y++)
@@ -982,7 +1024,7 @@ static void test_level_formula(hush_device dev) {
             /* the AVX-512 loop's 2^t is within 7.5e-5 relative (weights.h), and
              * the variance sums squared weights: up to twice that */
             CHECK_MSG(worst < 2.5e-4, "level %s step %d %s%s%s: worst difference %g",
-                      kk ? "3x3" : "5x5", step, nexp ? "exp" : "pow",
+                      kk ? "3x3" : "5x5", step, fast ? "fast exp" : nexp ? "exp" : "pow",
                       valid ? " validity" : "", portable ? " portable" : "", worst);
             CHECK(holes_ok);
           }
@@ -1193,6 +1235,7 @@ static void wavefront_run(const svgf_guide *g, int order, int valid, int portabl
     lp[k].eps_l = NULL;
     lp[k].validity = valid;
     lp[k].normal_exp = 1;
+    lp[k].fast_exp = order >= 2; /* both weights through the wavefront */
     lp[k].portable = portable;
     lp[k].vectors = 1 + ((order + valid) & 1);
     in[k] = &wf_buf[k & 1];

@@ -103,8 +103,9 @@ static void pad_written(const svgf_level_out *out, size_t o, int W, int xa, int 
  * 2^(-sigma_n log2 e (1 - n_p . n_q)), the first-order form of max(0, n_p .
  * n_q)^sigma_n (both vanish away from dot 1; they differ by at most 0.0021
  * at sigma_n 128): the dot joins the exponent's fma chain, with the normal
- * at p pre-scaled by sigma_n log2 e, and costs no power. Else the exact
- * power as weights.h's svgf_tap_weight.
+ * at p pre-scaled by sigma_n log2 e, and costs no power; NORMAL_EXP 2: the
+ * same with the fast weight (weight_exp=fast, svgf_exp2_neg_fast). Else the
+ * exact power as weights.h's svgf_tap_weight.
  */
 #define TAP(OFF)                                                                            \
   do {                                                                                      \
@@ -113,7 +114,8 @@ static void pad_written(const svgf_level_out *out, size_t o, int W, int xa, int 
     float w;                                                                                \
     if (NORMAL_EXP) {                                                                       \
       s = fmaf(-n0p, n0[q], fmaf(-n1p, n1[q], fmaf(-n2p, n2[q], s)));                       \
-      w = hush__select_bits(s < t_floor, svgf_exp2_neg4(s), 0.0f);                         \
+      const float e = NORMAL_EXP == 2 ? svgf_exp2_neg_fast(s) : svgf_exp2_neg4(s);          \
+      w = hush__select_bits(s < t_floor, e, 0.0f);                                          \
     } else {                                                                                \
       const float dot = fmaf(n0p, n0[q], fmaf(n1p, n1[q], n2p * n2[q]));                    \
       w = svgf_tap_weight(s, dot, SQUARINGS, sigma_n_log2e, dot_floor, &unit_poly);         \
@@ -315,11 +317,21 @@ static void avx_args_of(const level_ctx *c, int y, int validity, avx_args *a) {
   for (int ch = 0; ch < 3; ch++) a->also[ch] = c->out->also[0] ? c->out->also[ch] + pi : NULL;
 }
 
-/* the variance is carried only where the level writes it (not the last) */
-#define AVX_ROW(NAME, VALIDITY, WITH_VAR)                                                    \
+/* the variance is carried only where the level writes it (not the last);
+ * FAST: the fast weight (weight_exp=fast) */
+#define AVX_ROW(NAME, VALIDITY, WITH_VAR, FAST)                                              \
   static void NAME(const level_ctx *c, int y, int xa, int xb) {                              \
-    avx_level_row(c, y, xa, xb, VALIDITY, WITH_VAR);                                         \
+    avx_level_row(c, y, xa, xb, VALIDITY, WITH_VAR, FAST);                                   \
   }
+#define AVX_ROWS                                                                             \
+  AVX_ROW(avx_row_plain, 0, 1, 0)                                                            \
+  AVX_ROW(avx_row_valid, 1, 1, 0)                                                            \
+  AVX_ROW(avx_row_novar, 0, 0, 0)                                                            \
+  AVX_ROW(avx_row_valid_novar, 1, 0, 0)                                                      \
+  AVX_ROW(avx_row_plain_fast, 0, 1, 1)                                                       \
+  AVX_ROW(avx_row_valid_fast, 1, 1, 1)                                                       \
+  AVX_ROW(avx_row_novar_fast, 0, 0, 1)                                                       \
+  AVX_ROW(avx_row_valid_novar_fast, 1, 0, 1)
 #endif
 
 #if defined(__AVX512F__) && defined(__x86_64__)
@@ -351,7 +363,7 @@ typedef struct avx_px {
  * (plain loads); else the loads are masked by m. */
 static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, avx_px *p,
                                        __m512 nbias, __m512 nfloor, __mmask16 m, const int FULL,
-                                       const int VALIDITY, const int WITH_VAR) {
+                                       const int VALIDITY, const int WITH_VAR, const int FAST) {
 #define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
   const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(p->zp, LD(r->z)));
   const __m512 dl = _mm512_abs_ps(_mm512_sub_ps(p->lp, LD(r->l)));
@@ -362,7 +374,8 @@ static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 r
   t = _mm512_fmadd_ps(p->n2p, LD(r->n2), t);
   /* NaN compares false: weight 0 */
   const __mmask16 keep = _mm512_cmp_ps_mask(t, nfloor, _CMP_GT_OQ);
-  __m512 w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
+  __m512 w = FAST ? svgf_avx_exp2_fast(keep, t)
+                 : _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
   if (VALIDITY) w = _mm512_mul_ps(w, LD(r->ok));
   p->acc.sw = _mm512_add_ps(p->acc.sw, w);
   p->acc.s0 = _mm512_fmadd_ps(w, LD(r->c0), p->acc.s0);
@@ -495,7 +508,8 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
                                            const avx_pair *pairs, int npairs, int x, int n,
                                            float *const out[SVGF_SIGNAL_CHANNELS],
                                            float *const also[3], const int TWO, const int FULL,
-                                           const int VALIDITY, const int WITH_VAR) {
+                                           const int VALIDITY, const int WITH_VAR,
+                                           const int FAST) {
   const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
   avx_px p0, p1;
   avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p0);
@@ -507,18 +521,18 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
       const avx_pair *t = &pairs[k];
       const __m512 rdd0 = avx_rdd(&p0, t), rdd1 = avx_rdd(&p1, t);
       const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR);
-      avx_tap(&rx, t->a + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR);
-      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR);
-      avx_tap(&rx, t->b + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->a + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->b + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
     }
   } else if (!TWO && (p0.surface || !sky_skip)) {
     for (int k = 0; k < npairs; k++) {
       const avx_pair *t = &pairs[k];
       const __m512 rdd0 = avx_rdd(&p0, t);
       const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR);
-      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR);
+      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR, FAST);
     }
   }
   avx_finish(&p0, x, m, out, also, VALIDITY, WITH_VAR);
@@ -526,7 +540,8 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
 }
 
 static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, int xb,
-                                             const int VALIDITY, const int WITH_VAR) {
+                                             const int VALIDITY, const int WITH_VAR,
+                                             const int FAST) {
   avx_args a;
   avx_args_of(c, y, VALIDITY, &a);
   const int npairs = a.npairs;
@@ -534,13 +549,13 @@ static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, 
   if (c->two)
     for (; x + 32 <= xb; x += 32)
       avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, 32, a.out,
-                  a.also, 1, 1, VALIDITY, WITH_VAR);
+                  a.also, 1, 1, VALIDITY, WITH_VAR, FAST);
   for (; x + 16 <= xb; x += 16)
     avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, 16, a.out,
-                a.also, 0, 1, VALIDITY, WITH_VAR);
+                a.also, 0, 1, VALIDITY, WITH_VAR, FAST);
   if (x < xb)
     avx_vectors(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, npairs, x, xb - x, a.out,
-                a.also, 0, 0, VALIDITY, WITH_VAR);
+                a.also, 0, 0, VALIDITY, WITH_VAR, FAST);
   pad_written(c->out, a.o, c->g->width, xa, xb);
   if (a.also[0]) hush__stream_fence(); /* the streamed history before the row is done */
 }
@@ -553,10 +568,7 @@ static int avx_two_vectors(int vectors) {
   return vectors ? vectors == 2 : !__builtin_cpu_is("amd");
 }
 
-AVX_ROW(avx_row_plain, 0, 1)
-AVX_ROW(avx_row_valid, 1, 1)
-AVX_ROW(avx_row_novar, 0, 0)
-AVX_ROW(avx_row_valid_novar, 1, 0)
+AVX_ROWS
 #define HAVE_AVX_LEVEL 1
 #elif defined(__AVX2__) && defined(__FMA__) && defined(__x86_64__)
 /*
@@ -603,9 +615,10 @@ static HUSH_ALWAYS_INLINE __m256 avx_tap_exponent(const avx_row *r, ptrdiff_t of
  * sums. */
 static HUSH_ALWAYS_INLINE void avx_tap_add(const avx_row *r, ptrdiff_t off, __m256 t,
                                            __m256 nfloor, avx_px *p, __m256i m, const int FULL,
-                                           const int VALIDITY, const int WITH_VAR) {
+                                           const int VALIDITY, const int WITH_VAR,
+                                           const int FAST) {
 #define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
-  __m256 w = svgf_avx2_exp2_floored(t, nfloor);
+  __m256 w = FAST ? svgf_avx2_exp2_fast(t, nfloor) : svgf_avx2_exp2_floored(t, nfloor);
   if (VALIDITY) w = _mm256_mul_ps(w, LD(r->ok));
   p->sw = _mm256_add_ps(p->sw, w);
   p->s0 = _mm256_fmadd_ps(w, LD(r->c0), p->s0);
@@ -724,7 +737,8 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
                                           const avx_pair *pairs, int npairs, int x, int n,
                                           float *const out[SVGF_SIGNAL_CHANNELS],
                                           float *const also[3], const int FULL,
-                                          const int VALIDITY, const int WITH_VAR) {
+                                          const int VALIDITY, const int WITH_VAR,
+                                          const int FAST) {
   const __m256i m = _mm256_cmpgt_epi32(_mm256_set1_epi32(FULL ? 8 : n),
                                        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   avx_px p;
@@ -761,24 +775,25 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
     }
     for (int k = 0; k < npairs; k++) {
       const __m256 nf = _mm256_set1_ps(pairs[k].nfloor);
-      avx_tap_add(&rx, pairs[k].a, t[2 * k], nf, &p, m, FULL, VALIDITY, WITH_VAR);
-      avx_tap_add(&rx, pairs[k].b, t[2 * k + 1], nf, &p, m, FULL, VALIDITY, WITH_VAR);
+      avx_tap_add(&rx, pairs[k].a, t[2 * k], nf, &p, m, FULL, VALIDITY, WITH_VAR, FAST);
+      avx_tap_add(&rx, pairs[k].b, t[2 * k + 1], nf, &p, m, FULL, VALIDITY, WITH_VAR, FAST);
     }
   }
   avx_finish(&p, x, m, out, also, FULL, VALIDITY, WITH_VAR);
 }
 
 static HUSH_ALWAYS_INLINE void avx_level_row(const level_ctx *c, int y, int xa, int xb,
-                                             const int VALIDITY, const int WITH_VAR) {
+                                             const int VALIDITY, const int WITH_VAR,
+                                             const int FAST) {
   avx_args a;
   avx_args_of(c, y, VALIDITY, &a);
   int x = xa;
   for (; x + 8 <= xb; x += 8)
     avx_vector(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, a.npairs, x, 8, a.out,
-               a.also, 1, VALIDITY, WITH_VAR);
+               a.also, 1, VALIDITY, WITH_VAR, FAST);
   if (x < xb)
     avx_vector(c, &a.r, a.vu, a.vd, a.gx, a.gy, a.zon, a.eps, a.pairs, a.npairs, x, xb - x, a.out,
-               a.also, 0, VALIDITY, WITH_VAR);
+               a.also, 0, VALIDITY, WITH_VAR, FAST);
   pad_written(c->out, a.o, c->g->width, xa, xb);
 }
 
@@ -788,10 +803,7 @@ static int avx_two_vectors(int vectors) {
   return 0;
 }
 
-AVX_ROW(avx_row_plain, 0, 1)
-AVX_ROW(avx_row_valid, 1, 1)
-AVX_ROW(avx_row_novar, 0, 0)
-AVX_ROW(avx_row_valid_novar, 1, 0)
+AVX_ROWS
 #define HAVE_AVX_LEVEL 1
 #else
 #define HAVE_AVX_LEVEL 0
@@ -801,8 +813,9 @@ AVX_ROW(avx_row_valid_novar, 1, 0)
   static void NAME(const level_ctx *c, int y, int xa, int xb) {                               \
     level_row(c, y, xa, xb, NPAIRS, NORMAL_EXP, SQUARINGS, VALIDITY);                         \
   }
-/* 5x5 (12 pairs) and 3x3 (4 pairs); the normal weight as exp (default),
- * as the exact power 128 by squarings, or any sigma_n through the log */
+/* 5x5 (12 pairs) and 3x3 (4 pairs); the normal weight as exp (default;
+ * with the fast weight: _fast), as the exact power 128 by squarings, or
+ * any sigma_n through the log */
 LEVEL_ROW(row5_exp, 12, 1, 0, 0)
 LEVEL_ROW(row5_exp_valid, 12, 1, 0, 1)
 LEVEL_ROW(row5_pow128, 12, 0, 7, 0)
@@ -815,6 +828,10 @@ LEVEL_ROW(row3_pow128, 4, 0, 7, 0)
 LEVEL_ROW(row3_pow128_valid, 4, 0, 7, 1)
 LEVEL_ROW(row3_any, 4, 0, -1, 0)
 LEVEL_ROW(row3_any_valid, 4, 0, -1, 1)
+LEVEL_ROW(row5_exp_fast, 12, 2, 0, 0)
+LEVEL_ROW(row5_exp_fast_valid, 12, 2, 0, 1)
+LEVEL_ROW(row3_exp_fast, 4, 2, 0, 0)
+LEVEL_ROW(row3_exp_fast_valid, 4, 2, 0, 1)
 
 /* The first column of part `part` out of `parts` of a row of W pixels,
  * on a 32-pixel boundary (the AVX-512 loop's pairs of vectors). */
@@ -842,19 +859,25 @@ static row_fn level_init(level_ctx *c, const svgf_guide *g, const svgf_level_par
   const int exp_form = lp->normal_exp;
   c->bias = exp_form ? g->np.sigma_n_log2e : 0.0f;
   c->nscale = exp_form ? g->np.sigma_n_log2e : 1.0f;
-  const int pow128 = g->np.squarings == 7, v = lp->validity;
+  const int pow128 = g->np.squarings == 7, v = lp->validity, fast = lp->fast_exp;
 #if HAVE_AVX_LEVEL
   if (exp_form && !lp->portable) {
     c->two = avx_two_vectors(lp->vectors);
-    if (out->plane[SVGF_VAR]) return v ? avx_row_valid : avx_row_plain;
+    if (out->plane[SVGF_VAR]) {
+      if (fast) return v ? avx_row_valid_fast : avx_row_plain_fast;
+      return v ? avx_row_valid : avx_row_plain;
+    }
+    if (fast) return v ? avx_row_valid_novar_fast : avx_row_novar_fast;
     return v ? avx_row_valid_novar : avx_row_novar;
   }
 #endif
   if (npairs == 12) {
+    if (exp_form && fast) return v ? row5_exp_fast_valid : row5_exp_fast;
     if (exp_form) return v ? row5_exp_valid : row5_exp;
     if (pow128) return v ? row5_pow128_valid : row5_pow128;
     return v ? row5_any_valid : row5_any;
   }
+  if (exp_form && fast) return v ? row3_exp_fast_valid : row3_exp_fast;
   if (exp_form) return v ? row3_exp_valid : row3_exp;
   if (pow128) return v ? row3_pow128_valid : row3_pow128;
   return v ? row3_any_valid : row3_any;

@@ -77,6 +77,7 @@ typedef struct svgf_level_params {
   const float *eps_l; /* per-pixel luminance epsilon (unpadded), or NULL: SVGF_EPS_L */
   int validity;       /* taps and centre weighted by VALID (progressive, Dundr §4.2) */
   int normal_exp;     /* normal weight 2^(-sigma_n log2 e (1 - dot)), else max(0, dot)^sigma_n */
+  int fast_exp;       /* with normal_exp: svgf's weight_exp=fast (weights.h, svgf_exp2_neg_fast) */
   int portable;       /* 1: never the intrinsic (AVX-512 or AVX2) loop (tests compare the two) */
   int vectors;        /* AVX-512 loop: 0 this CPU's choice, 1 or 2 vectors of pixels at a time */
 } svgf_level_params;

@@ -54,6 +54,7 @@ const char *const svgf_kernel_names[] = {"5x5", "3x3"};
 enum { ORDER_INCREASING = 0, ORDER_DECREASING, ORDER_ZERO_THEN_DECREASING };
 const char *const svgf_order_names[] = {"increasing", "decreasing", "0-then-decreasing"};
 const char *const svgf_normal_weight_names[] = {"exp", "pow"};
+const char *const svgf_weight_exp_names[] = {"accurate", "fast"};
 
 static const hush_param_info svgf_params[P_COUNT] = {SVGF_PARAM_ROWS};
 
@@ -352,6 +353,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   lp.eps_l = NULL;
   lp.validity = fc->holes;
   lp.normal_exp = hush__param_i(f, P_NORMAL_WEIGHT) == 0;
+  lp.fast_exp = hush__param_i(f, P_WEIGHT_EXP) == 1;
   lp.portable = 0;
   lp.vectors = 0;
   if (fc->holes) {

@@ -41,12 +41,14 @@ enum {
   P_EMISSION_BYPASS,
   P_PROGRESSIVE_TAA,
   P_NORMAL_WEIGHT,
+  P_WEIGHT_EXP,
   P_COUNT
 };
 
 extern const char *const svgf_kernel_names[];
 extern const char *const svgf_order_names[];
 extern const char *const svgf_normal_weight_names[];
+extern const char *const svgf_weight_exp_names[];
 
 /* the most a-trous levels (the "iterations" parameter's bound) */
 #define SVGF_MAX_ITERATIONS 10
@@ -130,7 +132,13 @@ extern const char *const svgf_normal_weight_names[];
      "a-trous normal weight: exp = exp(-sigma_n (1 - n_p . n_q)), the first-order form of the " \
      "paper's max(0, n_p . n_q)^sigma_n (within 0.0021 of it at sigma_n 128, and cheaper: " \
      "docs/svgf-speed.md), or pow = that power exactly", \
-     svgf_normal_weight_names},
+     svgf_normal_weight_names}, \
+    {"weight_exp", HUSH_PARAM_ENUM, 1, 0, 1, \
+     "the exp of the a-trous tap weights (with normal_weight=exp): fast = 2^t interpolated " \
+     "linearly between powers of two (Schraudolph 1999; each weight within 3 % of it, the " \
+     "a-trous 8-10 % faster, RMSE and SSIM on the classroom and the Cornell box as good: " \
+     "docs/svgf-speed.md, twenty-third round), accurate = a cubic polynomial (1e-4 relative)", \
+     svgf_weight_exp_names},
 
 enum {
   I_COLOR = 0,

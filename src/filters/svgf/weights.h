@@ -94,6 +94,30 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_neg4(float s) {
   return y;
 }
 
+/* The fast tap weight (svgf's weight_exp=fast, the default): 2^t as the
+ * float whose bits are (u + 127) 2^23 truncated to an integer, u = t +
+ * SVGF_FAST_EXP_SHIFT (Schraudolph 1999): 2^floor(u) (1 + frac(u)), 2^u
+ * interpolated linearly between powers of two, whose error (1 + f) / 2^f
+ * peaks at 1.0615 (f = 1 / ln 2 - 1); the shift, log2(2 / 2.0615), centres
+ * it, so every weight is within 2.98 % of 2^t, and it never increases as t
+ * falls. One fused multiply-add and one conversion, where the polynomial
+ * and its exponent take eight operations of the tap's 25 (the a-trous 8-10
+ * % faster on Zen 3; docs/svgf-speed.md, twenty-third round). */
+#define SVGF_FAST_EXP_SHIFT (-0.043678f)
+#define SVGF_FAST_EXP_BIAS ((127.0f + SVGF_FAST_EXP_SHIFT) * 8388608.0f)
+
+/* 2^-s by the fast weight, for s in [-64, 64] (clamped there, NaN taken as
+ * 64, so the conversion stays in range; the caller zeroes weights past the
+ * floor, s < 29, as with svgf_exp2_neg4). */
+static HUSH_ALWAYS_INLINE float svgf_exp2_neg_fast(float s) {
+  s = hush__select_bits(s < 64.0f, s, 64.0f);  /* a min (NaN: 64) */
+  s = hush__select_bits(s > -64.0f, s, -64.0f); /* a max */
+  const int32_t b = (int32_t)fmaf(-s, 8388608.0f, SVGF_FAST_EXP_BIAS);
+  float y;
+  memcpy(&y, &b, sizeof y);
+  return y;
+}
+
 /* Exponents are in base 2 (see the top): log2 e joins the reciprocals. */
 #define SVGF_LOG2E 1.44269504f
 /* Weights at or below e^-20 are 0 (see the top). */
@@ -207,6 +231,15 @@ static HUSH_ALWAYS_INLINE __m512 svgf_avx_exp2_frac(__m512 t) {
   return _mm512_fmadd_ps(f, y, _mm512_set1_ps(0.9999247990f));
 }
 
+/* 2^t where keep, else 0, by the fast weight (svgf_exp2_neg_fast): the
+ * conversion zero-masked. Lanes not kept may hold any t (the conversion of
+ * an out-of-range value is masked out). */
+static HUSH_ALWAYS_INLINE __m512 svgf_avx_exp2_fast(__mmask16 keep, __m512 t) {
+  const __m512 u =
+      _mm512_fmadd_ps(t, _mm512_set1_ps(8388608.0f), _mm512_set1_ps(SVGF_FAST_EXP_BIAS));
+  return _mm512_castsi512_ps(_mm512_maskz_cvttps_epi32(keep, u));
+}
+
 /* 1/x from vrcp14ps and one Newton step (relative error about 2^-28). */
 static HUSH_ALWAYS_INLINE __m512 svgf_avx_rcp(__m512 x) {
   const __m512 y = _mm512_rcp14_ps(x);
@@ -241,6 +274,16 @@ static HUSH_ALWAYS_INLINE __m256 svgf_avx2_exp2_floored(__m256 t, __m256 nfloor)
   const __m256i e = _mm256_slli_epi32(_mm256_cvtps_epi32(fl), 23);
   const __m256 w = _mm256_castsi256_ps(_mm256_add_epi32(_mm256_castps_si256(y), e));
   return _mm256_and_ps(w, keep);
+}
+
+/* 2^t where t > nfloor, else 0 (NaN: 0), by the fast weight
+ * (svgf_exp2_neg_fast): kept lanes have t > nfloor > -60, in range of the
+ * truncating conversion. */
+static HUSH_ALWAYS_INLINE __m256 svgf_avx2_exp2_fast(__m256 t, __m256 nfloor) {
+  const __m256 keep = _mm256_cmp_ps(t, nfloor, _CMP_GT_OQ);
+  const __m256 u =
+      _mm256_fmadd_ps(t, _mm256_set1_ps(8388608.0f), _mm256_set1_ps(SVGF_FAST_EXP_BIAS));
+  return _mm256_and_ps(_mm256_castsi256_ps(_mm256_cvttps_epi32(u)), keep);
 }
 
 #endif
