@@ -1037,7 +1037,8 @@ static void test_level_formula(hush_device dev) {
   REQUIRE(mom.stride != zn.stride);
   static float age[LW * LH], var[LW * LH];
   for (int holes = 0; holes <= 1; holes++)
-    for (int nexp = 0; nexp <= 1; nexp++) {
+    for (int form = 0; form < 3; form++) { /* pow, exp, exp with the fast weight */
+      const int nexp = form > 0, fast = form == 2;
       for (int y = 0; y < LH; y++) {
         for (int x = 0; x < LW; x++) {
           const size_t pi = (size_t)y * LW + x, mi = (size_t)y * mom.stride + x;
@@ -1052,7 +1053,7 @@ static void test_level_formula(hush_device dev) {
         for (int c = 0; c < 2; c++) svgf_pad_row(svgf_padded_row(&mom, c, y), LW, mom.pad);
       }
       const svgf_guide g = test_guide(&zn, gx, gy, zon, LW, LH);
-      svgf_spatial_variance(&g, &mom, age, 4.0f, var, nexp, 2);
+      svgf_spatial_variance(&g, &mom, age, 4.0f, var, nexp, fast, 2);
       double worst = 0.0;
       int kept = 1;
       const int R = SVGF_SPATIAL_VARIANCE_RADIUS;
@@ -1078,7 +1079,10 @@ static void test_level_formula(hush_device dev) {
                 for (int c = 1; c <= 3; c++) dot += (double)zn.plane[c][gp] * zn.plane[c][gq];
                 const double wn = nexp ? exp(-128.0 * (1.0 - dot)) : pow(dot > 0 ? dot : 0, 128.0);
                 w = wn * exp(-ez);
-                if (w <= exp(-20.0)) w = 0.0;
+                if (w <= exp(-20.0))
+                  w = 0.0;
+                else if (fast)
+                  w = fast_exp2_model(log2(w));
               }
               const size_t mq = (size_t)qy * mom.stride + qx;
               sw += w;
@@ -1091,7 +1095,7 @@ static void test_level_formula(hush_device dev) {
           worst = e > worst ? e : worst;
         }
       CHECK_MSG(worst < 1e-5 && kept, "spatial variance %s%s: worst difference %g, kept %d",
-                nexp ? "exp" : "pow", holes ? " holes" : "", worst, kept);
+                fast ? "fast exp" : nexp ? "exp" : "pow", holes ? " holes" : "", worst, kept);
     }
   svgf_padded_free(&mom);
   svgf_padded_free(&zn);

@@ -333,7 +333,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     const hush_planar *m = hush__accum_moments(&c->acc);
     for (int k = 0; k < 2; k++) svgf_padded_import(&st->moments, k, m->plane[k], threads);
     svgf_spatial_variance(fc->gd, &st->moments, samples, (float)min_age, st->var.plane[0],
-                          hush__param_i(f, P_NORMAL_WEIGHT) == 0, threads);
+                          hush__param_i(f, P_NORMAL_WEIGHT) == 0,
+                          hush__param_i(f, P_WEIGHT_EXP) == 1, threads);
   }
   /* with the merge the moments are per sample; else they see only the
    * frame-to-frame spread of the pixel means, already per frame value */

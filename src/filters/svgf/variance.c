@@ -239,22 +239,24 @@ static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const f
                                         const float *n2, const float *m1, const float *m2,
                                         ptrdiff_t go, ptrdiff_t mo, __m512 rdd, __m512 zp,
                                         __m512 n0p, __m512 n1p, __m512 n2p, __m512 nbias,
-                                        __m512 *sw, __m512 *s1, __m512 *s2) {
+                                        __m512 *sw, __m512 *s1, __m512 *s2, const int FAST) {
   const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(zp, _mm512_loadu_ps(z + go)));
   __m512 t = _mm512_fnmadd_ps(dz, rdd, nbias);
   t = _mm512_fmadd_ps(n0p, _mm512_loadu_ps(n0 + go), t);
   t = _mm512_fmadd_ps(n1p, _mm512_loadu_ps(n1 + go), t);
   t = _mm512_fmadd_ps(n2p, _mm512_loadu_ps(n2 + go), t);
   const __mmask16 keep = _mm512_cmp_ps_mask(t, _mm512_set1_ps(-20.0f * SVGF_LOG2E), _CMP_GT_OQ);
-  const __m512 w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
+  const __m512 w = FAST ? svgf_avx_exp2_fast(keep, t)
+                       : _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
   *sw = _mm512_add_ps(*sw, w);
   *s1 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m1 + mo), *s1);
   *s2 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m2 + mo), *s2);
 }
 
-static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const float *age,
-                             float min_age, float *var, int y, int has_empty,
-                             const svgf_exp2_poly *poly) {
+static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_padded *m,
+                                                const float *age, float min_age, float *var,
+                                                int y, int has_empty,
+                                                const svgf_exp2_poly *poly, const int FAST) {
   const int W = g->width, H = g->height;
   vrow r;
   vrow_of(g, m, age, var, y, &r);
@@ -273,7 +275,8 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
                                 _CMP_LT_OQ);
     if (!young) continue;
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
-      variance_row_valid(g, m, age, min_age, var, y, x, n, poly, SVGF_NORMAL_EXP);
+      variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
+                         FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
       continue;
     }
     /* the tail's lanes past the row read the pads and the next row: their
@@ -304,9 +307,9 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
       const __m512 d = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
       const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(d), eps_z)));
       avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->ga, t->ma, rdd, zp, n0p, n1p, n2p,
-               nbias, &sw, &s1, &s2);
+               nbias, &sw, &s1, &s2, FAST);
       avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->gb, t->mb, rdd, zp, n0p, n1p, n2p,
-               nbias, &sw, &s1, &s2);
+               nbias, &sw, &s1, &s2, FAST);
     }
     const __m512 inv = svgf_avx_rcp(sw);
     const __m512 e1 = _mm512_mul_ps(s1, inv), e2 = _mm512_mul_ps(s2, inv);
@@ -341,16 +344,19 @@ static HUSH_ALWAYS_INLINE __m256 avx_vtap_exponent(const float *z, const float *
 /* Its weight from the exponent t, added to the sums with the moments at
  * offset mo. */
 static HUSH_ALWAYS_INLINE void avx_vtap_add(const float *m1, const float *m2, ptrdiff_t mo,
-                                            __m256 t, __m256 *sw, __m256 *s1, __m256 *s2) {
-  const __m256 w = svgf_avx2_exp2_floored(t, _mm256_set1_ps(-20.0f * SVGF_LOG2E));
+                                            __m256 t, __m256 *sw, __m256 *s1, __m256 *s2,
+                                            const int FAST) {
+  const __m256 nfloor = _mm256_set1_ps(-20.0f * SVGF_LOG2E);
+  const __m256 w = FAST ? svgf_avx2_exp2_fast(t, nfloor) : svgf_avx2_exp2_floored(t, nfloor);
   *sw = _mm256_add_ps(*sw, w);
   *s1 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m1 + mo), *s1);
   *s2 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m2 + mo), *s2);
 }
 
-static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const float *age,
-                             float min_age, float *var, int y, int has_empty,
-                             const svgf_exp2_poly *poly) {
+static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_padded *m,
+                                                const float *age, float min_age, float *var,
+                                                int y, int has_empty,
+                                                const svgf_exp2_poly *poly, const int FAST) {
   const int W = g->width, H = g->height;
   vrow r;
   vrow_of(g, m, age, var, y, &r);
@@ -385,7 +391,8 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
       hush__prefetch_planes(moments, 2, ma);
     }
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
-      variance_row_valid(g, m, age, min_age, var, y, x, n, poly, SVGF_NORMAL_EXP);
+      variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
+                         FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
       continue;
     }
     /* the tail's lanes past the row read the pads and the next row: their
@@ -428,8 +435,8 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
           na = avx_vtap_exponent(zx, n0x, n1x, n2x, u->ga, rdd[p + 1], zp, n0p, n1p, n2p, nbias);
           nb = avx_vtap_exponent(zx, n0x, n1x, n2x, u->gb, rdd[p + 1], zp, n0p, n1p, n2p, nbias);
         }
-        avx_vtap_add(m1 + x, m2 + x, t->ma, ta, &sw, &s1, &s2);
-        avx_vtap_add(m1 + x, m2 + x, t->mb, tb, &sw, &s1, &s2);
+        avx_vtap_add(m1 + x, m2 + x, t->ma, ta, &sw, &s1, &s2, FAST);
+        avx_vtap_add(m1 + x, m2 + x, t->mb, tb, &sw, &s1, &s2, FAST);
         ta = na;
         tb = nb;
       }
@@ -444,30 +451,50 @@ static void avx_variance_row(const svgf_guide *g, const svgf_padded *m, const fl
 #define HAVE_AVX_VARIANCE 1
 #else
 VARIANCE_ROWS(variance_rows_exp, SVGF_NORMAL_EXP)
+VARIANCE_ROWS(variance_rows_exp_fast, SVGF_NORMAL_EXP_FAST)
 #define HAVE_AVX_VARIANCE 0
 #endif
 
 #if HAVE_AVX_VARIANCE
+static void avx_variance_row_accurate(const svgf_guide *g, const svgf_padded *m,
+                                      const float *age, float min_age, float *var, int y,
+                                      int has_empty, const svgf_exp2_poly *poly) {
+  avx_variance_row(g, m, age, min_age, var, y, has_empty, poly, 0);
+}
+
+static void avx_variance_row_fast(const svgf_guide *g, const svgf_padded *m, const float *age,
+                                  float min_age, float *var, int y, int has_empty,
+                                  const svgf_exp2_poly *poly) {
+  avx_variance_row(g, m, age, min_age, var, y, has_empty, poly, 1);
+}
+
 static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, const float *age,
-                                  float min_age, float *var, int threads) {
+                                  float min_age, float *var, int fast, int threads) {
   const svgf_exp2_poly poly = svgf_exp2_poly_scaled(1.0f);
   const long long npix = (long long)g->width * g->height;
   int has_empty = 0;
 #pragma omp parallel for simd reduction(| : has_empty) num_threads(threads)
   for (long long i = 0; i < npix; i++) has_empty |= !(age[i] > 0.0f);
 #pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
-  for (int y = 0; y < g->height; y++)
-    avx_variance_row(g, m, age, min_age, var, y, has_empty, &poly);
+  for (int y = 0; y < g->height; y++) {
+    if (fast)
+      avx_variance_row_fast(g, m, age, min_age, var, y, has_empty, &poly);
+    else
+      avx_variance_row_accurate(g, m, age, min_age, var, y, has_empty, &poly);
+  }
 }
 #endif
 
 void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
-                           float min_age, float *var, int normal_exp, int threads) {
+                           float min_age, float *var, int normal_exp, int fast_exp, int threads) {
   if (normal_exp) {
 #if HAVE_AVX_VARIANCE
-    variance_rows_exp_avx(g, moments, age, min_age, var, threads);
+    variance_rows_exp_avx(g, moments, age, min_age, var, fast_exp, threads);
 #else
-    variance_rows_exp(g, moments, age, min_age, var, threads);
+    if (fast_exp)
+      variance_rows_exp_fast(g, moments, age, min_age, var, threads);
+    else
+      variance_rows_exp(g, moments, age, min_age, var, threads);
 #endif
     return;
   }

@@ -25,8 +25,10 @@
 /* moments: padded, 2 planes (E[l], E[l^2]); age: unpadded history lengths;
  * var (unpadded) is overwritten where age < min_age and kept elsewhere.
  * normal_exp: the normal weight as svgf's normal_weight=exp (weights.h,
- * SVGF_NORMAL_EXP), else the power. */
+ * SVGF_NORMAL_EXP), else the power; fast_exp, with normal_exp: the weights
+ * by svgf's weight_exp=fast (weights.h, svgf_exp2_neg_fast). */
 void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
-                           float min_age, float *var, int normal_exp, int threads);
+                           float min_age, float *var, int normal_exp, int fast_exp,
+                           int threads);
 
 #endif

@@ -172,6 +172,10 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_neg_h(float s, float s_max, const svgf
  * dot)) (svgf's normal_weight=exp): the first-order form of max(0, dot)^
  * sigma_n, within 0.0021 of it at sigma_n 128, in the exponent (no power). */
 #define SVGF_NORMAL_EXP (-2)
+/* SVGF_NORMAL_EXP with the fast weight (weight_exp=fast,
+ * svgf_exp2_neg_fast), for callers whose h is 1 (the polynomial p is not
+ * used; the floor is decided on the exponent, as the vector loops do). */
+#define SVGF_NORMAL_EXP_FAST (-3)
 
 /* The weight h w_n w_z w_l of one tap from s_zl = (|dz| / dd + |dl| /
  * dl_max) log2 e (>= 0) and the normals' `dot`. SQUARINGS is a
@@ -182,6 +186,10 @@ static HUSH_ALWAYS_INLINE float svgf_tap_weight(float s_zl, float dot, const int
                                                 float sigma_n_log2e, float dot_floor,
                                                 const svgf_exp2_poly *p) {
   float w;
+  if (squarings == SVGF_NORMAL_EXP_FAST) {
+    const float s = fmaf(sigma_n_log2e, 1.0f - dot, s_zl);
+    return hush__select_bits(s < 20.0f * SVGF_LOG2E, svgf_exp2_neg_fast(s), 0.0f);
+  }
   if (squarings == SVGF_NORMAL_EXP) {
     w = svgf_exp2_neg_h(fmaf(sigma_n_log2e, 1.0f - dot, s_zl), SVGF_S_MAX, p);
     return hush__select_bits(w > p->floor, w, 0.0f);
