@@ -37,6 +37,7 @@ fi
 # filter | settings (KEY=VALUE ..., empty: the defaults) | the stage they change
 configs=(
   "svgf||atrous"
+  "svgf|weight_exp=accurate|atrous"
   "svgf|iterations=4|atrous"
   "svgf|kernel=3x3 iterations=6|atrous"
   "svgf|kernel=3x3 iterations=6 order=0-then-decreasing|atrous"

@@ -13,7 +13,9 @@
  * by Newton steps, not divisions), the kernel weight h into the polynomial
  * of 2^f; w_n is a power of two by repeated squaring (sigma_n = 128: 7
  * multiplies) or, for any other sigma_n, joins the exponent as
- * sigma_n log2(dot).
+ * sigma_n log2(dot). That 2^t is a polynomial with svgf's
+ * weight_exp=accurate; by default (fast) it is svgf_exp2_neg_fast's linear
+ * interpolation between powers of two, within 3 % (below).
  *
  * Every weight w = w_n w_z w_l at or below e^-20 is made exactly 0 (one
  * compare and a zero-masked operation): such a tap weighs under 2e-9 of
