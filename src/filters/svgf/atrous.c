@@ -251,6 +251,7 @@ typedef struct avx_pair {
   ptrdiff_t a, b;       /* tap offsets in floats (row_offsets) */
   float fdx, fdy;
   float nbias, nfloor;  /* -(bias - log2 h), -(S_FLOOR - log2 h) */
+  int32_t bfloor;       /* the fast weight's bits at nfloor (svgf_avx2_exp2_fast) */
 } avx_pair;
 
 /* The planes of a row, at pixel 0 of that row. */
@@ -292,6 +293,7 @@ static void avx_args_of(const level_ctx *c, int y, int validity, avx_args *a) {
     a->pairs[k].fdy = c->pairs[k].fdy;
     a->pairs[k].nbias = -(c->bias + c->pairs[k].nlh);
     a->pairs[k].nfloor = -(S_FLOOR + c->pairs[k].nlh);
+    a->pairs[k].bfloor = svgf_fast_exp_bits(a->pairs[k].nfloor);
   }
   const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
   a->r.z = g->zn->plane[0] + gi;
@@ -614,11 +616,12 @@ static HUSH_ALWAYS_INLINE __m256 avx_tap_exponent(const avx_row *r, ptrdiff_t of
 /* The weight of the tap at offset off from its exponent t, added to the
  * sums. */
 static HUSH_ALWAYS_INLINE void avx_tap_add(const avx_row *r, ptrdiff_t off, __m256 t,
-                                           __m256 nfloor, avx_px *p, __m256i m, const int FULL,
-                                           const int VALIDITY, const int WITH_VAR,
-                                           const int FAST) {
+                                           const avx_pair *pr, avx_px *p, __m256i m,
+                                           const int FULL, const int VALIDITY,
+                                           const int WITH_VAR, const int FAST) {
 #define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
-  __m256 w = FAST ? svgf_avx2_exp2_fast(t, nfloor) : svgf_avx2_exp2_floored(t, nfloor);
+  __m256 w = FAST ? svgf_avx2_exp2_fast(t, _mm256_set1_epi32(pr->bfloor))
+                  : svgf_avx2_exp2_floored(t, _mm256_set1_ps(pr->nfloor));
   if (VALIDITY) w = _mm256_mul_ps(w, LD(r->ok));
   p->sw = _mm256_add_ps(p->sw, w);
   p->s0 = _mm256_fmadd_ps(w, LD(r->c0), p->s0);
@@ -774,9 +777,9 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
       t[2 * k + 1] = avx_tap_exponent(&rx, pairs[k].b, rdd, &p, bias, m, FULL);
     }
     for (int k = 0; k < npairs; k++) {
-      const __m256 nf = _mm256_set1_ps(pairs[k].nfloor);
-      avx_tap_add(&rx, pairs[k].a, t[2 * k], nf, &p, m, FULL, VALIDITY, WITH_VAR, FAST);
-      avx_tap_add(&rx, pairs[k].b, t[2 * k + 1], nf, &p, m, FULL, VALIDITY, WITH_VAR, FAST);
+      avx_tap_add(&rx, pairs[k].a, t[2 * k], &pairs[k], &p, m, FULL, VALIDITY, WITH_VAR, FAST);
+      avx_tap_add(&rx, pairs[k].b, t[2 * k + 1], &pairs[k], &p, m, FULL, VALIDITY, WITH_VAR,
+                  FAST);
     }
   }
   avx_finish(&p, x, m, out, also, FULL, VALIDITY, WITH_VAR);

@@ -346,8 +346,9 @@ static HUSH_ALWAYS_INLINE __m256 avx_vtap_exponent(const float *z, const float *
 static HUSH_ALWAYS_INLINE void avx_vtap_add(const float *m1, const float *m2, ptrdiff_t mo,
                                             __m256 t, __m256 *sw, __m256 *s1, __m256 *s2,
                                             const int FAST) {
-  const __m256 nfloor = _mm256_set1_ps(-20.0f * SVGF_LOG2E);
-  const __m256 w = FAST ? svgf_avx2_exp2_fast(t, nfloor) : svgf_avx2_exp2_floored(t, nfloor);
+  const float nfloor = -20.0f * SVGF_LOG2E;
+  const __m256 w = FAST ? svgf_avx2_exp2_fast(t, _mm256_set1_epi32(svgf_fast_exp_bits(nfloor)))
+                        : svgf_avx2_exp2_floored(t, _mm256_set1_ps(nfloor));
   *sw = _mm256_add_ps(*sw, w);
   *s1 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m1 + mo), *s1);
   *s2 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m2 + mo), *s2);
