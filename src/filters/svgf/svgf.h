@@ -136,7 +136,7 @@ extern const char *const svgf_weight_exp_names[];
     {"weight_exp", HUSH_PARAM_ENUM, 1, 0, 1, \
      "the exp of the edge-stopping weights (a-trous and 7x7 variance, with " \
      "normal_weight=exp): fast = 2^t interpolated linearly between powers of two " \
-     "(Schraudolph 1999; each weight within 3 % of it, the a-trous 8-10 % faster, RMSE and " \
+     "(Schraudolph 1999; each weight within 3 % of it, the a-trous 11-13 % faster, RMSE and " \
      "SSIM as good on three scenes: docs/svgf-speed.md, twenty-third round), accurate = a " \
      "polynomial (1e-4 relative)", \
      svgf_weight_exp_names},

@@ -103,8 +103,9 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_neg4(float s) {
  * peaks at 1.0615 (f = 1 / ln 2 - 1); the shift, log2(2 / 2.0615), centres
  * it, so every weight is within 2.98 % of 2^t, and it never increases as t
  * falls. One fused multiply-add and one conversion, where the polynomial
- * and its exponent take eight operations of the tap's 25 (the a-trous 8-10
- * % faster on Zen 3; docs/svgf-speed.md, twenty-third round). */
+ * and its exponent take eight operations of the tap's 25 (the a-trous 11-13
+ * % faster on Zen 3, with the AVX2 floor below; docs/svgf-speed.md,
+ * twenty-third round). */
 #define SVGF_FAST_EXP_SHIFT (-0.043678f)
 #define SVGF_FAST_EXP_BIAS ((127.0f + SVGF_FAST_EXP_SHIFT) * 8388608.0f)
 
