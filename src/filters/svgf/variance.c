@@ -476,13 +476,11 @@ static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, con
   int has_empty = 0;
 #pragma omp parallel for simd reduction(| : has_empty) num_threads(threads)
   for (long long i = 0; i < npix; i++) has_empty |= !(age[i] > 0.0f);
+  void (*const row)(const svgf_guide *, const svgf_padded *, const float *, float, float *, int,
+                    int, const svgf_exp2_poly *) =
+      fast ? avx_variance_row_fast : avx_variance_row_accurate;
 #pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
-  for (int y = 0; y < g->height; y++) {
-    if (fast)
-      avx_variance_row_fast(g, m, age, min_age, var, y, has_empty, &poly);
-    else
-      avx_variance_row_accurate(g, m, age, min_age, var, y, has_empty, &poly);
-  }
+  for (int y = 0; y < g->height; y++) row(g, m, age, min_age, var, y, has_empty, &poly);
 }
 #endif
 
