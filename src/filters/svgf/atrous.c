@@ -252,6 +252,7 @@ typedef struct avx_pair {
   float fdx, fdy;
   float nbias, nfloor;  /* -(bias - log2 h), -(S_FLOOR - log2 h) */
   int32_t bfloor;       /* the fast weight's bits at nfloor (svgf_avx2_exp2_fast) */
+  float ubias;          /* nbias in the fast weight's units, biased (avx_setup) */
 } avx_pair;
 
 /* The planes of a row, at pixel 0 of that row. */
@@ -294,6 +295,7 @@ static void avx_args_of(const level_ctx *c, int y, int validity, avx_args *a) {
     a->pairs[k].nbias = -(c->bias + c->pairs[k].nlh);
     a->pairs[k].nfloor = -(S_FLOOR + c->pairs[k].nlh);
     a->pairs[k].bfloor = svgf_fast_exp_bits(a->pairs[k].nfloor);
+    a->pairs[k].ubias = fmaf(a->pairs[k].nbias, SVGF_FAST_EXP_UNIT, SVGF_FAST_EXP_BIAS);
   }
   const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
   a->r.z = g->zn->plane[0] + gi;
@@ -620,7 +622,7 @@ static HUSH_ALWAYS_INLINE void avx_tap_add(const avx_row *r, ptrdiff_t off, __m2
                                            const int FULL, const int VALIDITY,
                                            const int WITH_VAR, const int FAST) {
 #define LD(P) (FULL ? _mm256_loadu_ps((P) + off) : _mm256_maskload_ps((P) + off, m))
-  __m256 w = FAST ? svgf_avx2_exp2_fast(t, _mm256_set1_epi32(pr->bfloor))
+  __m256 w = FAST ? svgf_avx2_exp2_fast_biased(t, _mm256_set1_epi32(pr->bfloor))
                   : svgf_avx2_exp2_floored(t, _mm256_set1_ps(pr->nfloor));
   if (VALIDITY) w = _mm256_mul_ps(w, LD(r->ok));
   p->sw = _mm256_add_ps(p->sw, w);
@@ -635,7 +637,8 @@ static HUSH_ALWAYS_INLINE void avx_tap_add(const avx_row *r, ptrdiff_t off, __m2
 static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, const float *vu,
                                          const float *vd, const float *gx, const float *gy,
                                          const float *zon, const float *eps, int x, __m256i m,
-                                         const int FULL, const int VALIDITY, avx_px *p) {
+                                         const int FULL, const int VALIDITY, const int FAST,
+                                         avx_px *p) {
 #define LDX(P, OFF) (FULL ? _mm256_loadu_ps((P) + x + (OFF)) : _mm256_maskload_ps((P) + x + (OFF), m))
   const __m256 q = _mm256_set1_ps(0.25f), h = _mm256_set1_ps(0.5f);
   const __m256 hu = _mm256_fmadd_ps(h, LDX(vu, 0), _mm256_mul_ps(q, _mm256_add_ps(LDX(vu, -1), LDX(vu, 1))));
@@ -652,17 +655,22 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
   const __m256 sd = _mm256_sqrt_ps(var3);
   const __m256 dl = _mm256_min_ps(_mm256_fmadd_ps(_mm256_set1_ps(c->sigma_l), sd, e),
                                   _mm256_set1_ps(1e30f));
-  p->inv_l = _mm256_div_ps(_mm256_set1_ps(SVGF_LOG2E), dl);
+  /* FAST: the exponent's terms in the fast weight's units, so that the tap
+   * sums u = t 2^23 + bias directly (the bias in the pair's ubias): one
+   * fused multiply-add fewer per tap (docs/svgf-speed.md, twenty-fourth
+   * round) */
+  const float unit = FAST ? SVGF_FAST_EXP_UNIT : 1.0f;
+  p->inv_l = _mm256_div_ps(_mm256_set1_ps(SVGF_LOG2E * unit), dl);
   if (VALIDITY) p->inv_l = _mm256_mul_ps(p->inv_l, LDX(r->ok, 0));
   const __m256 sz = _mm256_set1_ps(c->g->sigma_z);
   p->sgx = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDX(gx, 0)), _mm256_set1_ps(1e20f)),
                          _mm256_set1_ps(-1e20f));
   p->sgy = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDX(gy, 0)), _mm256_set1_ps(1e20f)),
                          _mm256_set1_ps(-1e20f));
-  p->zl = _mm256_mul_ps(LDX(zon, 0), _mm256_set1_ps(SVGF_LOG2E));
+  p->zl = _mm256_mul_ps(LDX(zon, 0), _mm256_set1_ps(SVGF_LOG2E * unit));
   p->zp = LDX(r->z, 0);
   p->lp = LDX(r->l, 0);
-  const __m256 ns = _mm256_set1_ps(c->nscale);
+  const __m256 ns = _mm256_set1_ps(c->nscale * unit);
   p->n0p = _mm256_mul_ps(ns, LDX(r->n0, 0));
   p->n1p = _mm256_mul_ps(ns, LDX(r->n1, 0));
   p->n2p = _mm256_mul_ps(ns, LDX(r->n2, 0));
@@ -745,7 +753,7 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
   const __m256i m = _mm256_cmpgt_epi32(_mm256_set1_epi32(FULL ? 8 : n),
                                        _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
   avx_px p;
-  avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p);
+  avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, FAST, &p);
   const avx_row rx = avx_row_at(r, x, VALIDITY);
   /* The taps' bottom row (y + 2 step) is the one this row reads first of
    * all rows (the others were bottom rows of earlier ones); its lines
@@ -772,7 +780,7 @@ static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, 
     __m256 t[2 * MAX_PAIRS];
     for (int k = 0; k < npairs; k++) {
       const __m256 rdd = avx_rdd(&p, &pairs[k]);
-      const __m256 bias = _mm256_set1_ps(pairs[k].nbias);
+      const __m256 bias = _mm256_set1_ps(FAST ? pairs[k].ubias : pairs[k].nbias);
       t[2 * k] = avx_tap_exponent(&rx, pairs[k].a, rdd, &p, bias, m, FULL);
       t[2 * k + 1] = avx_tap_exponent(&rx, pairs[k].b, rdd, &p, bias, m, FULL);
     }

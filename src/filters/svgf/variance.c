@@ -347,7 +347,7 @@ static HUSH_ALWAYS_INLINE void avx_vtap_add(const float *m1, const float *m2, pt
                                             __m256 t, __m256 *sw, __m256 *s1, __m256 *s2,
                                             const int FAST) {
   const float nfloor = -20.0f * SVGF_LOG2E;
-  const __m256 w = FAST ? svgf_avx2_exp2_fast(t, _mm256_set1_epi32(svgf_fast_exp_bits(nfloor)))
+  const __m256 w = FAST ? svgf_avx2_exp2_fast_biased(t, _mm256_set1_epi32(svgf_fast_exp_bits(nfloor)))
                         : svgf_avx2_exp2_floored(t, _mm256_set1_ps(nfloor));
   *sw = _mm256_add_ps(*sw, w);
   *s1 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m1 + mo), *s1);
@@ -365,7 +365,14 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
   const float *z = r.z, *n0 = r.n0, *n1 = r.n1, *n2 = r.n2, *m1 = r.m1, *m2 = r.m2;
   const float *a = r.a, *gx = r.gx, *gy = r.gy, *zon = r.zon;
   float *v = r.v;
-  const __m256 sn = _mm256_set1_ps(g->np.sigma_n_log2e), nbias = _mm256_set1_ps(-g->np.sigma_n_log2e);
+  /* FAST: the exponent's terms in the fast weight's units and its bias in
+   * nbias, as the a-trous's (atrous.c): the tap's exponent is the weight's
+   * biased bits, u = t 2^23 + bias */
+  const float unit = FAST ? SVGF_FAST_EXP_UNIT : 1.0f;
+  const __m256 sn = _mm256_set1_ps(g->np.sigma_n_log2e * unit);
+  const __m256 nbias =
+      _mm256_set1_ps(FAST ? fmaf(-g->np.sigma_n_log2e, SVGF_FAST_EXP_UNIT, SVGF_FAST_EXP_BIAS)
+                          : -g->np.sigma_n_log2e);
   const __m256 sz = _mm256_set1_ps(g->sigma_z), eps_z = _mm256_set1_ps(SVGF_EPS_Z);
   const __m256 zero = _mm256_setzero_ps();
   const int sky_skip = g->np.sigma_n_log2e >= 20.0f * SVGF_LOG2E;
@@ -402,7 +409,7 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
                                      _mm256_set1_ps(-1e20f));
     const __m256 sgy = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDL(gy)), _mm256_set1_ps(1e20f)),
                                      _mm256_set1_ps(-1e20f));
-    const __m256 zl = _mm256_mul_ps(LDL(zon), _mm256_set1_ps(SVGF_LOG2E));
+    const __m256 zl = _mm256_mul_ps(LDL(zon), _mm256_set1_ps(SVGF_LOG2E * unit));
     const __m256 zp = LDL(z);
     const __m256 n0p = _mm256_mul_ps(sn, LDL(n0));
     const __m256 n1p = _mm256_mul_ps(sn, LDL(n1));
