@@ -694,6 +694,25 @@ static hush_status list_channels(hush_frame frame, const char *path, hush_exr_ty
   return HUSH_OK;
 }
 
+/* The library's compressor, wrapped by compress_guarded. */
+typedef struct zip_guard {
+  exr_result_t (*compress)(exr_encode_pipeline_t *pipeline);
+} zip_guard;
+
+/* OpenEXR before 3.4.8 (Debian 12 has 3.1.5) keeps the deflated bytes of
+ * a chunk whose deflated size equals its raw size, and every reader takes
+ * a chunk of its raw size for raw pixels: the chunk reads back as garbage
+ * (OpenEXR issue 2306; here 3 of 6 frames of `hush synth --size 2x1`).
+ * Such a chunk is stored raw, as later releases do. */
+static exr_result_t compress_guarded(exr_encode_pipeline_t *e) {
+  const zip_guard *guard = e->encoding_user_data;
+  const exr_result_t rv = guard->compress(e);
+  if (rv == EXR_ERR_SUCCESS && e->compressed_bytes == e->packed_bytes && e->compressed_buffer &&
+      e->packed_buffer && e->compressed_buffer != e->packed_buffer)
+    memcpy(e->compressed_buffer, e->packed_buffer, e->packed_bytes);
+  return rv;
+}
+
 static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
                                     const out_channel *channels, int count, const exr_sink *sink,
                                     const char *path) {
@@ -703,6 +722,7 @@ static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
   if (rv != EXR_ERR_SUCCESS || lines < 1)
     return write_fail(device, sink, rv, path, "lay out scanlines");
   exr_encode_pipeline_t encoder = EXR_ENCODE_PIPELINE_INITIALIZER;
+  zip_guard guard = {NULL};
   const int32_t height = (int32_t)frame->height;
   const size_t width = frame->width;
   hush_status status = HUSH_OK;
@@ -735,7 +755,14 @@ static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
       ch->user_data_type = EXR_PIXEL_FLOAT;
     }
     if (status != HUSH_OK) break;
-    if (y == 0) rv = exr_encoding_choose_default_routines(ctx, 0, &encoder);
+    if (y == 0) {
+      rv = exr_encoding_choose_default_routines(ctx, 0, &encoder);
+      if (rv == EXR_ERR_SUCCESS && encoder.compress_fn) {
+        guard.compress = encoder.compress_fn;
+        encoder.compress_fn = compress_guarded;
+        encoder.encoding_user_data = &guard;
+      }
+    }
     if (rv == EXR_ERR_SUCCESS) rv = exr_encoding_run(ctx, 0, &encoder);
     if (rv != EXR_ERR_SUCCESS) status = write_fail(device, sink, rv, path, "encode scanlines");
   }
