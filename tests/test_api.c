@@ -11,6 +11,8 @@
 #include "hush.h"
 
 #include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
 
 #define W 16
@@ -406,6 +408,75 @@ static void test_input_range(void) {
   }
 }
 
+/*
+ * A filter committed with less memory than it needs (the device's memory
+ * option) fails with HUSH_ERROR_OUT_OF_MEMORY, at whichever allocation the
+ * cap is reached, and frees what it had (the sanitizer builds check the
+ * leaks); with enough it commits and runs. The cap is what keeps a commit
+ * at a size the machine cannot hold from being killed by the kernel.
+ */
+static void test_memory_cap(void) {
+  enum { MW = 512, MH = 512, MN = MW * MH };
+  float *buf = calloc((size_t)MN * 18, sizeof(float));
+  REQUIRE(buf != NULL);
+  float *mcolor = buf, *mdepth = mcolor + 3 * MN, *mnormal = mdepth + MN, *malbedo = mnormal + 3 * MN;
+  float *mposition = malbedo + 3 * MN, *mmotion = mposition + 3 * MN, *mout = mmotion + 2 * MN;
+  for (int i = 0; i < MN; i++) {
+    mdepth[i] = 2.0f;
+    mnormal[3 * i + 2] = 1.0f;
+    mposition[3 * i + 2] = -2.0f;
+    for (int c = 0; c < 3; c++) mcolor[3 * i + c] = malbedo[3 * i + c] = 0.5f;
+  }
+  for (size_t k = 0; k < BENCH_CLASSES; k++) {
+    int refused = 0, committed = 0;
+    for (int mib = 1; mib <= 256 && !committed; mib++) {
+      char config[64];
+      snprintf(config, sizeof config, "threads=2, memory=%d", mib);
+      hush_device d = hush_device_new(config);
+      REQUIRE(d != NULL);
+      hush_filter f = hush_filter_new(d, bench_classes[k]);
+      REQUIRE(f != NULL);
+      const hush_filter_class_info *ci = hush_filter_get_class(f);
+      for (uint32_t i = 0; i < ci->image_count; i++) {
+        const char *name = ci->images[i].name;
+        hush_image_view v = {0};
+        if (!strcmp(name, "color")) v = view(mcolor, HUSH_FORMAT_FLOAT3, MW, MH);
+        else if (!strcmp(name, "depth")) v = view(mdepth, HUSH_FORMAT_FLOAT, MW, MH);
+        else if (!strcmp(name, "normal")) v = view(mnormal, HUSH_FORMAT_FLOAT3, MW, MH);
+        else if (!strcmp(name, "albedo")) v = view(malbedo, HUSH_FORMAT_FLOAT3, MW, MH);
+        else if (!strcmp(name, "position")) v = view(mposition, HUSH_FORMAT_FLOAT3, MW, MH);
+        else if (!strcmp(name, "motion")) v = view(mmotion, HUSH_FORMAT_FLOAT2, MW, MH);
+        else if (!strcmp(name, "output")) v = view(mout, HUSH_FORMAT_FLOAT3, MW, MH);
+        else continue;
+        CHECK(hush_filter_set_image(f, name, &v) == HUSH_OK);
+      }
+      const hush_status s = hush_filter_commit(f);
+      if (s == HUSH_OK) {
+        committed = 1;
+        hush_frame_info info;
+        hush_frame_info_init(&info);
+        CHECK_MSG(hush_filter_execute(f, &info) == HUSH_OK, "%s at memory=%d",
+                  bench_classes[k], mib);
+        /* a flat grey wall stays grey (nca, a learned filter, within 0.1) */
+        const float tol = strcmp(bench_classes[k], "nca") ? 1e-3f : 0.1f;
+        CHECK_MSG(isfinite(mout[0]) && fabsf(mout[3 * (MN / 2)] - 0.5f) < tol, "%s: %g",
+                  bench_classes[k], mout[3 * (MN / 2)]);
+      } else {
+        refused++;
+        CHECK_MSG(s == HUSH_ERROR_OUT_OF_MEMORY && expect_error(d, s, "memory"),
+                  "%s at memory=%d: %s", bench_classes[k], mib, hush_status_name(s));
+        CHECK(hush_filter_execute(f, NULL) == HUSH_ERROR_INVALID_OPERATION);
+      }
+      hush_filter_release(f);
+      hush_device_release(d);
+    }
+    /* 512x512 planes are 1 MiB each: every filter needs a few */
+    CHECK_MSG(committed && refused >= 2, "%s: committed %d after %d refusals",
+              bench_classes[k], committed, refused);
+  }
+  free(buf);
+}
+
 int main(void) {
   dev = hush_device_new("threads=2");
   REQUIRE(dev != NULL);
@@ -416,6 +487,7 @@ int main(void) {
   test_frames();
   test_normal_length();
   test_input_range();
+  test_memory_cap();
   hush_device_release(dev);
   return check_summary();
 }

@@ -43,6 +43,21 @@ static void test_device_config(void) {
   CHECK(msg && strstr(msg, "colour") != NULL);
   CHECK(hush_device_new("threads") == NULL);
   CHECK(hush_device_get_error(NULL, NULL) == HUSH_ERROR_INVALID_ARGUMENT);
+
+  /* memory: MiB a commit may allocate; 0 is the machine's memory */
+  d = hush_device_new("memory=64");
+  REQUIRE(d != NULL);
+  CHECK(hush__device_memory_limit(d) == (size_t)64 << 20);
+  hush_device_release(d);
+  d = hush_device_new("memory=0");
+  REQUIRE(d != NULL);
+  CHECK(hush__device_memory_limit(d) > (size_t)64 << 20);
+  hush_device_release(d);
+  CHECK(hush_device_new("memory=-5") == NULL);
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_ERROR_INVALID_ARGUMENT);
+  CHECK(msg && strstr(msg, "memory") != NULL);
+  CHECK(hush_device_new("memory=1e9") == NULL);
+  CHECK(hush_device_get_error(NULL, NULL) == HUSH_ERROR_INVALID_ARGUMENT);
 }
 
 static int callback_calls;
@@ -445,7 +460,31 @@ static void test_stream_copy(void) {
   CHECK(bad == 0);
 }
 
+/* The allocation cap: refuses what would pass it, before allocating, and
+ * only while open; the planes it grants are zeroed and aligned. */
+static void test_alloc_cap(void) {
+  hush__alloc_cap_open((size_t)1 << 20);
+  float *a = hush__alloc_floats(150000); /* 600 KB */
+  float *b = hush__alloc_floats(150000); /* past 1 MiB */
+  float *c = hush__alloc_floats(10000);  /* 40 KB still fits */
+  CHECK(hush__alloc_cap_close() == 1);
+  CHECK(a != NULL && b == NULL && c != NULL);
+  float *d = hush__alloc_floats(150000); /* closed: no cap */
+  CHECK(d != NULL);
+  hush__alloc_cap_open((size_t)1 << 20);
+  CHECK(hush__alloc_cap_close() == 0);
+  int zero = 1;
+  for (int i = 0; a && d && i < 150000; i++) zero = zero && a[i] == 0.0f && d[i] == 0.0f;
+  CHECK(zero);
+  CHECK(((uintptr_t)a % HUSH_ALIGN) == 0 && ((uintptr_t)c % HUSH_ALIGN) == 0 &&
+        ((uintptr_t)d % HUSH_ALIGN) == 0);
+  hush__free_floats(a);
+  hush__free_floats(c);
+  hush__free_floats(d);
+}
+
 int main(void) {
+  test_alloc_cap();
   test_device_config();
   test_first_error_kept();
   test_half();

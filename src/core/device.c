@@ -11,6 +11,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <unistd.h>
 
 /* The error of a failed hush_device_new() (no device to hold it), per thread
  * as in Open Image Denoise's oidnGetDeviceError(NULL). */
@@ -104,9 +105,18 @@ static hush_status apply_option(hush_device d, const char *key, size_t key_len, 
     d->verbose = v;
     return HUSH_OK;
   }
+  if (key_len == 6 && memcmp(key, "memory", 6) == 0) {
+    if (!parse_int(val, val_len, &v))
+      return hush__fail(NULL, HUSH_ERROR_INVALID_ARGUMENT,
+                        "device config: memory must be a number of MiB in [0, 999999999], got "
+                        "'%.*s'",
+                        (int)val_len, val);
+    d->memory_limit = (size_t)v << 20;
+    return HUSH_OK;
+  }
   return hush__fail(NULL, HUSH_ERROR_NOT_FOUND,
-                    "device config: unknown option '%.*s' (known: threads, verbose)", (int)key_len,
-                    key);
+                    "device config: unknown option '%.*s' (known: threads, verbose, memory)",
+                    (int)key_len, key);
 }
 
 static hush_status parse_config(hush_device d, const char *config) {
@@ -130,6 +140,23 @@ static hush_status parse_config(hush_device d, const char *config) {
   return HUSH_OK;
 }
 
+/* The machine's physical memory, or the cgroup (v2) limit of the process
+ * if lower: what a commit may take before the kernel kills the process
+ * (Linux grants more than it has and kills whoever touches the excess). */
+static size_t machine_memory(void) {
+  size_t bytes = SIZE_MAX;
+  const long pages = sysconf(_SC_PHYS_PAGES), page = sysconf(_SC_PAGESIZE);
+  if (pages > 0 && page > 0 && (unsigned long)pages <= SIZE_MAX / (unsigned long)page)
+    bytes = (size_t)pages * (size_t)page;
+  FILE *f = fopen("/sys/fs/cgroup/memory.max", "r"); /* "max" when unlimited */
+  if (f) {
+    unsigned long long limit = 0;
+    if (fscanf(f, "%llu", &limit) == 1 && limit > 0 && limit < bytes) bytes = (size_t)limit;
+    fclose(f);
+  }
+  return bytes;
+}
+
 hush_device hush_device_new(const char *config) {
   hush_device d = calloc(1, sizeof *d);
   if (!d) {
@@ -143,6 +170,7 @@ hush_device hush_device_new(const char *config) {
   }
   if (d->threads == 0) d->threads = omp_get_max_threads();
   if (d->threads < 1) d->threads = 1;
+  if (d->memory_limit == 0) d->memory_limit = machine_memory();
   return d;
 }
 
@@ -184,3 +212,7 @@ void hush_device_set_log_callback(hush_device device, hush_log_fn fn, void *user
 }
 
 int hush_device_threads(hush_device device) { return device ? device->threads : 0; }
+
+size_t hush__device_memory_limit(hush_device device) {
+  return device ? device->memory_limit : SIZE_MAX;
+}

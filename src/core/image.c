@@ -35,18 +35,47 @@
 #define STAGGER_CYCLE 13u
 static atomic_uint stagger_next;
 
+/* The calling thread's allocation cap (hush__alloc_cap_open), per thread
+ * so that filters committed on other threads keep their own. */
+static _Thread_local struct {
+  size_t left;
+  int open, refused;
+} alloc_cap;
+
+void hush__alloc_cap_open(size_t bytes) {
+  alloc_cap.left = bytes;
+  alloc_cap.open = 1;
+  alloc_cap.refused = 0;
+}
+
+int hush__alloc_cap_close(void) {
+  alloc_cap.open = 0;
+  return alloc_cap.refused;
+}
+
 float *hush__alloc_floats(size_t n) {
   const size_t slack = HUSH_ALIGN + STAGGER_LINES * STAGGER_CYCLE * 64u;
-  if (n == 0 || n > (SIZE_MAX - 2 * slack) / sizeof(float)) return NULL;
+  if (n == 0 || n > (SIZE_MAX - 2 * slack - HUSH_ALIGN) / sizeof(float)) return NULL;
   const size_t bytes = (n * sizeof(float) + HUSH_ALIGN - 1) / HUSH_ALIGN * HUSH_ALIGN;
-  char *base = aligned_alloc(HUSH_ALIGN, bytes + slack);
+  if (alloc_cap.open) {
+    if (bytes + slack > alloc_cap.left) {
+      alloc_cap.refused = 1;
+      return NULL;
+    }
+    alloc_cap.left -= bytes + slack;
+  }
+  /* calloc, not aligned_alloc and memset: a large block comes as fresh
+   * zero pages, which take memory only as the filter writes them */
+  char *base = calloc(1, bytes + slack + HUSH_ALIGN);
   if (!base) return NULL;
-  /* the first HUSH_ALIGN bytes hold base for hush__free_floats */
+  /* the HUSH_ALIGN bytes before the aligned start hold base for
+   * hush__free_floats */
   const unsigned k = atomic_fetch_add_explicit(&stagger_next, 1u, memory_order_relaxed) %
                      STAGGER_CYCLE;
-  char *p = base + HUSH_ALIGN + (size_t)k * STAGGER_LINES * 64u;
+  const uintptr_t aligned =
+      ((uintptr_t)base + 2 * HUSH_ALIGN - 1) / HUSH_ALIGN * HUSH_ALIGN; /* >= base + 64 */
+  char *p = base + (aligned - (uintptr_t)base) + (size_t)k * STAGGER_LINES * 64u;
   memcpy(p - sizeof base, &base, sizeof base);
-  memset(p, 0, bytes);
   return (float *)p;
 }
 

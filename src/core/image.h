@@ -20,6 +20,15 @@
 float *hush__alloc_floats(size_t n);
 void hush__free_floats(float *p);
 
+/* While open, the calling thread's hush__alloc_floats calls fail (NULL)
+ * once they would take more than `bytes` in all, before a page is touched:
+ * a filter committed at a size the machine cannot hold then fails with
+ * HUSH_ERROR_OUT_OF_MEMORY, where zeroing its planes would have had the
+ * kernel kill the process (Linux grants more memory than it has). Not
+ * nested; close returns whether an allocation was refused. */
+void hush__alloc_cap_open(size_t bytes);
+int hush__alloc_cap_close(void);
+
 /* A planar image: `channels` planes of width * height floats each, rows
  * packed (plane[c][y * width + x]). Owned by whoever called hush__planar_init. */
 typedef struct hush_planar {
