@@ -699,11 +699,12 @@ typedef struct zip_guard {
   exr_result_t (*compress)(exr_encode_pipeline_t *pipeline);
 } zip_guard;
 
-/* OpenEXR before 3.4.8 (Debian 12 has 3.1.5) keeps the deflated bytes of
- * a chunk whose deflated size equals its raw size, and every reader takes
- * a chunk of its raw size for raw pixels: the chunk reads back as garbage
- * (OpenEXR issue 2306; here 3 of 6 frames of `hush synth --size 2x1`).
- * Such a chunk is stored raw, as later releases do. */
+/* OpenEXRCore's ZIP encoder (Debian 12 has 3.1.5; fixed upstream in March
+ * 2026, OpenEXR issue 2306) keeps the deflated bytes of a chunk whose
+ * deflated size equals its raw size, and every reader takes a chunk of its
+ * raw size for raw pixels: the chunk reads back as garbage (here 3 of 6
+ * frames of `hush synth --size 2x1`). Such a chunk is stored raw, as the
+ * fixed encoder does. */
 static exr_result_t compress_guarded(exr_encode_pipeline_t *e) {
   const zip_guard *guard = e->encoding_user_data;
   const exr_result_t rv = guard->compress(e);
