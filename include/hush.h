@@ -384,7 +384,9 @@ typedef enum hush_exr_type {
  * renamed into place, so a failure never leaves a partial file. With
  * HUSH_EXR_HALF the "id", "depth", "position" and "vis" layers are still
  * written as float: ids and the visibility buffer's triangle indices must
- * stay exact and half is too coarse for geometry and barycentrics. */
+ * stay exact and half is too coarse for geometry and barycentrics. Finite
+ * values beyond the half range are written as +-65504 (the largest half),
+ * not Inf; NaN and Inf are kept. */
 HUSH_API hush_status hush_frame_write_exr(hush_frame frame, const char *path, hush_exr_type type);
 
 /* Display transform for pictures: radiance * 2^exposure, then tone mapping,

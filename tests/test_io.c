@@ -305,7 +305,8 @@ static void test_exr_half_round_trip(hush_device dev) {
   hush_frame f = make_frame(dev, 40, 35, all_layers, all_channels, ALL_LAYERS);
   float *color = layer_pixels(f, "color", NULL);
   const float special[] = {65504.0f,  1e-5f,    6.1035156e-05f, 5.9604645e-08f, 1e-8f,
-                           -65504.0f, 70000.0f, 0.1f,           1.0f / 3.0f,    2049.0f};
+                           -65504.0f, 70000.0f, 0.1f,           1.0f / 3.0f,    2049.0f,
+                           -1e30f,    65519.0f, 65520.0f,       INFINITY,       -INFINITY};
   memcpy(color, special, sizeof special);
   float *id = layer_pixels(f, "id", NULL);
   id[0] = 123457.0f; /* not a half: ids must stay exact */
@@ -325,7 +326,9 @@ static void test_exr_half_round_trip(hush_device dev) {
     const int exact = !strcmp(all_layers[l], "id") || !strcmp(all_layers[l], "depth") ||
                       !strcmp(all_layers[l], "position");
     for (size_t i = 0; i < pixels * (size_t)c; i++) {
-      const float want = exact ? a[i] : hush__half_to_float(hush__float_to_half(a[i]));
+      /* finite values past the half range saturate at 65504 */
+      const float sat = isfinite(a[i]) ? fmaxf(-65504.0f, fminf(65504.0f, a[i])) : a[i];
+      const float want = exact ? a[i] : hush__half_to_float(hush__float_to_half(sat));
       if (memcmp(&want, &b[i], sizeof want) != 0) bad++;
     }
   }
@@ -335,7 +338,9 @@ static void test_exr_half_round_trip(hush_device dev) {
   CHECK_NEAR(c2[1], 1e-5f, 3e-8); /* half subnormal: spacing 6e-8 */
   CHECK(c2[3] == 5.9604645e-08f); /* the smallest half */
   CHECK(c2[4] == 0.0f);
-  CHECK(isinf(c2[6]) && c2[6] > 0);
+  CHECK(c2[6] == 65504.0f); /* 70000: the largest half, not Inf */
+  CHECK(c2[10] == -65504.0f && c2[11] == 65504.0f && c2[12] == 65504.0f);
+  CHECK(isinf(c2[13]) && c2[13] > 0 && isinf(c2[14]) && c2[14] < 0); /* Inf stays Inf */
   CHECK_NEAR(c2[7], 0.1f, 0.1f / 2048);
   CHECK(layer_pixels(g, "id", NULL)[0] == 123457.0f);
   hush_frame_release(g);

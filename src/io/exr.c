@@ -29,6 +29,7 @@
 
 #include <errno.h>
 #include <fcntl.h>
+#include <float.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -714,6 +715,27 @@ static exr_result_t compress_guarded(exr_encode_pipeline_t *e) {
   return rv;
 }
 
+/* Rows [y, y + rows) of a channel as halves into dst (width per row).
+ * Finite values beyond the half range are written as +-65504, the largest
+ * half: IEEE's conversion (OpenEXR's) makes them Inf, which no reader can
+ * tell from an Inf of the frame, and which hush itself refuses as input
+ * (a renderer's highlight written with --half came back as a NaN/Inf
+ * error). NaN and Inf stay what they are. */
+static void half_rows(const out_channel *oc, size_t width, int32_t y, int32_t rows,
+                      uint16_t *dst) {
+  const int n = oc->layer->channels;
+  for (int32_t r = 0; r < rows; r++) {
+    const float *src = oc->layer->pixels + ((size_t)(y + r) * width) * (size_t)n + (size_t)oc->comp;
+    uint16_t *row = dst + (size_t)r * width;
+    for (size_t x = 0; x < width; x++) {
+      float v = src[x * (size_t)n];
+      v = v > 65504.0f && v <= FLT_MAX ? 65504.0f : v;
+      v = v < -65504.0f && v >= -FLT_MAX ? -65504.0f : v;
+      row[x] = hush__float_to_half(v);
+    }
+  }
+}
+
 static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
                                     const out_channel *channels, int count, const exr_sink *sink,
                                     const char *path) {
@@ -726,8 +748,17 @@ static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
   zip_guard guard = {NULL};
   const int32_t height = (int32_t)frame->height;
   const size_t width = frame->width;
+  /* the half channels' rows of a chunk, converted by half_rows */
+  int halves = 0;
+  for (int i = 0; i < count; i++) halves += channels[i].type == EXR_PIXEL_HALF;
+  const size_t slot = (size_t)(lines < height ? lines : height) * width;
+  uint16_t *half_buf = halves ? malloc((size_t)halves * slot * sizeof *half_buf) : NULL;
+  if (halves && !half_buf)
+    return hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "cannot write '%s': out of memory", path);
   hush_status status = HUSH_OK;
   for (int32_t y = 0; y < height && status == HUSH_OK; y += lines) {
+    const int32_t rows = height - y < lines ? height - y : lines;
+    int half_slot = 0;
     exr_chunk_info_t ci;
     rv = exr_write_scanline_chunk_info(ctx, 0, y, &ci);
     if (rv == EXR_ERR_SUCCESS)
@@ -748,6 +779,16 @@ static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
         break;
       }
       const int n = oc->layer->channels;
+      if (oc->type == EXR_PIXEL_HALF) {
+        uint16_t *dst = half_buf + (size_t)half_slot++ * slot;
+        half_rows(oc, width, y, rows, dst);
+        ch->encode_from_ptr = (const uint8_t *)dst;
+        ch->user_pixel_stride = (int32_t)sizeof *dst;
+        ch->user_line_stride = (int32_t)(width * sizeof *dst);
+        ch->user_bytes_per_element = sizeof *dst;
+        ch->user_data_type = EXR_PIXEL_HALF;
+        continue;
+      }
       ch->encode_from_ptr =
           (const uint8_t *)(oc->layer->pixels + (size_t)y * width * (size_t)n + (size_t)oc->comp);
       ch->user_pixel_stride = n * (int32_t)sizeof(float);
@@ -768,6 +809,7 @@ static hush_status encode_scanlines(exr_context_t ctx, hush_frame frame,
     if (rv != EXR_ERR_SUCCESS) status = write_fail(device, sink, rv, path, "encode scanlines");
   }
   exr_encoding_destroy(ctx, &encoder);
+  free(half_buf);
   return status;
 }
 
