@@ -707,6 +707,26 @@ static void test_png_formats(hush_device dev) {
   CHECK_NEAR(p[(2 * w + 3) * 3 + 1], hush__srgb_decode((float)(255 - index * 17) / 255.0f), 1e-6);
   CHECK_NEAR(p[(2 * w + 3) * 3 + 2], hush__srgb_decode((float)(index * 5) / 255.0f), 1e-6);
   hush_frame_release(f);
+
+  /* a header of 20000 x 20000 (each side allowed, 4e8 pixels too many)
+   * and a token IDAT: refused before any pixel is allocated */
+  FILE *fp = fopen(TMP "/huge.png", "wb");
+  REQUIRE(fp);
+  png_structp png = png_create_write_struct(PNG_LIBPNG_VER_STRING, NULL, NULL, NULL);
+  png_infop info = png_create_info_struct(png);
+  REQUIRE(png && info && !setjmp(png_jmpbuf(png)));
+  png_init_io(png, fp);
+  png_set_IHDR(png, info, 20000, 20000, 8, PNG_COLOR_TYPE_RGB, PNG_INTERLACE_NONE,
+               PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
+  png_write_info(png, info);
+  png_byte token[8] = {0};
+  png_write_chunk(png, (png_const_bytep) "IDAT", token, sizeof token);
+  png_destroy_write_struct(&png, &info);
+  fclose(fp);
+  f = NULL;
+  CHECK_STATUS(dev, hush_frame_read_png(dev, TMP "/huge.png", "c", &f), HUSH_ERROR_UNSUPPORTED,
+               "20000x20000");
+  CHECK(f == NULL);
 }
 
 static void test_pfm(hush_device dev) {

@@ -26,6 +26,9 @@
 #include <string.h>
 
 #define PNG_MAX_SIZE 65536u
+/* Largest width * height read, as for EXR (HUSH_EXR_MAX_PIXELS): a small
+ * file can claim 65536 x 65536 and deflate to 48 GB of float pixels. */
+#define PNG_MAX_PIXELS ((uint64_t)1 << 28)
 
 typedef struct png_message {
   char text[256];
@@ -189,7 +192,9 @@ static decode_result png_decode(png_reader *r) {
   png_read_info(r->png, r->info);
   r->width = png_get_image_width(r->png, r->info);
   r->height = png_get_image_height(r->png, r->info);
-  if (r->width > PNG_MAX_SIZE || r->height > PNG_MAX_SIZE) return DECODE_TOO_LARGE;
+  if (r->width > PNG_MAX_SIZE || r->height > PNG_MAX_SIZE ||
+      (uint64_t)r->width * r->height > PNG_MAX_PIXELS)
+    return DECODE_TOO_LARGE;
 
   const int color = png_get_color_type(r->png, r->info);
   if (color == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(r->png);
@@ -268,8 +273,9 @@ static hush_status read_png_file(hush_device device, FILE *f, const char *path,
     break;
   case DECODE_TOO_LARGE:
     status =
-        hush__fail(device, HUSH_ERROR_UNSUPPORTED, "'%s': %ux%u is larger than %u pixels a side",
-                   path, r.width, r.height, PNG_MAX_SIZE);
+        hush__fail(device, HUSH_ERROR_UNSUPPORTED,
+                   "'%s': %ux%u is larger than %u pixels a side or %llu pixels in all", path,
+                   r.width, r.height, PNG_MAX_SIZE, (unsigned long long)PNG_MAX_PIXELS);
     break;
   case DECODE_NO_MEMORY:
     status = hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory reading '%s' (%ux%u)",
