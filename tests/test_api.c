@@ -419,8 +419,9 @@ static void test_memory_cap(void) {
   enum { MW = 512, MH = 512, MN = MW * MH };
   float *buf = calloc((size_t)MN * 18, sizeof(float));
   REQUIRE(buf != NULL);
-  float *mcolor = buf, *mdepth = mcolor + 3 * MN, *mnormal = mdepth + MN, *malbedo = mnormal + 3 * MN;
-  float *mposition = malbedo + 3 * MN, *mmotion = mposition + 3 * MN, *mout = mmotion + 2 * MN;
+  float *mcolor = buf, *mdepth = mcolor + 3 * MN, *mnormal = mdepth + MN;
+  float *malbedo = mnormal + 3 * MN, *mposition = malbedo + 3 * MN;
+  float *mmotion = mposition + 3 * MN, *mout = mmotion + 2 * MN;
   for (int i = 0; i < MN; i++) {
     mdepth[i] = 2.0f;
     mnormal[3 * i + 2] = 1.0f;
@@ -470,8 +471,8 @@ static void test_memory_cap(void) {
       hush_filter_release(f);
       hush_device_release(d);
     }
-    /* 512x512 planes are 1 MiB each: every filter needs a few */
-    CHECK_MSG(committed && refused >= 2, "%s: committed %d after %d refusals",
+    /* 512x512 planes are 1 MiB each: every filter needs 19-36 MiB */
+    CHECK_MSG(committed && refused >= 10, "%s: committed %d after %d refusals",
               bench_classes[k], committed, refused);
   }
   free(buf);
