@@ -299,23 +299,35 @@ static void bench_fill(bench_frame *b, int k) {
   }
 }
 
-static hush_filter bench_filter(const char *cls, bench_frame *b) {
-  hush_filter f = hush_filter_new(dev, cls);
-  REQUIRE(f != NULL);
+/* The planes of a w x h frame that bind_frame binds by image name. */
+typedef struct frame_planes {
+  float *color, *depth, *normal, *albedo, *position, *motion, *out;
+} frame_planes;
+
+/* Binds every image of f's class that planes has (others stay unbound). */
+static void bind_frame(hush_filter f, const frame_planes *p, uint32_t w, uint32_t h) {
   const hush_filter_class_info *ci = hush_filter_get_class(f);
   for (uint32_t k = 0; k < ci->image_count; k++) {
     const char *name = ci->images[k].name;
     hush_image_view v = {0};
-    if (!strcmp(name, "color")) v = view(b->color, HUSH_FORMAT_FLOAT3, BW, BH);
-    else if (!strcmp(name, "depth")) v = view(b->depth, HUSH_FORMAT_FLOAT, BW, BH);
-    else if (!strcmp(name, "normal")) v = view(b->normal, HUSH_FORMAT_FLOAT3, BW, BH);
-    else if (!strcmp(name, "albedo")) v = view(b->albedo, HUSH_FORMAT_FLOAT3, BW, BH);
-    else if (!strcmp(name, "position")) v = view(b->position, HUSH_FORMAT_FLOAT3, BW, BH);
-    else if (!strcmp(name, "motion")) v = view(b->motion, HUSH_FORMAT_FLOAT2, BW, BH);
-    else if (!strcmp(name, "output")) v = view(b->out, HUSH_FORMAT_FLOAT3, BW, BH);
+    if (!strcmp(name, "color")) v = view(p->color, HUSH_FORMAT_FLOAT3, w, h);
+    else if (!strcmp(name, "depth")) v = view(p->depth, HUSH_FORMAT_FLOAT, w, h);
+    else if (!strcmp(name, "normal")) v = view(p->normal, HUSH_FORMAT_FLOAT3, w, h);
+    else if (!strcmp(name, "albedo")) v = view(p->albedo, HUSH_FORMAT_FLOAT3, w, h);
+    else if (!strcmp(name, "position")) v = view(p->position, HUSH_FORMAT_FLOAT3, w, h);
+    else if (!strcmp(name, "motion")) v = view(p->motion, HUSH_FORMAT_FLOAT2, w, h);
+    else if (!strcmp(name, "output")) v = view(p->out, HUSH_FORMAT_FLOAT3, w, h);
     else continue;
     CHECK(hush_filter_set_image(f, name, &v) == HUSH_OK);
   }
+}
+
+static hush_filter bench_filter(const char *cls, bench_frame *b) {
+  hush_filter f = hush_filter_new(dev, cls);
+  REQUIRE(f != NULL);
+  const frame_planes p = {b->color,    b->depth,  b->normal, b->albedo,
+                          b->position, b->motion, b->out};
+  bind_frame(f, &p, BW, BH);
   CHECK(hush_filter_commit(f) == HUSH_OK);
   return f;
 }
@@ -419,14 +431,19 @@ static void test_memory_cap(void) {
   enum { MW = 512, MH = 512, MN = MW * MH };
   float *buf = calloc((size_t)MN * 18, sizeof(float));
   REQUIRE(buf != NULL);
-  float *mcolor = buf, *mdepth = mcolor + 3 * MN, *mnormal = mdepth + MN;
-  float *malbedo = mnormal + 3 * MN, *mposition = malbedo + 3 * MN;
-  float *mmotion = mposition + 3 * MN, *mout = mmotion + 2 * MN;
+  frame_planes p;
+  p.color = buf;
+  p.depth = p.color + 3 * MN;
+  p.normal = p.depth + MN;
+  p.albedo = p.normal + 3 * MN;
+  p.position = p.albedo + 3 * MN;
+  p.motion = p.position + 3 * MN;
+  p.out = p.motion + 2 * MN;
   for (int i = 0; i < MN; i++) {
-    mdepth[i] = 2.0f;
-    mnormal[3 * i + 2] = 1.0f;
-    mposition[3 * i + 2] = -2.0f;
-    for (int c = 0; c < 3; c++) mcolor[3 * i + c] = malbedo[3 * i + c] = 0.5f;
+    p.depth[i] = 2.0f;
+    p.normal[3 * i + 2] = 1.0f;
+    p.position[3 * i + 2] = -2.0f;
+    for (int c = 0; c < 3; c++) p.color[3 * i + c] = p.albedo[3 * i + c] = 0.5f;
   }
   for (size_t k = 0; k < BENCH_CLASSES; k++) {
     int refused = 0, committed = 0;
@@ -437,20 +454,7 @@ static void test_memory_cap(void) {
       REQUIRE(d != NULL);
       hush_filter f = hush_filter_new(d, bench_classes[k]);
       REQUIRE(f != NULL);
-      const hush_filter_class_info *ci = hush_filter_get_class(f);
-      for (uint32_t i = 0; i < ci->image_count; i++) {
-        const char *name = ci->images[i].name;
-        hush_image_view v = {0};
-        if (!strcmp(name, "color")) v = view(mcolor, HUSH_FORMAT_FLOAT3, MW, MH);
-        else if (!strcmp(name, "depth")) v = view(mdepth, HUSH_FORMAT_FLOAT, MW, MH);
-        else if (!strcmp(name, "normal")) v = view(mnormal, HUSH_FORMAT_FLOAT3, MW, MH);
-        else if (!strcmp(name, "albedo")) v = view(malbedo, HUSH_FORMAT_FLOAT3, MW, MH);
-        else if (!strcmp(name, "position")) v = view(mposition, HUSH_FORMAT_FLOAT3, MW, MH);
-        else if (!strcmp(name, "motion")) v = view(mmotion, HUSH_FORMAT_FLOAT2, MW, MH);
-        else if (!strcmp(name, "output")) v = view(mout, HUSH_FORMAT_FLOAT3, MW, MH);
-        else continue;
-        CHECK(hush_filter_set_image(f, name, &v) == HUSH_OK);
-      }
+      bind_frame(f, &p, MW, MH);
       const hush_status s = hush_filter_commit(f);
       if (s == HUSH_OK) {
         committed = 1;
@@ -460,8 +464,8 @@ static void test_memory_cap(void) {
                   bench_classes[k], mib);
         /* a flat grey wall stays grey (nca, a learned filter, within 0.1) */
         const float tol = strcmp(bench_classes[k], "nca") ? 1e-3f : 0.1f;
-        CHECK_MSG(isfinite(mout[0]) && fabsf(mout[3 * (MN / 2)] - 0.5f) < tol, "%s: %g",
-                  bench_classes[k], mout[3 * (MN / 2)]);
+        CHECK_MSG(isfinite(p.out[0]) && fabsf(p.out[3 * (MN / 2)] - 0.5f) < tol, "%s: %g",
+                  bench_classes[k], p.out[3 * (MN / 2)]);
       } else {
         refused++;
         CHECK_MSG(s == HUSH_ERROR_OUT_OF_MEMORY && expect_error(d, s, "memory"),

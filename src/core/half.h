@@ -6,6 +6,7 @@
 #define HUSH_CORE_HALF_H
 
 #include <stdint.h>
+#include <math.h>
 #include <string.h>
 
 static inline float hush__half_to_float(uint16_t h) {
@@ -57,6 +58,14 @@ static inline uint16_t hush__float_to_half(float f) {
   const uint32_t rem = absx & 0x1fffu;
   if (rem > 0x1000u || (rem == 0x1000u && (h & 1u))) h++;
   return (uint16_t)(sign | h);
+}
+
+/* hush__float_to_half with finite values beyond the half range written as
+ * +-65504, the largest half, where IEEE's conversion makes them Inf (which
+ * no reader can tell from an Inf of the data); NaN and Inf stay. */
+static inline uint16_t hush__float_to_half_saturating(float f) {
+  const uint16_t h = hush__float_to_half(f);
+  return (h & 0x7fffu) == 0x7c00u && isfinite(f) ? (uint16_t)((h & 0x8000u) | 0x7bffu) : h;
 }
 
 #endif

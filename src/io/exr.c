@@ -29,7 +29,6 @@
 
 #include <errno.h>
 #include <fcntl.h>
-#include <float.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -715,24 +714,18 @@ static exr_result_t compress_guarded(exr_encode_pipeline_t *e) {
   return rv;
 }
 
-/* Rows [y, y + rows) of a channel as halves into dst (width per row).
- * Finite values beyond the half range are written as +-65504, the largest
- * half: IEEE's conversion (OpenEXR's) makes them Inf, which no reader can
- * tell from an Inf of the frame, and which hush itself refuses as input
- * (a renderer's highlight written with --half came back as a NaN/Inf
- * error). NaN and Inf stay what they are. */
+/* Rows [y, y + rows) of a channel as halves into dst (width per row),
+ * saturating: OpenEXR's conversion makes finite values beyond the half
+ * range Inf, which hush itself refuses as input (a renderer's highlight
+ * written with --half came back as a NaN/Inf error). */
 static void half_rows(const out_channel *oc, size_t width, int32_t y, int32_t rows,
                       uint16_t *dst) {
   const int n = oc->layer->channels;
   for (int32_t r = 0; r < rows; r++) {
     const float *src = oc->layer->pixels + ((size_t)(y + r) * width) * (size_t)n + (size_t)oc->comp;
     uint16_t *row = dst + (size_t)r * width;
-    for (size_t x = 0; x < width; x++) {
-      float v = src[x * (size_t)n];
-      v = v > 65504.0f && v <= FLT_MAX ? 65504.0f : v;
-      v = v < -65504.0f && v >= -FLT_MAX ? -65504.0f : v;
-      row[x] = hush__float_to_half(v);
-    }
+    for (size_t x = 0; x < width; x++)
+      row[x] = hush__float_to_half_saturating(src[x * (size_t)n]);
   }
 }
 
