@@ -271,6 +271,8 @@ HUSH_API hush_status hush_filter_get_float(hush_filter filter, const char *name,
  * a view of a new size needs hush_filter_commit() again.
  * Input images may be FLOAT* or HALF*, with at least the class's channel
  * count (extra channels are ignored); outputs must have exactly that many.
+ * HALF outputs get finite values beyond the half range as +-65504 (the
+ * largest half), not Inf, as hush_frame_write_exr does.
  */
 HUSH_API hush_status hush_filter_set_image(hush_filter filter, const char *name,
                                            const hush_image_view *view);

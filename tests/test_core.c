@@ -14,6 +14,7 @@
 #include "core/stream.h"
 #include "filters/albedo.h"
 
+#include <float.h>
 #include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
@@ -135,6 +136,29 @@ static void roundtrip_view(hush_format format, size_t offset, size_t pixel_pad, 
   hush__planar_free(&dst);
 }
 
+/* A HALF output view gets finite values beyond the half range as +-65504,
+ * not Inf; Inf and NaN stay, and values in range round as IEEE's
+ * conversion does. */
+static void half_export_saturates(void) {
+  const float in[] = {70000.0f, -1e30f, 65519.0f, 65520.0f, INFINITY, -INFINITY, NAN, 1.5f,
+                      -3.0e38f, 0.0f, FLT_MAX, 65504.0f, 1e-8f};
+  const uint16_t want[] = {0x7bff, 0xfbff, 0x7bff, 0x7bff, 0x7c00, 0xfc00, 0, 0x3e00,
+                           0xfbff, 0x0000, 0x7bff, 0x7bff, 0x0000};
+  enum { N = sizeof in / sizeof in[0] };
+  hush_planar src;
+  REQUIRE(hush__planar_init(NULL, &src, 1, N, 1) == HUSH_OK);
+  memcpy(src.plane[0], in, sizeof in);
+  uint16_t out[N];
+  hush_image_view v = {out, HUSH_FORMAT_HALF, N, 1, 0, 0, 0};
+  hush__view_export(&src, &v, 1);
+  for (int i = 0; i < N; i++) {
+    const int ok = isnan(in[i]) ? (out[i] & 0x7c00) == 0x7c00 && (out[i] & 0x3ff) != 0
+                                : out[i] == want[i];
+    CHECK_MSG(ok, "%g exported as half 0x%04x, want 0x%04x", (double)in[i], out[i], want[i]);
+  }
+  hush__planar_free(&src);
+}
+
 /* Planes of fewer channels than the view's pixels (3 planes in FLOAT4,
  * 1 or 2 planes in a padded FLOAT2/FLOAT3/FLOAT4 pixel): export writes only
  * those channels, leaving the rest of each pixel as it was, and import reads
@@ -180,6 +204,7 @@ static void test_views(void) {
     if (planes < 3) partial_channels(HUSH_FORMAT_FLOAT3, planes);
     partial_channels(HUSH_FORMAT_FLOAT4, planes);
   }
+  half_export_saturates();
   CHECK(hush_format_pixel_size(HUSH_FORMAT_HALF3) == 6);
   CHECK(hush_format_pixel_size(HUSH_FORMAT_FLOAT4) == 16);
   CHECK(hush_format_channels((hush_format)99) == 0);

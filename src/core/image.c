@@ -712,7 +712,7 @@ void hush__view_export_span(const float *const *in, int nc, const hush_image_vie
   if (hush__format_element_size(v->format) == 2) {
     for (uint32_t x = 0; x < w; x++)
       for (int c = 0; c < nc; c++) {
-        const uint16_t hv = hush__float_to_half(in[c][x]);
+        const uint16_t hv = hush__float_to_half_saturating(in[c][x]);
         memcpy(row + (size_t)x * ps + 2 * (size_t)c, &hv, 2);
       }
     return;
