@@ -468,7 +468,7 @@ static void test_memory_cap(void) {
                   bench_classes[k], p.out[3 * (MN / 2)]);
       } else {
         refused++;
-        CHECK_MSG(s == HUSH_ERROR_OUT_OF_MEMORY && expect_error(d, s, "memory"),
+        CHECK_MSG(s == HUSH_ERROR_OUT_OF_MEMORY && expect_error(d, s, "MiB it may allocate"),
                   "%s at memory=%d: %s", bench_classes[k], mib, hush_status_name(s));
         CHECK(hush_filter_execute(f, NULL) == HUSH_ERROR_INVALID_OPERATION);
       }

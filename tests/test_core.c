@@ -488,16 +488,20 @@ static void test_stream_copy(void) {
 /* The allocation cap: refuses what would pass it, before allocating, and
  * only while open; the planes it grants are zeroed and aligned. */
 static void test_alloc_cap(void) {
-  hush__alloc_cap_open((size_t)1 << 20);
+  const char *msg = NULL;
+  hush__alloc_cap_open(NULL, (size_t)1 << 20, "the test's cap");
   float *a = hush__alloc_floats(150000); /* 600 KB */
   float *b = hush__alloc_floats(150000); /* past 1 MiB */
   float *c = hush__alloc_floats(10000);  /* 40 KB still fits */
   CHECK(hush__alloc_cap_close() == 1);
   CHECK(a != NULL && b == NULL && c != NULL);
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_ERROR_OUT_OF_MEMORY && msg &&
+        strcmp(msg, "the test's cap") == 0);
   float *d = hush__alloc_floats(150000); /* closed: no cap */
   CHECK(d != NULL);
-  hush__alloc_cap_open((size_t)1 << 20);
+  hush__alloc_cap_open(NULL, (size_t)1 << 20, "unused");
   CHECK(hush__alloc_cap_close() == 0);
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_OK);
   int zero = 1;
   for (int i = 0; a && d && i < 150000; i++) zero = zero && a[i] == 0.0f && d[i] == 0.0f;
   CHECK(zero);

@@ -40,12 +40,16 @@ static atomic_uint stagger_next;
 static _Thread_local struct {
   size_t left;
   int open, refused;
+  hush_device device;
+  const char *why;
 } alloc_cap;
 
-void hush__alloc_cap_open(size_t bytes) {
+void hush__alloc_cap_open(hush_device device, size_t bytes, const char *why) {
   alloc_cap.left = bytes;
   alloc_cap.open = 1;
   alloc_cap.refused = 0;
+  alloc_cap.device = device;
+  alloc_cap.why = why;
 }
 
 int hush__alloc_cap_close(void) {
@@ -59,6 +63,9 @@ float *hush__alloc_floats(size_t n) {
   const size_t bytes = (n * sizeof(float) + HUSH_ALIGN - 1) / HUSH_ALIGN * HUSH_ALIGN;
   if (alloc_cap.open) {
     if (bytes + slack > alloc_cap.left) {
+      /* recorded here, first, so that the device's error names the cap and
+       * not the caller's "out of memory" that follows */
+      if (!alloc_cap.refused) hush__fail(alloc_cap.device, HUSH_ERROR_OUT_OF_MEMORY, "%s", alloc_cap.why);
       alloc_cap.refused = 1;
       return NULL;
     }

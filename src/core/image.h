@@ -24,9 +24,11 @@ void hush__free_floats(float *p);
  * once they would take more than `bytes` in all, before a page is touched:
  * a filter committed at a size the machine cannot hold then fails with
  * HUSH_ERROR_OUT_OF_MEMORY, where zeroing its planes would have had the
- * kernel kill the process (Linux grants more memory than it has). Not
- * nested; close returns whether an allocation was refused. */
-void hush__alloc_cap_open(size_t bytes);
+ * kernel kill the process (Linux grants more memory than it has). The
+ * first refusal records `why` as the device's error (HUSH_ERROR_OUT_OF_MEMORY);
+ * `why` is the caller's and must stay valid until close. Not nested; close
+ * returns whether an allocation was refused. */
+void hush__alloc_cap_open(hush_device device, size_t bytes, const char *why);
 int hush__alloc_cap_close(void);
 
 /* A planar image: `channels` planes of width * height floats each, rows

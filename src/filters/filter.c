@@ -390,13 +390,14 @@ hush_status hush_filter_commit(hush_filter filter) {
   filter->width = w;
   filter->height = h;
   const size_t limit = hush__device_memory_limit(filter->device);
-  hush__alloc_cap_open(limit);
+  char why[HUSH_MESSAGE_MAX];
+  snprintf(why, sizeof why,
+           "filter '%s': %ux%u images need more than the %zu MiB it may allocate (the "
+           "machine's memory, or the device's memory option)",
+           filter->cls->info->name, w, h, limit >> 20);
+  hush__alloc_cap_open(filter->device, limit, why);
   s = filter->cls->create(filter, &filter->state);
-  if (hush__alloc_cap_close() && s != HUSH_OK)
-    hush__fail(filter->device, HUSH_ERROR_OUT_OF_MEMORY,
-               "filter '%s': %ux%u images need more than the %zu MiB it may allocate (the "
-               "machine's memory, or the device's memory option)",
-               filter->cls->info->name, w, h, limit >> 20);
+  hush__alloc_cap_close();
   if (s) {
     filter->state = NULL;
     filter->width = filter->height = 0;
