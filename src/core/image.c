@@ -65,7 +65,8 @@ float *hush__alloc_floats(size_t n) {
     if (bytes + slack > alloc_cap.left) {
       /* recorded here, first, so that the device's error names the cap and
        * not the caller's "out of memory" that follows */
-      if (!alloc_cap.refused) hush__fail(alloc_cap.device, HUSH_ERROR_OUT_OF_MEMORY, "%s", alloc_cap.why);
+      if (!alloc_cap.refused)
+        hush__fail(alloc_cap.device, HUSH_ERROR_OUT_OF_MEMORY, "%s", alloc_cap.why);
       alloc_cap.refused = 1;
       return NULL;
     }
