@@ -475,7 +475,7 @@ static void test_memory_cap(void) {
       hush_filter_release(f);
       hush_device_release(d);
     }
-    /* 512x512 planes are 1 MiB each: every filter needs 19-36 MiB */
+    /* 512x512 planes are 1 MiB each: every filter needs 19-37 MiB */
     CHECK_MSG(committed && refused >= 10, "%s: committed %d after %d refusals",
               bench_classes[k], committed, refused);
   }

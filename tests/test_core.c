@@ -510,6 +510,23 @@ static void test_alloc_cap(void) {
   hush__free_floats(a);
   hush__free_floats(c);
   hush__free_floats(d);
+
+  /* the other per-pixel arrays count against the same cap */
+  hush__alloc_cap_open(NULL, (size_t)1 << 20, "the counted cap");
+  unsigned char *e = hush__alloc_counted(700000, 1);
+  uint32_t *g = hush__alloc_counted(100000, sizeof *g); /* 400 KB: past 1 MiB */
+  float *k = hush__alloc_floats(10000);
+  CHECK(hush__alloc_cap_close() == 1);
+  CHECK(e != NULL && g == NULL && k != NULL);
+  CHECK(hush_device_get_error(NULL, &msg) == HUSH_ERROR_OUT_OF_MEMORY && msg &&
+        strcmp(msg, "the counted cap") == 0);
+  int zeroed = 1;
+  for (int i = 0; e && i < 700000; i++) zeroed = zeroed && e[i] == 0;
+  CHECK(zeroed);
+  CHECK(hush__alloc_counted(0, 4) == NULL && hush__alloc_counted(4, 0) == NULL);
+  CHECK(hush__alloc_counted(SIZE_MAX / 2, 4) == NULL); /* count * size overflows */
+  free(e);
+  hush__free_floats(k);
 }
 
 int main(void) {

@@ -57,21 +57,31 @@ int hush__alloc_cap_close(void) {
   return alloc_cap.refused;
 }
 
+/* Takes `bytes` from the open cap, if any; 0 when the cap refuses them. */
+static int cap_take(size_t bytes) {
+  if (!alloc_cap.open) return 1;
+  if (bytes > alloc_cap.left) {
+    /* recorded here, first, so that the device's error names the cap and
+     * not the caller's "out of memory" that follows */
+    if (!alloc_cap.refused)
+      hush__fail(alloc_cap.device, HUSH_ERROR_OUT_OF_MEMORY, "%s", alloc_cap.why);
+    alloc_cap.refused = 1;
+    return 0;
+  }
+  alloc_cap.left -= bytes;
+  return 1;
+}
+
+void *hush__alloc_counted(size_t count, size_t size) {
+  if (count == 0 || size == 0 || count > SIZE_MAX / size) return NULL;
+  return cap_take(count * size) ? calloc(count, size) : NULL;
+}
+
 float *hush__alloc_floats(size_t n) {
   const size_t slack = HUSH_ALIGN + STAGGER_LINES * STAGGER_CYCLE * 64u;
   if (n == 0 || n > (SIZE_MAX - 2 * slack - HUSH_ALIGN) / sizeof(float)) return NULL;
   const size_t bytes = (n * sizeof(float) + HUSH_ALIGN - 1) / HUSH_ALIGN * HUSH_ALIGN;
-  if (alloc_cap.open) {
-    if (bytes + slack > alloc_cap.left) {
-      /* recorded here, first, so that the device's error names the cap and
-       * not the caller's "out of memory" that follows */
-      if (!alloc_cap.refused)
-        hush__fail(alloc_cap.device, HUSH_ERROR_OUT_OF_MEMORY, "%s", alloc_cap.why);
-      alloc_cap.refused = 1;
-      return NULL;
-    }
-    alloc_cap.left -= bytes + slack;
-  }
+  if (!cap_take(bytes + slack)) return NULL;
   /* calloc, not aligned_alloc and memset: a large block comes as fresh
    * zero pages, which take memory only as the filter writes them */
   char *base = calloc(1, bytes + slack + HUSH_ALIGN);

@@ -20,8 +20,14 @@
 float *hush__alloc_floats(size_t n);
 void hush__free_floats(float *p);
 
-/* While open, the calling thread's hush__alloc_floats calls fail (NULL)
- * once they would take more than `bytes` in all, before a page is touched:
+/* calloc(count, size) counted against the cap below, for the per-pixel
+ * arrays that are not float planes (the reprojection plan's bytes, sort
+ * keys, scratch); NULL on failure or a zero size. Free with free(). */
+void *hush__alloc_counted(size_t count, size_t size);
+
+/* While open, the calling thread's hush__alloc_floats and
+ * hush__alloc_counted calls fail (NULL) once they would take more than
+ * `bytes` in all, before a page is touched:
  * a filter committed at a size the machine cannot hold then fails with
  * HUSH_ERROR_OUT_OF_MEMORY, where zeroing its planes would have had the
  * kernel kill the process (Linux grants more memory than it has). The

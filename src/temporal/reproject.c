@@ -47,9 +47,9 @@ hush_status hush__reproject_plan_init(hush_device device, hush_reproject_plan *p
   if (n == 0)
     return hush__fail(device, HUSH_ERROR_INVALID_ARGUMENT, "reprojection plan of size %ux%u",
                       width, height);
-  plan->origin = calloc(n, sizeof *plan->origin);
-  plan->mask = calloc(n, sizeof *plan->mask);
-  plan->kind = calloc(n, sizeof *plan->kind);
+  plan->origin = hush__alloc_counted(n, sizeof *plan->origin);
+  plan->mask = hush__alloc_counted(n, sizeof *plan->mask);
+  plan->kind = hush__alloc_counted(n, sizeof *plan->kind);
   int ok = plan->origin && plan->mask && plan->kind;
   for (int t = 0; t < 4; t++) {
     plan->w[t] = hush__alloc_floats(n);

@@ -30,7 +30,8 @@ hush_status bmfr_adaptive_import(hush_filter f, bmfr_adaptive *ad, int image) {
       (s = hush__filter_scratch(f, &ad->color, 3)))
     return s;
   if (!ad->scratch) {
-    ad->scratch = malloc(hush__gradient_scratch_floats(f->width, f->height) * sizeof(float));
+    ad->scratch =
+        hush__alloc_counted(hush__gradient_scratch_floats(f->width, f->height), sizeof(float));
     if (!ad->scratch) return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
   }
   return hush__filter_import(f, image, &ad->gradient);

@@ -26,7 +26,8 @@ hush_status svgf_adaptive_import(hush_filter f, svgf_adaptive *ad) {
       (s = hush__filter_scratch(f, &ad->lowered, 1)))
     return s;
   if (!ad->scratch) {
-    ad->scratch = malloc(hush__gradient_scratch_floats(f->width, f->height) * sizeof(float));
+    ad->scratch =
+        hush__alloc_counted(hush__gradient_scratch_floats(f->width, f->height), sizeof(float));
     if (!ad->scratch)
       return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "asvgf: out of memory");
   }

@@ -33,8 +33,8 @@ hush_status svgf_progressive_init(hush_device device, svgf_progressive *p, uint3
   if (!s) s = hush__planar_init(device, &p->background, 1, W, H);
   if (!s) {
     p->pyramid_floats = hush__holes_pyramid_floats(W, H, SVGF_PYRAMID_MAX_PLANES);
-    p->src = malloc(n * sizeof *p->src);
-    p->keys = malloc(n * sizeof *p->keys);
+    p->src = hush__alloc_counted(n, sizeof *p->src);
+    p->keys = hush__alloc_counted(n, sizeof *p->keys);
     p->pyramid = p->pyramid_floats ? hush__alloc_floats(p->pyramid_floats) : NULL;
     if (!p->src || !p->keys || (p->pyramid_floats && !p->pyramid))
       s = hush__fail(device, HUSH_ERROR_OUT_OF_MEMORY, "svgf: out of memory");
