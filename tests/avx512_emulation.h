@@ -49,8 +49,9 @@
 static inline void hush_emu_get_f(float *out, simde__m512 a) { memcpy(out, &a, 64); }
 static inline void hush_emu_get_i(int32_t *out, simde__m512i a) { memcpy(out, &a, 64); }
 
-/* vreduceps with M = 0 and rounding towards -Inf (weights.h): t - floor(t),
- * +0 for an infinity. */
+/* vreduceps with M = 0 and rounding towards -Inf (weights.h): t - floor(t);
+ * 0 for an infinity (no weight depends on it: the floor's mask drops t =
+ * -Inf, and t is never +Inf). */
 static inline simde__m512 hush_emu_reduce_floor(simde__m512 a) {
   float x[16];
   hush_emu_get_f(x, a);
