@@ -113,10 +113,13 @@ typedef struct hush_device_t *hush_device;
  *   threads=N   worker threads (0 = one per core; default 0)
  *   verbose=N   0..2: how much the device reports through its log callback
  *               (default 0). The library never prints.
- *   memory=N    MiB that a filter's commit may allocate for its buffers and
- *               history (default 0: the machine's memory, or the cgroup
- *               limit of the process if lower). A commit that needs more
- *               fails with HUSH_ERROR_OUT_OF_MEMORY and keeps nothing.
+ *   memory=N    MiB that each filter may allocate for its buffers and
+ *               history, at commit and at its first executes (default 0:
+ *               the machine's memory, or the cgroup limit of the process
+ *               if lower). A commit that needs more fails with
+ *               HUSH_ERROR_OUT_OF_MEMORY and keeps nothing; an execute
+ *               that needs more (the first frames allocate the buffers of
+ *               the stages and images they use) fails with it too.
  * On failure returns NULL; hush_device_get_error(NULL, ...) tells why.
  * The caller owns the returned reference: hush_device_release() it.
  */

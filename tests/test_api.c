@@ -446,8 +446,8 @@ static void test_memory_cap(void) {
     for (int c = 0; c < 3; c++) p.color[3 * i + c] = p.albedo[3 * i + c] = 0.5f;
   }
   for (size_t k = 0; k < BENCH_CLASSES; k++) {
-    int refused = 0, committed = 0;
-    for (int mib = 1; mib <= 256 && !committed; mib++) {
+    int refused = 0, ran = 0;
+    for (int mib = 1; mib <= 256 && !ran; mib++) {
       char config[64];
       snprintf(config, sizeof config, "threads=2, memory=%d", mib);
       hush_device d = hush_device_new(config);
@@ -457,15 +457,19 @@ static void test_memory_cap(void) {
       bind_frame(f, &p, MW, MH);
       const hush_status s = hush_filter_commit(f);
       if (s == HUSH_OK) {
-        committed = 1;
+        /* the first execute allocates the buffers of images first used
+         * then (svgf's albedo): counted against what commit left */
         hush_frame_info info;
         hush_frame_info_init(&info);
-        CHECK_MSG(hush_filter_execute(f, &info) == HUSH_OK, "%s at memory=%d",
-                  bench_classes[k], mib);
+        const hush_status e = hush_filter_execute(f, &info);
+        ran = e == HUSH_OK;
+        const int capped =
+            e == HUSH_ERROR_OUT_OF_MEMORY && expect_error(d, e, "MiB it may allocate");
+        CHECK_MSG(ran || capped, "%s at memory=%d: %s", bench_classes[k], mib, hush_status_name(e));
         /* a flat grey wall stays grey (nca, a learned filter, within 0.1) */
         const float tol = strcmp(bench_classes[k], "nca") ? 1e-3f : 0.1f;
-        CHECK_MSG(isfinite(p.out[0]) && fabsf(p.out[3 * (MN / 2)] - 0.5f) < tol, "%s: %g",
-                  bench_classes[k], p.out[3 * (MN / 2)]);
+        CHECK_MSG(!ran || (isfinite(p.out[0]) && fabsf(p.out[3 * (MN / 2)] - 0.5f) < tol),
+                  "%s: %g", bench_classes[k], p.out[3 * (MN / 2)]);
       } else {
         refused++;
         CHECK_MSG(s == HUSH_ERROR_OUT_OF_MEMORY && expect_error(d, s, "MiB it may allocate"),
@@ -475,9 +479,9 @@ static void test_memory_cap(void) {
       hush_filter_release(f);
       hush_device_release(d);
     }
-    /* 512x512 planes are 1 MiB each: every filter needs 19-37 MiB */
-    CHECK_MSG(committed && refused >= 10, "%s: committed %d after %d refusals",
-              bench_classes[k], committed, refused);
+    /* 512x512 planes are 1 MiB each: every filter needs 19-64 MiB to run a frame */
+    CHECK_MSG(ran && refused >= 10, "%s: ran %d after %d refusals", bench_classes[k], ran,
+              refused);
   }
   free(buf);
 }

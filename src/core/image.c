@@ -52,6 +52,8 @@ void hush__alloc_cap_open(hush_device device, size_t bytes, const char *why) {
   alloc_cap.why = why;
 }
 
+size_t hush__alloc_cap_left(void) { return alloc_cap.left; }
+
 int hush__alloc_cap_close(void) {
   alloc_cap.open = 0;
   return alloc_cap.refused;

@@ -36,6 +36,8 @@ void *hush__alloc_counted(size_t count, size_t size);
  * returns whether an allocation was refused. */
 void hush__alloc_cap_open(hush_device device, size_t bytes, const char *why);
 int hush__alloc_cap_close(void);
+/* What the last cap opened on this thread had left when it closed. */
+size_t hush__alloc_cap_left(void);
 
 /* A planar image: `channels` planes of width * height floats each, rows
  * packed (plane[c][y * width + x]). Owned by whoever called hush__planar_init. */

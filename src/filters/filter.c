@@ -376,6 +376,16 @@ static hush_status check_bindings(hush_filter f, uint32_t *width, uint32_t *heig
   return HUSH_OK;
 }
 
+/* The memory cap's refusal, for commit and execute (which allocates the
+ * buffers of images bound after commit, such as "emission"). */
+static void cap_message(const struct hush_filter_t *filter, char *why, size_t size) {
+  snprintf(why, size,
+           "filter '%s': %ux%u images need more than the %zu MiB it may allocate (the "
+           "machine's memory, or the device's memory option)",
+           filter->cls->info->name, filter->width, filter->height,
+           hush__device_memory_limit(filter->device) >> 20);
+}
+
 hush_status hush_filter_commit(hush_filter filter) {
   if (!filter) return hush__fail(NULL, HUSH_ERROR_INVALID_ARGUMENT, "filter is NULL");
   uint32_t w, h;
@@ -389,15 +399,12 @@ hush_status hush_filter_commit(hush_filter filter) {
   filter->state = NULL;
   filter->width = w;
   filter->height = h;
-  const size_t limit = hush__device_memory_limit(filter->device);
   char why[HUSH_MESSAGE_MAX];
-  snprintf(why, sizeof why,
-           "filter '%s': %ux%u images need more than the %zu MiB it may allocate (the "
-           "machine's memory, or the device's memory option)",
-           filter->cls->info->name, w, h, limit >> 20);
-  hush__alloc_cap_open(filter->device, limit, why);
+  cap_message(filter, why, sizeof why);
+  hush__alloc_cap_open(filter->device, hush__device_memory_limit(filter->device), why);
   s = filter->cls->create(filter, &filter->state);
   hush__alloc_cap_close();
+  filter->memory_left = hush__alloc_cap_left();
   if (s) {
     filter->state = NULL;
     filter->width = filter->height = 0;
@@ -469,7 +476,15 @@ hush_status hush_filter_execute(hush_filter filter, const hush_frame_info *info)
   s = read_info(filter, info, &full);
   if (s) return s;
   filter->stage_count = 0;
-  return filter->cls->execute(filter, filter->state, &full);
+  /* what execute allocates (buffers of optional images, first used now)
+   * counts against what commit left of the limit */
+  char why[HUSH_MESSAGE_MAX];
+  cap_message(filter, why, sizeof why);
+  hush__alloc_cap_open(filter->device, filter->memory_left, why);
+  s = filter->cls->execute(filter, filter->state, &full);
+  hush__alloc_cap_close();
+  filter->memory_left = hush__alloc_cap_left();
+  return s;
 }
 
 hush_status hush_filter_get_timings(hush_filter filter, const char *const **names, const double **ms,

@@ -39,6 +39,7 @@ struct hush_filter_t {
   int bound[HUSH_MAX_IMAGES];
   uint32_t width, height;                /* committed size, 0 before commit */
   int committed;                         /* 0 until commit, or after a binding changed size */
+  size_t memory_left; /* of the device's memory limit, after what commit and execute allocated */
   void *state;
   /* Class data that outlives commits, freed with free() at release (nca:
    * weights loaded with hush_nca_load_weights); NULL until a class sets it. */

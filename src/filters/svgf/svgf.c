@@ -153,6 +153,10 @@ hush_status svgf_create(hush_filter f, void **state) {
   if (!s) s = hush__planar_init(f->device, &st->zon, 1, W, H);
   if (!s) s = hush__planar_init(f->device, &st->var, 1, W, H);
   if (!s) s = hush__planar_init(f->device, &st->samples, 1, W, H);
+  /* here, not at the first frame that uses it: an execute refused by the
+   * memory cap after its history moved on would leave it half a frame */
+  if (!s && !(st->line = hush__alloc_floats((size_t)3 * SVGF_WAVEFRONT_RING * W)))
+    s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "svgf: out of memory");
   if (s) {
     svgf_destroy(st);
     return s;
@@ -616,8 +620,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   fc.out_albedo = demod ? &st->albedo : NULL;
   if (!with_taa && !emis && !split && iterations > 0 && !feedback_alone &&
       svgf_atrous_levels_wavefront(W, H)) {
-    if (!st->line) st->line = hush__alloc_floats((size_t)3 * SVGF_WAVEFRONT_RING * W);
-    fc.out_view = st->line ? hush__filter_view(f, I_OUTPUT) : NULL;
+    fc.out_view = hush__filter_view(f, I_OUTPUT);
   }
   filter_component(&fc, &st->comp[0], 1);
   if (split) {
