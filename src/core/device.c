@@ -141,7 +141,7 @@ static hush_status parse_config(hush_device d, const char *config) {
 }
 
 /* The machine's physical memory, or the cgroup (v2) limit of the process
- * if lower: what a commit may take before the kernel kills the process
+ * if lower: what a filter may take before the kernel kills the process
  * (Linux grants more than it has and kills whoever touches the excess). */
 static size_t machine_memory(void) {
   size_t bytes = SIZE_MAX;

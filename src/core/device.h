@@ -16,7 +16,7 @@ struct hush_device_t {
   int refcount;
   int threads; /* resolved, >= 1 */
   int verbose;
-  size_t memory_limit; /* bytes a filter's commit may allocate; resolved, > 0 */
+  size_t memory_limit; /* bytes a filter may allocate; resolved, > 0 */
   hush_status error;           /* first unread error, HUSH_OK if none */
   char message[HUSH_MESSAGE_MAX];
   char read_message[HUSH_MESSAGE_MAX]; /* what get_error handed out last */
@@ -43,8 +43,8 @@ hush_status hush__fail(hush_device device, hush_status status, const char *fmt, 
     HUSH_PRINTF(3, 4);
 hush_status hush__vfail(hush_device device, hush_status status, const char *fmt, va_list ap);
 
-/* The bytes a filter's commit may allocate on device (its "memory" option,
- * else the machine's memory or its cgroup's limit). */
+/* The bytes a filter may allocate on device, at commit and execute together
+ * (its "memory" option, else the machine's memory or its cgroup's limit). */
 size_t hush__device_memory_limit(hush_device device);
 
 /* Sends a message to the log callback when device->verbose >= level. */

@@ -27,9 +27,8 @@ void *hush__alloc_counted(size_t count, size_t size);
 
 /* While open, the calling thread's hush__alloc_floats and
  * hush__alloc_counted calls fail (NULL) once they would take more than
- * `bytes` in all, before a page is touched:
- * a filter committed at a size the machine cannot hold then fails with
- * HUSH_ERROR_OUT_OF_MEMORY, where zeroing its planes would have had the
+ * `bytes` in all, before a page is touched: a filter committed (or run) at
+ * a size the machine cannot hold then fails with HUSH_ERROR_OUT_OF_MEMORY, where zeroing its planes would have had the
  * kernel kill the process (Linux grants more memory than it has). The
  * first refusal records `why` as the device's error (HUSH_ERROR_OUT_OF_MEMORY);
  * `why` is the caller's and must stay valid until close. Not nested; close

@@ -376,14 +376,22 @@ static hush_status check_bindings(hush_filter f, uint32_t *width, uint32_t *heig
   return HUSH_OK;
 }
 
-/* The memory cap's refusal, for commit and execute (which allocates the
- * buffers of images bound after commit, such as "emission"). */
-static void cap_message(const struct hush_filter_t *filter, char *why, size_t size) {
-  snprintf(why, size,
+/* Opens the memory cap around a class's create or execute (execute
+ * allocates the buffers of the stages and images it first uses) with
+ * `bytes` of the limit left; `why` (HUSH_MESSAGE_MAX) receives the refusal's
+ * message and must outlive cap_close. */
+static void cap_open(const struct hush_filter_t *filter, size_t bytes, char *why) {
+  snprintf(why, HUSH_MESSAGE_MAX,
            "filter '%s': %ux%u images need more than the %zu MiB it may allocate (the "
            "machine's memory, or the device's memory option)",
            filter->cls->info->name, filter->width, filter->height,
            hush__device_memory_limit(filter->device) >> 20);
+  hush__alloc_cap_open(filter->device, bytes, why);
+}
+
+static void cap_close(struct hush_filter_t *filter) {
+  hush__alloc_cap_close();
+  filter->memory_left = hush__alloc_cap_left();
 }
 
 hush_status hush_filter_commit(hush_filter filter) {
@@ -400,11 +408,9 @@ hush_status hush_filter_commit(hush_filter filter) {
   filter->width = w;
   filter->height = h;
   char why[HUSH_MESSAGE_MAX];
-  cap_message(filter, why, sizeof why);
-  hush__alloc_cap_open(filter->device, hush__device_memory_limit(filter->device), why);
+  cap_open(filter, hush__device_memory_limit(filter->device), why);
   s = filter->cls->create(filter, &filter->state);
-  hush__alloc_cap_close();
-  filter->memory_left = hush__alloc_cap_left();
+  cap_close(filter);
   if (s) {
     filter->state = NULL;
     filter->width = filter->height = 0;
@@ -476,14 +482,10 @@ hush_status hush_filter_execute(hush_filter filter, const hush_frame_info *info)
   s = read_info(filter, info, &full);
   if (s) return s;
   filter->stage_count = 0;
-  /* what execute allocates (buffers of optional images, first used now)
-   * counts against what commit left of the limit */
   char why[HUSH_MESSAGE_MAX];
-  cap_message(filter, why, sizeof why);
-  hush__alloc_cap_open(filter->device, filter->memory_left, why);
+  cap_open(filter, filter->memory_left, why); /* what commit and earlier frames left */
   s = filter->cls->execute(filter, filter->state, &full);
-  hush__alloc_cap_close();
-  filter->memory_left = hush__alloc_cap_left();
+  cap_close(filter);
   return s;
 }
 
