@@ -247,12 +247,17 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, int xa, int 
 /* What the intrinsic loops below (AVX-512, else AVX2) read for a row. */
 #include <immintrin.h>
 
+/* Pixels past a row's rightmost bottom tap whose lines the vector loops
+ * prefetch. */
+#define SVGF_PREFETCH_AHEAD 32
+
 typedef struct avx_pair {
   ptrdiff_t a, b;       /* tap offsets in floats (row_offsets) */
   float fdx, fdy;
   float nbias, nfloor;  /* -(bias - log2 h), -(S_FLOOR - log2 h) */
   int32_t bfloor;       /* the fast weight's bits at nfloor (svgf_avx2_exp2_fast) */
   float ubias;          /* nbias in the fast weight's units, biased (avx_setup) */
+  float ufloor;         /* bfloor as a float, the AVX-512 loop's fast floor */
 } avx_pair;
 
 /* The planes of a row, at pixel 0 of that row. */
@@ -296,6 +301,7 @@ static void avx_args_of(const level_ctx *c, int y, int validity, avx_args *a) {
     a->pairs[k].nfloor = -(S_FLOOR + c->pairs[k].nlh);
     a->pairs[k].bfloor = svgf_fast_exp_bits(a->pairs[k].nfloor);
     a->pairs[k].ubias = fmaf(a->pairs[k].nbias, SVGF_FAST_EXP_UNIT, SVGF_FAST_EXP_BIAS);
+    a->pairs[k].ufloor = (float)a->pairs[k].bfloor;
   }
   const size_t gi = (size_t)y * g->zn->stride, si = (size_t)y * in->stride;
   a->r.z = g->zn->plane[0] + gi;
@@ -363,11 +369,12 @@ typedef struct avx_px {
   avx_sums acc;
 } avx_px;
 
-/* One tap at offset off from the vector at x. FULL: all 16 lanes in the row
- * (plain loads); else the loads are masked by m. */
-static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, avx_px *p,
-                                       __m512 nbias, __m512 nfloor, __mmask16 m, const int FULL,
-                                       const int VALIDITY, const int WITH_VAR, const int FAST) {
+/* The exponent t (of the weight 2^t) of the tap at offset off from the
+ * vector at x. FULL: all 16 lanes in the row (plain loads); else the loads
+ * are masked by m. With the fast weight t is in its units (avx_setup). */
+static HUSH_ALWAYS_INLINE __m512 avx_tap_exponent(const avx_row *r, ptrdiff_t off, __m512 rdd,
+                                                  const avx_px *p, __m512 nbias, __mmask16 m,
+                                                  const int FULL) {
 #define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
   const __m512 dz = _mm512_abs_ps(_mm512_sub_ps(p->zp, LD(r->z)));
   const __m512 dl = _mm512_abs_ps(_mm512_sub_ps(p->lp, LD(r->l)));
@@ -375,11 +382,25 @@ static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 r
   t = _mm512_fnmadd_ps(dz, rdd, t);
   t = _mm512_fmadd_ps(p->n0p, LD(r->n0), t);
   t = _mm512_fmadd_ps(p->n1p, LD(r->n1), t);
-  t = _mm512_fmadd_ps(p->n2p, LD(r->n2), t);
+  return _mm512_fmadd_ps(p->n2p, LD(r->n2), t);
+#undef LD
+}
+
+/* The weight of the tap at offset off from its exponent t, added to the
+ * sums. */
+static HUSH_ALWAYS_INLINE void avx_tap_add(const avx_row *r, ptrdiff_t off, __m512 t,
+                                           const avx_pair *pr, avx_px *p, __mmask16 m,
+                                           const int FULL, const int VALIDITY,
+                                           const int WITH_VAR, const int FAST) {
+#define LD(P) (FULL ? _mm512_loadu_ps((P) + off) : _mm512_maskz_loadu_ps(m, (P) + off))
   /* NaN compares false: weight 0 */
-  const __mmask16 keep = _mm512_cmp_ps_mask(t, nfloor, _CMP_GT_OQ);
-  __m512 w = FAST ? svgf_avx_exp2_fast(keep, t)
-                 : _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
+  __m512 w;
+  if (FAST) {
+    w = svgf_avx_exp2_fast_biased(_mm512_cmp_ps_mask(t, _mm512_set1_ps(pr->ufloor), _CMP_GT_OQ), t);
+  } else {
+    const __mmask16 keep = _mm512_cmp_ps_mask(t, _mm512_set1_ps(pr->nfloor), _CMP_GT_OQ);
+    w = _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
+  }
   if (VALIDITY) w = _mm512_mul_ps(w, LD(r->ok));
   p->acc.sw = _mm512_add_ps(p->acc.sw, w);
   p->acc.s0 = _mm512_fmadd_ps(w, LD(r->c0), p->acc.s0);
@@ -389,13 +410,22 @@ static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 r
 #undef LD
 }
 
+/* One tap: its exponent, then its weight and sums. */
+static HUSH_ALWAYS_INLINE void avx_tap(const avx_row *r, ptrdiff_t off, __m512 rdd, avx_px *p,
+                                       const avx_pair *pr, __mmask16 m, const int FULL,
+                                       const int VALIDITY, const int WITH_VAR, const int FAST) {
+  const __m512 bias = _mm512_set1_ps(FAST ? pr->ubias : pr->nbias);
+  const __m512 t = avx_tap_exponent(r, off, rdd, p, bias, m, FULL);
+  avx_tap_add(r, off, t, pr, p, m, FULL, VALIDITY, WITH_VAR, FAST);
+}
+
 /* The per-pixel terms of the 16 pixels from x (n of them, n < 16 only at
  * the row's end, m their mask) and the centre tap's sums. */
 static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, const float *vu,
                                          const float *vd, const float *gx, const float *gy,
                                          const float *zon, const float *eps, int x,
                                          __mmask16 m, const int FULL, const int VALIDITY,
-                                         avx_px *p) {
+                                         const int FAST, avx_px *p) {
 #define LDX(P, OFF) (FULL ? _mm512_loadu_ps((P) + x + (OFF)) : _mm512_maskz_loadu_ps(m, (P) + x + (OFF)))
   const __m512 q = _mm512_set1_ps(0.25f), h = _mm512_set1_ps(0.5f);
   const __m512 hu = _mm512_fmadd_ps(h, LDX(vu, 0), _mm512_mul_ps(q, _mm512_add_ps(LDX(vu, -1), LDX(vu, 1))));
@@ -413,17 +443,21 @@ static HUSH_ALWAYS_INLINE void avx_setup(const level_ctx *c, const avx_row *r, c
   const __m512 sd = _mm512_mul_ps(var3, rs);
   const __m512 dl = _mm512_min_ps(_mm512_fmadd_ps(_mm512_set1_ps(c->sigma_l), sd, e),
                                   _mm512_set1_ps(1e30f));
-  p->inv_l = _mm512_mul_ps(_mm512_set1_ps(SVGF_LOG2E), svgf_avx_rcp(dl));
+  /* FAST: the exponent's terms in the fast weight's units, so that the tap
+   * sums u = t 2^23 + bias directly (the bias in the pair's ubias): one
+   * fused multiply-add fewer per tap (as the AVX2 loop's) */
+  const float unit = FAST ? SVGF_FAST_EXP_UNIT : 1.0f;
+  p->inv_l = _mm512_mul_ps(_mm512_set1_ps(SVGF_LOG2E * unit), svgf_avx_rcp(dl));
   if (VALIDITY) p->inv_l = _mm512_mul_ps(p->inv_l, LDX(r->ok, 0));
   const __m512 sz = _mm512_set1_ps(c->g->sigma_z);
   p->sgx = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gx, 0)), _mm512_set1_ps(1e20f)),
                          _mm512_set1_ps(-1e20f));
   p->sgy = _mm512_max_ps(_mm512_min_ps(_mm512_mul_ps(sz, LDX(gy, 0)), _mm512_set1_ps(1e20f)),
                          _mm512_set1_ps(-1e20f));
-  p->zl = _mm512_mul_ps(LDX(zon, 0), _mm512_set1_ps(SVGF_LOG2E));
+  p->zl = _mm512_mul_ps(LDX(zon, 0), _mm512_set1_ps(SVGF_LOG2E * unit));
   p->zp = LDX(r->z, 0);
   p->lp = LDX(r->l, 0);
-  const __m512 ns = _mm512_set1_ps(c->nscale);
+  const __m512 ns = _mm512_set1_ps(c->nscale * unit);
   p->n0p = _mm512_mul_ps(ns, LDX(r->n0, 0));
   p->n1p = _mm512_mul_ps(ns, LDX(r->n1, 0));
   p->n2p = _mm512_mul_ps(ns, LDX(r->n2, 0));
@@ -516,27 +550,32 @@ static HUSH_ALWAYS_INLINE void avx_vectors(const level_ctx *c, const avx_row *r,
                                            const int FAST) {
   const __mmask16 m = FULL ? (__mmask16)0xffff : (__mmask16)((1u << n) - 1u);
   avx_px p0, p1;
-  avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, &p0);
-  if (TWO) avx_setup(c, r, vu, vd, gx, gy, zon, eps, x + 16, m, 1, VALIDITY, &p1);
+  avx_setup(c, r, vu, vd, gx, gy, zon, eps, x, m, FULL, VALIDITY, FAST, &p0);
+  if (TWO) avx_setup(c, r, vu, vd, gx, gy, zon, eps, x + 16, m, 1, VALIDITY, FAST, &p1);
   const int sky_skip = c->bias >= S_FLOOR;
   const avx_row rx = avx_row_at(r, x, VALIDITY);
+  /* the bottom tap row's lines ahead, as the AVX2 loop's (avx_vector):
+   * a-trous 11.1 -> 10.0 ms at 640x360 on one thread on Zen 4 (16 or 64
+   * pixels ahead the same; docs/svgf-speed.md, twenty-fifth round) */
+  const ptrdiff_t ahead = (pairs[npairs - 1].a + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float);
+  const float *const ahead_of[9] = {rx.z, rx.n0, rx.n1, rx.n2, rx.l, rx.c0, rx.c1, rx.c2, rx.v};
+  hush__prefetch_planes(ahead_of, 9, ahead);
+  if (VALIDITY) hush__prefetch(rx.ok, ahead);
   if (TWO && (p0.surface || p1.surface || !sky_skip)) {
     for (int k = 0; k < npairs; k++) {
       const avx_pair *t = &pairs[k];
       const __m512 rdd0 = avx_rdd(&p0, t), rdd1 = avx_rdd(&p1, t);
-      const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
-      avx_tap(&rx, t->a + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
-      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
-      avx_tap(&rx, t->b + 16, rdd1, &p1, nb, nf, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->a, rdd0, &p0, t, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->a + 16, rdd1, &p1, t, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->b, rdd0, &p0, t, m, 1, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->b + 16, rdd1, &p1, t, m, 1, VALIDITY, WITH_VAR, FAST);
     }
   } else if (!TWO && (p0.surface || !sky_skip)) {
     for (int k = 0; k < npairs; k++) {
       const avx_pair *t = &pairs[k];
       const __m512 rdd0 = avx_rdd(&p0, t);
-      const __m512 nb = _mm512_set1_ps(t->nbias), nf = _mm512_set1_ps(t->nfloor);
-      avx_tap(&rx, t->a, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR, FAST);
-      avx_tap(&rx, t->b, rdd0, &p0, nb, nf, m, FULL, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->a, rdd0, &p0, t, m, FULL, VALIDITY, WITH_VAR, FAST);
+      avx_tap(&rx, t->b, rdd0, &p0, t, m, FULL, VALIDITY, WITH_VAR, FAST);
     }
   }
   avx_finish(&p0, x, m, out, also, VALIDITY, WITH_VAR);
@@ -737,8 +776,6 @@ static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __m256i m,
   }
 }
 
-/* Pixels past a row's rightmost bottom tap whose lines avx_vector prefetches. */
-#define SVGF_PREFETCH_AHEAD 32
 
 /* The 8 pixels from x (n of them, n < 8 only at the row's end). A vector
  * without a surface skips its taps as the AVX-512 loop's does. */

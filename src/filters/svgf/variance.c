@@ -245,8 +245,12 @@ static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const f
   t = _mm512_fmadd_ps(n0p, _mm512_loadu_ps(n0 + go), t);
   t = _mm512_fmadd_ps(n1p, _mm512_loadu_ps(n1 + go), t);
   t = _mm512_fmadd_ps(n2p, _mm512_loadu_ps(n2 + go), t);
-  const __mmask16 keep = _mm512_cmp_ps_mask(t, _mm512_set1_ps(-20.0f * SVGF_LOG2E), _CMP_GT_OQ);
-  const __m512 w = FAST ? svgf_avx_exp2_fast(keep, t)
+  /* FAST: t is the fast weight's biased bits (avx_variance_row), its floor
+   * those of the floor's exponent */
+  const float nfloor = -20.0f * SVGF_LOG2E;
+  const __m512 tfloor = _mm512_set1_ps(FAST ? (float)svgf_fast_exp_bits(nfloor) : nfloor);
+  const __mmask16 keep = _mm512_cmp_ps_mask(t, tfloor, _CMP_GT_OQ);
+  const __m512 w = FAST ? svgf_avx_exp2_fast_biased(keep, t)
                        : _mm512_maskz_scalef_ps(keep, svgf_avx_exp2_frac(t), t);
   *sw = _mm512_add_ps(*sw, w);
   *s1 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m1 + mo), *s1);
@@ -264,7 +268,14 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
   const float *z = r.z, *n0 = r.n0, *n1 = r.n1, *n2 = r.n2, *m1 = r.m1, *m2 = r.m2;
   const float *a = r.a, *gx = r.gx, *gy = r.gy, *zon = r.zon;
   float *v = r.v;
-  const __m512 sn = _mm512_set1_ps(g->np.sigma_n_log2e), nbias = _mm512_set1_ps(-g->np.sigma_n_log2e);
+  /* FAST: the exponent's terms in the fast weight's units and its bias in
+   * nbias, as the a-trous's (atrous.c): the tap's exponent is the weight's
+   * biased bits, u = t 2^23 + bias */
+  const float unit = FAST ? SVGF_FAST_EXP_UNIT : 1.0f;
+  const __m512 sn = _mm512_set1_ps(g->np.sigma_n_log2e * unit);
+  const __m512 nbias =
+      _mm512_set1_ps(FAST ? fmaf(-g->np.sigma_n_log2e, SVGF_FAST_EXP_UNIT, SVGF_FAST_EXP_BIAS)
+                          : -g->np.sigma_n_log2e);
   const __m512 sz = _mm512_set1_ps(g->sigma_z), eps_z = _mm512_set1_ps(SVGF_EPS_Z);
   const int sky_skip = g->np.sigma_n_log2e >= 20.0f * SVGF_LOG2E;
   for (int x = 0; x < W; x += 16) {
@@ -274,6 +285,17 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
         _mm512_mask_cmp_ps_mask(lanes, _mm512_maskz_loadu_ps(lanes, a + x), _mm512_set1_ps(min_age),
                                 _CMP_LT_OQ);
     if (!young) continue;
+    {
+      /* the bottom tap row's lines 32 pixels past the rightmost tap, as in
+       * the AVX2 loop below */
+      const avx_vpair *last = &pairs[NPAIRS - 1];
+      const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
+      const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
+      const float *const guide[4] = {z + x, n0 + x, n1 + x, n2 + x};
+      const float *const moments[2] = {m1 + x, m2 + x};
+      hush__prefetch_planes(guide, 4, ga);
+      hush__prefetch_planes(moments, 2, ma);
+    }
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
       variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
                          FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
@@ -287,7 +309,7 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
     const __m512 sgy = _mm512_max_ps(
         _mm512_min_ps(_mm512_mul_ps(sz, _mm512_maskz_loadu_ps(lanes, gy + x)), _mm512_set1_ps(1e20f)),
         _mm512_set1_ps(-1e20f));
-    const __m512 zl = _mm512_mul_ps(_mm512_maskz_loadu_ps(lanes, zon + x), _mm512_set1_ps(SVGF_LOG2E));
+    const __m512 zl = _mm512_mul_ps(_mm512_maskz_loadu_ps(lanes, zon + x), _mm512_set1_ps(SVGF_LOG2E * unit));
     const __m512 zp = _mm512_maskz_loadu_ps(lanes, z + x);
     const __m512 n0p = _mm512_mul_ps(sn, _mm512_maskz_loadu_ps(lanes, n0 + x));
     const __m512 n1p = _mm512_mul_ps(sn, _mm512_maskz_loadu_ps(lanes, n1 + x));
