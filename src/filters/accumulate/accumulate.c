@@ -257,7 +257,10 @@ static hush_status export_result(hush_filter f, accumulate_state *st, hush_plana
     result = &st->albedo;
   }
   /* pixels never sampled (age 0) output the fill of those around them;
-   * the accumulation ignores their colour (empty taps weigh 0) */
+   * the accumulation ignores their colour (empty taps weigh 0). Age 0
+   * comes only from spp holes, whose filling at import reserved a pyramid
+   * of more planes: the reserve below allocates nothing, so it cannot fail
+   * after the history has changed. */
   if (st->acc.empty) {
     if ((s = hush__holes_reserve(f->device, &st->gin.holes, f->width, f->height, 3))) return s;
     hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
