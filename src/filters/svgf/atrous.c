@@ -776,7 +776,6 @@ static HUSH_ALWAYS_INLINE void avx_finish(const avx_px *p, int x, __m256i m,
   }
 }
 
-
 /* The 8 pixels from x (n of them, n < 8 only at the row's end). A vector
  * without a surface skips its taps as the AVX-512 loop's does. */
 static HUSH_ALWAYS_INLINE void avx_vector(const level_ctx *c, const avx_row *r, const float *vu,
