@@ -224,6 +224,22 @@ static void vrow_of(const svgf_guide *g, const svgf_padded *m, const float *age,
   r->zon = g->zon + pi;
   r->v = var + pi;
 }
+
+/* The bottom tap row's lines 32 pixels past the rightmost tap of the
+ * vector at x, as the a-trous does (atrous.c), for the young pixels'
+ * neighbours to come: variance stage 7.7-7.9 -> 7.05-7.45 ms on the
+ * classroom's rendered frames (2 threads, 1280x720, Zen 3, alternated
+ * runs; 5.4-5.7 -> 4.8-5.1 on Zen 4 with the AVX-512 loop's folded
+ * weight), unchanged on the bench's frames, where fewer pixels are young. */
+static HUSH_ALWAYS_INLINE void vrow_prefetch(const vrow *r, int x) {
+  const avx_vpair *last = &r->pairs[NPAIRS - 1];
+  const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
+  const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
+  const float *const guide[4] = {r->z + x, r->n0 + x, r->n1 + x, r->n2 + x};
+  const float *const moments[2] = {r->m1 + x, r->m2 + x};
+  hush__prefetch_planes(guide, 4, ga);
+  hush__prefetch_planes(moments, 2, ma);
+}
 #endif
 
 #if defined(__AVX512F__) && defined(__x86_64__)
@@ -285,17 +301,7 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
         _mm512_mask_cmp_ps_mask(lanes, _mm512_maskz_loadu_ps(lanes, a + x), _mm512_set1_ps(min_age),
                                 _CMP_LT_OQ);
     if (!young) continue;
-    {
-      /* the bottom tap row's lines 32 pixels past the rightmost tap, as in
-       * the AVX2 loop below */
-      const avx_vpair *last = &pairs[NPAIRS - 1];
-      const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
-      const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
-      const float *const guide[4] = {z + x, n0 + x, n1 + x, n2 + x};
-      const float *const moments[2] = {m1 + x, m2 + x};
-      hush__prefetch_planes(guide, 4, ga);
-      hush__prefetch_planes(moments, 2, ma);
-    }
+    vrow_prefetch(&r, x);
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
       variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
                          FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
@@ -406,20 +412,7 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
                                        _mm256_castsi256_ps(lanes));
     const int young_bits = _mm256_movemask_ps(young);
     if (!young_bits) continue;
-    {
-      /* the bottom tap row's lines 32 pixels past the rightmost tap, as
-       * the a-trous does (atrous.c), for the young pixels' neighbours to
-       * come: variance stage 7.7-7.9 -> 7.05-7.45 ms on the classroom's
-       * rendered frames (2 threads, 1280x720, Zen 3, alternated runs),
-       * unchanged on the bench's frames, where fewer pixels are young */
-      const avx_vpair *last = &pairs[NPAIRS - 1];
-      const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
-      const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
-      const float *const guide[4] = {z + x, n0 + x, n1 + x, n2 + x};
-      const float *const moments[2] = {m1 + x, m2 + x};
-      hush__prefetch_planes(guide, 4, ga);
-      hush__prefetch_planes(moments, 2, ma);
-    }
+    vrow_prefetch(&r, x);
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
       variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
                          FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
