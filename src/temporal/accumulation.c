@@ -149,7 +149,7 @@ static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
  * blocks follow each other (origin + 1 per pixel, as under smooth motion)
  * loads its taps as vectors; one whose blocks form a window (reproject.h)
  * loads the window and permutes; any other chunk gathers them. */
-#define CHUNK 16
+#define CHUNK HUSH_CHUNK
 _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
 
 /* How blend_pixels reads a chunk's taps: gathered one by one, as vectors
@@ -300,16 +300,13 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
     const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
     hush__prefetch_taps(history, 7, hush__prefetch_origin(origin, x0, W), W);
     hush__prefetch_row(b->plan, samples, nc, row + (size_t)x0);
-    int contiguous = 1;
-    for (int x = x0; x < x1; x++)
-      contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
     /* a constant length for full chunks: one vector iteration, no
      * alignment peeling or scalar epilogue */
     if (x1 - x0 < CHUNK) {
       blend_pixels(b, row, x0, x1 - x0, 0, 0, MODE_GATHER, NULL, nc, mom);
       continue;
     }
-    if (contiguous) {
+    if (hush__chunk_contiguous(origin + x0, kind + x0)) {
       blend_pixels(b, row, x0, CHUNK, origin[x0] - x0, 0, MODE_CONTIGUOUS, NULL, nc, mom);
       continue;
     }
@@ -731,10 +728,7 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
       tblend_pixels(t, prev, sample, out, row, x0, x1 - x0, 0, 0, MODE_GATHER, NULL, nc);
       continue;
     }
-    int contiguous = 1;
-    for (int x = x0; x < x1; x++)
-      contiguous &= (kind[x] == HUSH_FOOTPRINT_BILINEAR) & (origin[x] == origin[x0] + (x - x0));
-    if (contiguous) {
+    if (hush__chunk_contiguous(origin + x0, kind + x0)) {
       tblend_pixels(t, prev, sample, out, row, x0, CHUNK, origin[x0] - x0, 0, MODE_CONTIGUOUS,
                     NULL, nc);
       continue;

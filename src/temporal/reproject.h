@@ -237,6 +237,23 @@ static inline int32_t hush__reproject_block_origin(const hush_reproject_plan *pl
   return o & -(int32_t)(plan->kind[i] == HUSH_FOOTPRINT_BILINEAR);
 }
 
+/* Pixels per chunk of the row loops that read the history by footprint
+ * (the blends, TAA, the plan's tap tests). */
+#define HUSH_CHUNK 16
+
+/* 1 if the HUSH_CHUNK pixels from origin/kind all have BILINEAR footprints
+ * that follow each other (origin[k] = origin[0] + k, as under smooth
+ * motion), so their taps load as vectors. A fixed count, so that it
+ * vectorises: the loop to a variable end ran scalar, about 5 % of
+ * accumulate's blend (docs/svgf-speed.md, twenty-sixth round). */
+static HUSH_ALWAYS_INLINE int hush__chunk_contiguous(const int32_t *origin, const uint8_t *kind) {
+  const int32_t o0 = origin[0];
+  int contiguous = 1;
+  for (int k = 0; k < HUSH_CHUNK; k++)
+    contiguous &= (kind[k] == HUSH_FOOTPRINT_BILINEAR) & (origin[k] == o0 + k);
+  return contiguous;
+}
+
 /*
  * The taps of pixel i and their renormalised weights (summing to 1 up to
  * rounding): writes up to 9 previous-frame pixel indices to idx and weights
