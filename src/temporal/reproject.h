@@ -237,8 +237,8 @@ static inline int32_t hush__reproject_block_origin(const hush_reproject_plan *pl
   return o & -(int32_t)(plan->kind[i] == HUSH_FOOTPRINT_BILINEAR);
 }
 
-/* Pixels per chunk of the row loops that read the history by footprint
- * (the blends, TAA, the plan's tap tests). */
+/* Pixels per chunk of the temporal blends' row loops (accumulation.c),
+ * which read the history by footprint. */
 #define HUSH_CHUNK 16
 
 /* 1 if the HUSH_CHUNK pixels from origin/kind all have BILINEAR footprints
