@@ -247,10 +247,6 @@ static HUSH_ALWAYS_INLINE void level_row(const level_ctx *c, int y, int xa, int 
 /* What the intrinsic loops below (AVX-512, else AVX2) read for a row. */
 #include <immintrin.h>
 
-/* Pixels past a row's rightmost bottom tap whose lines the vector loops
- * prefetch. */
-#define SVGF_PREFETCH_AHEAD 32
-
 typedef struct avx_pair {
   ptrdiff_t a, b;       /* tap offsets in floats (row_offsets) */
   float fdx, fdy;

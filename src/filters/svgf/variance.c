@@ -225,16 +225,16 @@ static void vrow_of(const svgf_guide *g, const svgf_padded *m, const float *age,
   r->v = var + pi;
 }
 
-/* The bottom tap row's lines 32 pixels past the rightmost tap of the
- * vector at x, as the a-trous does (atrous.c), for the young pixels'
- * neighbours to come: variance stage 7.7-7.9 -> 7.05-7.45 ms on the
+/* The bottom tap row's lines SVGF_PREFETCH_AHEAD pixels past the
+ * rightmost tap of the vector at x, as the a-trous does (atrous.c), for the
+ * young pixels' neighbours to come: variance stage 7.7-7.9 -> 7.05-7.45 ms on the
  * classroom's rendered frames (2 threads, 1280x720, Zen 3, alternated
  * runs; 5.4-5.7 -> 4.8-5.1 on Zen 4 with the AVX-512 loop's folded
  * weight), unchanged on the bench's frames, where fewer pixels are young. */
 static HUSH_ALWAYS_INLINE void vrow_prefetch(const vrow *r, int x) {
   const avx_vpair *last = &r->pairs[NPAIRS - 1];
-  const ptrdiff_t ga = (last->ga + 32) * (ptrdiff_t)sizeof(float);
-  const ptrdiff_t ma = (last->ma + 32) * (ptrdiff_t)sizeof(float);
+  const ptrdiff_t ga = (last->ga + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float);
+  const ptrdiff_t ma = (last->ma + SVGF_PREFETCH_AHEAD) * (ptrdiff_t)sizeof(float);
   const float *const guide[4] = {r->z + x, r->n0 + x, r->n1 + x, r->n2 + x};
   const float *const moments[2] = {r->m1 + x, r->m2 + x};
   hush__prefetch_planes(guide, 4, ga);

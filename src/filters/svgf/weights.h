@@ -111,6 +111,10 @@ static HUSH_ALWAYS_INLINE float svgf_exp2_neg4(float s) {
 /* 2^23: t's unit in the fast weight's bits */
 #define SVGF_FAST_EXP_UNIT 8388608.0f
 
+/* Pixels past a row's rightmost bottom tap whose lines the vector loops of
+ * the a-trous and the 7x7 variance prefetch (atrous.c, variance.c). */
+#define SVGF_PREFETCH_AHEAD 32
+
 /* The bits of the fast weight 2^t for t in [-64, 64] (the vector loops'
  * floor, svgf_avx2_exp2_fast). */
 static inline int32_t svgf_fast_exp_bits(float t) {
