@@ -183,35 +183,53 @@ static int level_step(int order, int i, int levels) {
 /* The a-trous input of the first level: colour, variance and luminance,
  * and with `valid` (frames with holes, the only ones whose levels read it)
  * the validity. */
-static void first_signal(const hush_planar *color, const float *var, const float *age, int valid,
-                         svgf_padded *sig, int threads) {
-  const int W = sig->width, H = sig->height;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++) {
-    const size_t o = (size_t)y * W;
-    const float *restrict r = color->plane[0] + o, *restrict g = color->plane[1] + o,
-                          *restrict b = color->plane[2] + o, *restrict v = var + o;
-    float *restrict sr = svgf_padded_row(sig, SVGF_R, y), *restrict sg = svgf_padded_row(sig, SVGF_G, y),
-                    *restrict sb = svgf_padded_row(sig, SVGF_B, y),
-                    *restrict sv = svgf_padded_row(sig, SVGF_VAR, y),
-                    *restrict sl = svgf_padded_row(sig, SVGF_LUM, y),
-                    *restrict ok = svgf_padded_row(sig, SVGF_VALID, y);
-    const float *restrict a = age + o;
-    if (valid) {
+/* The a-trous's first input: the accumulated colour and its variance,
+ * the luminance, and with holes the validity (age > 0). */
+typedef struct first_signal {
+  const hush_planar *color;
+  const float *var, *age;
+  int valid;
+  svgf_padded *sig;
+} first_signal;
+
+/* Pixels [xa, xb) of row y of the first signal, and the pads of the sides
+ * the part holds (an svgf_row_source's fill). */
+static void first_signal_span(void *ctx, int y, int xa, int xb) {
+  const first_signal *fs = ctx;
+  const svgf_padded *sig = fs->sig;
+  const int W = sig->width, n = xb - xa;
+  const size_t o = (size_t)y * W + (size_t)xa;
+  const float *restrict r = fs->color->plane[0] + o, *restrict g = fs->color->plane[1] + o,
+                        *restrict b = fs->color->plane[2] + o, *restrict v = fs->var + o;
+  float *restrict sr = svgf_padded_row(sig, SVGF_R, y) + xa,
+                  *restrict sg = svgf_padded_row(sig, SVGF_G, y) + xa,
+                  *restrict sb = svgf_padded_row(sig, SVGF_B, y) + xa,
+                  *restrict sv = svgf_padded_row(sig, SVGF_VAR, y) + xa,
+                  *restrict sl = svgf_padded_row(sig, SVGF_LUM, y) + xa;
+  if (fs->valid) {
+    float *restrict ok = svgf_padded_row(sig, SVGF_VALID, y) + xa;
+    const float *restrict a = fs->age + o;
 #pragma omp simd
-      for (int x = 0; x < W; x++) ok[x] = hush__select_bits(a[x] > 0.0f, 1.0f, 0.0f);
-    }
-#pragma omp simd
-    for (int x = 0; x < W; x++) {
-      sr[x] = r[x];
-      sg[x] = g[x];
-      sb[x] = b[x];
-      sv[x] = v[x];
-      sl[x] = hush_luminance(r[x], g[x], b[x]);
-    }
-    for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
-      if (valid || c != SVGF_VALID) svgf_pad_row(svgf_padded_row(sig, c, y), W, sig->pad);
+    for (int x = 0; x < n; x++) ok[x] = hush__select_bits(a[x] > 0.0f, 1.0f, 0.0f);
   }
+#pragma omp simd
+  for (int x = 0; x < n; x++) {
+    sr[x] = r[x];
+    sg[x] = g[x];
+    sb[x] = b[x];
+    sv[x] = v[x];
+    sl[x] = hush_luminance(r[x], g[x], b[x]);
+  }
+  for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
+    if (fs->valid || c != SVGF_VALID)
+      svgf_pad_row_sides(svgf_padded_row(sig, c, y), W, sig->pad, xa == 0, xb == W);
+}
+
+/* The whole first signal, one pass. */
+static void first_signal_pass(first_signal *fs, int threads) {
+  const int W = fs->sig->width, H = fs->sig->height;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) first_signal_span(fs, y, 0, W);
 }
 
 /* dst <- the colour of a level's output where age >= 1 (Dundr §4.2.2:
@@ -348,8 +366,13 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
   if (var_view && export_variance) hush__view_export(&st->var, var_view, threads);
   const float *age = hush__accum_age(&c->acc)->plane[0];
-  first_signal(hush__accum_color(&c->acc), st->var.plane[0], age, fc->holes, &st->signal[0],
-               threads);
+  /* the a-trous's first input: made as its levels go (svgf_atrous_levels_from),
+   * unless a level runs alone first or none runs */
+  first_signal fs = {hush__accum_color(&c->acc), st->var.plane[0], age, fc->holes,
+                     &st->signal[0]};
+  const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
+  const int alone = feedback && fc->holes && fc->iterations > 0 ? 1 : 0;
+  if (alone || fc->iterations == 0) first_signal_pass(&fs, threads);
   hush__filter_timing_stage(f, "variance");
 
   svgf_level_params lp;
@@ -393,7 +416,6 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   }
   /* the first level's colour written straight into the colour history as
    * well (with holes only where the age allows: copy_color_where) */
-  const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
   const int feedback_direct = feedback && !fc->holes;
   if (fc->iterations == 0) {
     const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
@@ -404,7 +426,6 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
    * of a little extra blur over time. With holes the first level's copy
    * into it is a pass of its own after that level (copy_color_where), so
    * the level runs alone; the others run as one wavefront. */
-  const int alone = feedback && fc->holes && fc->iterations > 0 ? 1 : 0;
   svgf_level_params lps[SVGF_MAX_ITERATIONS];
   svgf_level_out outs[SVGF_MAX_ITERATIONS];
   const svgf_padded *ins[SVGF_MAX_ITERATIONS];
@@ -423,8 +444,10 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     svgf_atrous_level(fc->gd, &lps[0], ins[0], outp[0], threads);
     copy_color_where(outp[0], hush__accum_color(&c->acc), age, threads);
   }
-  svgf_atrous_levels(fc->gd, lps + alone, ins + alone, outp + alone, fc->iterations - alone,
-                     threads);
+  const svgf_row_source src = {first_signal_span, &fs};
+  if (fc->iterations - alone > 0)
+    svgf_atrous_levels_from(fc->gd, lps + alone, ins + alone, outp + alone,
+                            fc->iterations - alone, alone ? NULL : &src, threads);
   hush__filter_timing_stage(f, "atrous");
 }
 
