@@ -85,7 +85,6 @@ typedef struct svgf_state {
   hush_planar var;     /* 1: variance from the moments or the spatial estimate */
   hush_planar samples; /* 1: samples behind the moments, age * spp */
   svgf_padded zn;        /* depth + normal, padded for the widest tap */
-  svgf_padded moments;   /* 2: the moments, padded for the spatial estimate */
   svgf_padded signal[2]; /* SVGF_SIGNAL_CHANNELS: a-trous ping-pong */
   int threads;
   int split; /* the components' histories are of direct and indirect */
@@ -126,7 +125,6 @@ void svgf_destroy(void *state) {
   hush__planar_free(&st->var);
   hush__planar_free(&st->samples);
   svgf_padded_free(&st->zn);
-  svgf_padded_free(&st->moments);
   svgf_padded_free(&st->signal[0]);
   svgf_padded_free(&st->signal[1]);
   hush__planar_free(&st->albedo);
@@ -353,10 +351,11 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   const int min_age = hush__param_i(f, P_SPATIAL_VARIANCE_FRAMES);
   if (min_age > 1) {
     const hush_planar *m = hush__accum_moments(&c->acc);
-    for (int k = 0; k < 2; k++) svgf_padded_import(&st->moments, k, m->plane[k], threads);
-    svgf_spatial_variance(fc->gd, &st->moments, samples, (float)min_age, st->var.plane[0],
-                          hush__param_i(f, P_NORMAL_WEIGHT) == 0,
-                          hush__param_i(f, P_WEIGHT_EXP) == 1, threads);
+    svgf_spatial_variance(fc->gd, (const float *const *)m->plane, samples, (float)min_age,
+                          st->var.plane[0], hush__param_i(f, P_NORMAL_WEIGHT) == 0,
+                          hush__param_i(f, P_WEIGHT_EXP) == 1,
+                          /* samples 0: a hole, or a pixel without samples */
+                          fc->holes || fc->merge, threads);
   }
   /* with the merge the moments are per sample; else they see only the
    * frame-to-frame spread of the pixel means, already per frame value */
@@ -481,8 +480,6 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   /* ---- import: nothing of the history changes until every input is read */
   const int pad = needed_pad(kernel, iterations);
   if ((s = svgf_padded_ensure(f->device, &st->zn, 4, W, H, pad))) return s;
-  if ((s = svgf_padded_ensure(f->device, &st->moments, 2, W, H, SVGF_SPATIAL_VARIANCE_RADIUS)))
-    return s;
   for (int i = 0; i < 2; i++)
     if ((s = svgf_padded_ensure(f->device, &st->signal[i], SVGF_SIGNAL_CHANNELS, W, H, pad)))
       return s;

@@ -11,22 +11,53 @@
 
 static inline int clampi(int v, int lo, int hi) { return v < lo ? lo : v > hi ? hi : v; }
 
+/* Columns of a block's moments window: the block and R on each side. */
+#define WIN (BLOCK + 2 * R)
+
 typedef struct block_acc {
   float sw[BLOCK], s1[BLOCK], s2[BLOCK];
+  /* a border block's moments window, columns and rows clamped */
+  float win[2][2 * R + 1][WIN];
 } block_acc;
+
+/* Where a block reads its moments: m1, m2 at its pixel (x0, y), a row
+ * stride, and whether they are a window (rows clamped in it: the row
+ * offsets are dy) or the planes (rows clamped by the offsets). */
+typedef struct block_moments {
+  const float *m1, *m2;
+  ptrdiff_t stride;
+  int scratch;
+} block_moments;
+
+/* The moments around the n pixels from (x0, y) of a W x H frame, R
+ * pixels on every side, columns and rows clamped to the frame (the values
+ * a padded copy of the planes would hold there): 2R + 1 rows of n + 2R
+ * columns, row stride ws; pixel (x0, y) at win[p] + R * ws + R. */
+static void fill_window(const float *const mom[2], int W, int H, int y, int x0, int n,
+                        float *win0, float *win1, ptrdiff_t ws) {
+  float *const win[2] = {win0, win1};
+  for (int p = 0; p < 2; p++)
+    for (int j = 0; j <= 2 * R; j++) {
+      const float *row = mom[p] + (size_t)clampi(y + j - R, 0, H - 1) * W;
+      float *w = win[p] + j * ws;
+      for (int i = 0; i < n + 2 * R; i++) w[i] = row[clampi(x0 + i - R, 0, W - 1)];
+    }
+}
 
 /* Adds the taps (x + dx, y + dy) and (x - dx, y - dy) for pixels
  * [x0, x0 + n) of row y. */
-static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded *m, int dx,
+static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const block_moments *m, int dx,
                                           int dy, int y, int x0, int n, const svgf_exp2_poly *poly,
                                           const int squarings, block_acc *acc) {
   const int H = g->height;
-  const ptrdiff_t gs = (ptrdiff_t)g->zn->stride, ms = (ptrdiff_t)m->stride;
+  const ptrdiff_t gs = (ptrdiff_t)g->zn->stride, ms = m->stride;
   const int ya = clampi(y + dy, 0, H - 1), yb = clampi(y - dy, 0, H - 1);
   /* signed: a tap left of column 0 is in the pad, before the plane's start */
   const ptrdiff_t gp = (ptrdiff_t)y * gs + x0, ga = (ptrdiff_t)ya * gs + x0 + dx,
                   gb = (ptrdiff_t)yb * gs + x0 - dx;
-  const ptrdiff_t ma = (ptrdiff_t)ya * ms + x0 + dx, mb = (ptrdiff_t)yb * ms + x0 - dx;
+  /* the moments' rows relative to row y (clamped like the guide's) */
+  const ptrdiff_t ma = (m->scratch ? dy : ya - y) * ms + dx,
+                  mb = (m->scratch ? -dy : yb - y) * ms - dx;
   const float *restrict zp = g->zn->plane[0] + gp, *restrict za = g->zn->plane[0] + ga,
                         *restrict zb = g->zn->plane[0] + gb;
   const float *restrict n0p = g->zn->plane[1] + gp, *restrict n0a = g->zn->plane[1] + ga,
@@ -35,8 +66,8 @@ static HUSH_ALWAYS_INLINE void block_pair(const svgf_guide *g, const svgf_padded
                         *restrict n1b = g->zn->plane[2] + gb;
   const float *restrict n2p = g->zn->plane[3] + gp, *restrict n2a = g->zn->plane[3] + ga,
                         *restrict n2b = g->zn->plane[3] + gb;
-  const float *restrict m1a = m->plane[0] + ma, *restrict m1b = m->plane[0] + mb;
-  const float *restrict m2a = m->plane[1] + ma, *restrict m2b = m->plane[1] + mb;
+  const float *restrict m1a = m->m1 + ma, *restrict m1b = m->m1 + mb;
+  const float *restrict m2a = m->m2 + ma, *restrict m2b = m->m2 + mb;
   const size_t pi = (size_t)y * g->width + x0;
   const float *restrict gx = g->gx + pi, *restrict gy = g->gy + pi, *restrict zon = g->zon + pi;
   float *restrict sw = acc->sw, *restrict s1 = acc->s1, *restrict s2 = acc->s2;
@@ -79,11 +110,11 @@ static int window_has_empty(const float *age, int W, int H, int y, int x0, int n
  * per pixel, each tap (the centre too) counted only where it has data
  * (age > 0), with block_pair's weights; no data at all gives variance 0.
  */
-static void variance_row_valid(const svgf_guide *g, const svgf_padded *m, const float *age,
+static void variance_row_valid(const svgf_guide *g, const float *const mom[2], const float *age,
                                float min_age, float *var, int y, int x0, int n,
                                const svgf_exp2_poly *poly, const int squarings) {
   const int W = g->width, H = g->height;
-  const ptrdiff_t gs = (ptrdiff_t)g->zn->stride, ms = (ptrdiff_t)m->stride;
+  const ptrdiff_t gs = (ptrdiff_t)g->zn->stride;
   const float sigma_z = g->sigma_z;
   for (int x = x0; x < x0 + n; x++) {
     const size_t i = (size_t)y * W + x;
@@ -93,10 +124,12 @@ static void variance_row_valid(const svgf_guide *g, const svgf_padded *m, const 
     for (int dy = -R; dy <= R; dy++) {
       const int yy = clampi(y + dy, 0, H - 1);
       for (int dx = -R; dx <= R; dx++) {
-        /* the padded planes repeat the edge pixel: so does the age */
-        if (!(age[(size_t)yy * W + clampi(x + dx, 0, W - 1)] > 0.0f)) continue;
+        /* the padded guide repeats the edge pixel: so do the age and the
+         * moments, by a clamped column */
+        const size_t mq = (size_t)yy * W + (size_t)clampi(x + dx, 0, W - 1);
+        if (!(age[mq] > 0.0f)) continue;
         /* signed: a tap left of column 0 is in the pad */
-        const ptrdiff_t gq = (ptrdiff_t)yy * gs + x + dx, mq = (ptrdiff_t)yy * ms + x + dx;
+        const ptrdiff_t gq = (ptrdiff_t)yy * gs + x + dx;
         float w = 1.0f;
         if (dx || dy) {
           const float dd = fmaf(sigma_z, fabsf(fmaf(g->gx[i], (float)dx, g->gy[i] * (float)dy)),
@@ -109,8 +142,8 @@ static void variance_row_valid(const svgf_guide *g, const svgf_padded *m, const 
                               squarings, g->np.sigma_n_log2e, g->np.dot_floor, poly);
         }
         sw += w;
-        s1 += w * m->plane[0][mq];
-        s2 += w * m->plane[1][mq];
+        s1 += w * mom[0][mq];
+        s2 += w * mom[1][mq];
       }
     }
     const float inv = sw > 0.0f ? 1.0f / sw : 0.0f;
@@ -121,11 +154,11 @@ static void variance_row_valid(const svgf_guide *g, const svgf_padded *m, const 
 }
 
 /* Row y (see atrous.c on why SQUARINGS is dispatched outside the region). */
-static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padded *m,
+static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const float *const mom[2],
                                             const float *age, float min_age, float *var, int y,
                                             const svgf_exp2_poly *poly, const int squarings,
                                             block_acc *acc) {
-  const int W = g->width;
+  const int W = g->width, H = g->height;
   for (int x0 = 0; x0 < W; x0 += BLOCK) {
     const int n = W - x0 < BLOCK ? W - x0 : BLOCK;
     const float *restrict a = age + (size_t)y * W + x0;
@@ -133,11 +166,21 @@ static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padd
     for (int x = 0; x < n; x++) need |= a[x] < min_age;
     if (!need) continue;
     if (window_has_empty(age, W, g->height, y, x0, n)) {
-      variance_row_valid(g, m, age, min_age, var, y, x0, n, poly, squarings);
+      variance_row_valid(g, mom, age, min_age, var, y, x0, n, poly, squarings);
       continue;
     }
-    const float *restrict m1 = svgf_padded_row(m, 0, y) + x0;
-    const float *restrict m2 = svgf_padded_row(m, 1, y) + x0;
+    const size_t o = (size_t)y * W + (size_t)x0;
+    const float *restrict m1 = mom[0] + o;
+    const float *restrict m2 = mom[1] + o;
+    /* a block whose taps reach past the row's ends reads a clamped window */
+    block_moments m = {m1, m2, W, 0};
+    if (x0 < R || x0 + n + R > W) {
+      fill_window(mom, W, H, y, x0, n, &acc->win[0][0][0], &acc->win[1][0][0], WIN);
+      m.m1 = &acc->win[0][R][R];
+      m.m2 = &acc->win[1][R][R];
+      m.stride = WIN;
+      m.scratch = 1;
+    }
 #pragma omp simd
     for (int x = 0; x < n; x++) {
       acc->sw[x] = 1.0f;
@@ -146,7 +189,7 @@ static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padd
     }
     for (int dy = 0; dy <= R; dy++)
       for (int dx = -R; dx <= R; dx++)
-        if (dy > 0 || dx > 0) block_pair(g, m, dx, dy, y, x0, n, poly, squarings, acc);
+        if (dy > 0 || dx > 0) block_pair(g, &m, dx, dy, y, x0, n, poly, squarings, acc);
     float *restrict v = var + (size_t)y * W + x0;
 #pragma omp simd
     for (int x = 0; x < n; x++) {
@@ -161,7 +204,7 @@ static HUSH_ALWAYS_INLINE void variance_row(const svgf_guide *g, const svgf_padd
 
 /* dynamic: only blocks with a short history cost anything */
 #define VARIANCE_ROWS(NAME, SQUARINGS)                                                       \
-  static void NAME(const svgf_guide *g, const svgf_padded *m, const float *age,              \
+  static void NAME(const svgf_guide *g, const float *const m[2], const float *age,           \
                    float min_age, float *var, int threads) {                                 \
     const svgf_exp2_poly poly = svgf_exp2_poly_scaled(1.0f); /* the weights are 2^t */      \
     _Pragma("omp parallel num_threads(threads)") {                                          \
@@ -182,8 +225,15 @@ VARIANCE_ROWS(variance_rows_any, -1)
 
 #define NPAIRS ((2 * R + 1) * (2 * R + 1) / 2)
 
+/* A border vector's moments window (fill_window): its columns, enough for
+ * the AVX-512 loop's 16 pixels and R on each side. */
+#define VWIN 32
+_Static_assert(16 + 2 * R <= VWIN, "a vector's window fits");
+
 typedef struct avx_vpair {
-  ptrdiff_t ga, gb, ma, mb; /* tap offsets in the guide and the moments, in floats */
+  /* tap offsets in floats: in the guide, in the moments' planes and in a
+   * border vector's window */
+  ptrdiff_t ga, gb, ma, mb, sa, sb;
   float fdx, fdy;
 } avx_vpair;
 
@@ -194,10 +244,10 @@ typedef struct vrow {
   float *v;
 } vrow;
 
-static void vrow_of(const svgf_guide *g, const svgf_padded *m, const float *age, float *var,
+static void vrow_of(const svgf_guide *g, const float *const mom[2], const float *age, float *var,
                     int y, vrow *r) {
   const int W = g->width, H = g->height;
-  const size_t gs = g->zn->stride, ms = m->stride;
+  const size_t gs = g->zn->stride, ms = (size_t)W;
   int k = 0;
   for (int dy = 0; dy <= R; dy++)
     for (int dx = -R; dx <= R; dx++) {
@@ -207,6 +257,8 @@ static void vrow_of(const svgf_guide *g, const svgf_padded *m, const float *age,
       r->pairs[k].gb = (ptrdiff_t)yb * (ptrdiff_t)gs - dx;
       r->pairs[k].ma = (ptrdiff_t)ya * (ptrdiff_t)ms + dx;
       r->pairs[k].mb = (ptrdiff_t)yb * (ptrdiff_t)ms - dx;
+      r->pairs[k].sa = (ptrdiff_t)dy * VWIN + dx;
+      r->pairs[k].sb = -(ptrdiff_t)dy * VWIN - dx;
       r->pairs[k].fdx = (float)dx;
       r->pairs[k].fdy = (float)dy;
       k++;
@@ -215,8 +267,8 @@ static void vrow_of(const svgf_guide *g, const svgf_padded *m, const float *age,
   r->n0 = g->zn->plane[1] + (size_t)y * gs;
   r->n1 = g->zn->plane[2] + (size_t)y * gs;
   r->n2 = g->zn->plane[3] + (size_t)y * gs;
-  r->m1 = m->plane[0] + (size_t)y * ms;
-  r->m2 = m->plane[1] + (size_t)y * ms;
+  r->m1 = mom[0] + (size_t)y * ms;
+  r->m2 = mom[1] + (size_t)y * ms;
   const size_t pi = (size_t)y * W;
   r->a = age + pi;
   r->gx = g->gx + pi;
@@ -243,6 +295,7 @@ static HUSH_ALWAYS_INLINE void vrow_prefetch(const vrow *r, int x) {
 #endif
 
 #if defined(__AVX512F__) && defined(__x86_64__)
+#define VL 16 /* pixels per vector */
 /*
  * The exp-normal-weight estimate in AVX-512 intrinsics, as the a-trous
  * (atrous.c): per vector of 16 pixels with a short-history pixel, the 48
@@ -273,13 +326,14 @@ static HUSH_ALWAYS_INLINE void avx_vtap(const float *z, const float *n0, const f
   *s2 = _mm512_fmadd_ps(w, _mm512_loadu_ps(m2 + mo), *s2);
 }
 
-static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_padded *m,
+static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const float *const mom[2],
                                                 const float *age, float min_age, float *var,
                                                 int y, int has_empty,
                                                 const svgf_exp2_poly *poly, const int FAST) {
   const int W = g->width, H = g->height;
   vrow r;
-  vrow_of(g, m, age, var, y, &r);
+  vrow_of(g, mom, age, var, y, &r);
+  float win[2][2 * R + 1][VWIN] __attribute__((aligned(64)));
   const avx_vpair *pairs = r.pairs;
   const float *z = r.z, *n0 = r.n0, *n1 = r.n1, *n2 = r.n2, *m1 = r.m1, *m2 = r.m2;
   const float *a = r.a, *gx = r.gx, *gy = r.gy, *zon = r.zon;
@@ -303,10 +357,15 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
     if (!young) continue;
     vrow_prefetch(&r, x);
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
-      variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
+      variance_row_valid(g, mom, age, min_age, var, y, x, n, poly,
                          FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
       continue;
     }
+    /* taps past the row's ends (and the tail's lanes past it) read the
+     * moments from a window with clamped columns and rows */
+    const int border = x < R || x + VL + R > W;
+    if (border) fill_window(mom, W, H, y, x, VL, &win[0][0][0], &win[1][0][0], VWIN);
+    const float *m1x = border ? &win[0][R][R] : m1 + x, *m2x = border ? &win[1][R][R] : m2 + x;
     /* the tail's lanes past the row read the pads and the next row: their
      * sums are never stored */
     const __m512 sgx = _mm512_max_ps(
@@ -334,10 +393,11 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
       const avx_vpair *t = &pairs[p];
       const __m512 d = _mm512_fmadd_ps(sgx, _mm512_set1_ps(t->fdx), _mm512_mul_ps(sgy, _mm512_set1_ps(t->fdy)));
       const __m512 rdd = _mm512_mul_ps(zl, _mm512_rcp14_ps(_mm512_add_ps(_mm512_abs_ps(d), eps_z)));
-      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->ga, t->ma, rdd, zp, n0p, n1p, n2p,
-               nbias, &sw, &s1, &s2, FAST);
-      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1 + x, m2 + x, t->gb, t->mb, rdd, zp, n0p, n1p, n2p,
-               nbias, &sw, &s1, &s2, FAST);
+      const ptrdiff_t ma = border ? t->sa : t->ma, mb = border ? t->sb : t->mb;
+      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1x, m2x, t->ga, ma, rdd, zp, n0p, n1p, n2p, nbias,
+               &sw, &s1, &s2, FAST);
+      avx_vtap(z + x, n0 + x, n1 + x, n2 + x, m1x, m2x, t->gb, mb, rdd, zp, n0p, n1p, n2p, nbias,
+               &sw, &s1, &s2, FAST);
     }
     const __m512 inv = svgf_avx_rcp(sw);
     const __m512 e1 = _mm512_mul_ps(s1, inv), e2 = _mm512_mul_ps(s2, inv);
@@ -348,6 +408,7 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
 
 #define HAVE_AVX_VARIANCE 1
 #elif defined(__AVX2__) && defined(__FMA__) && defined(__x86_64__)
+#define VL 8 /* pixels per vector */
 /*
  * The same in AVX2 + FMA intrinsics (x86-64-v3 builds), on vectors of 8
  * pixels: the weight floor as a compare and an AND, vrcpps with a Newton
@@ -382,13 +443,14 @@ static HUSH_ALWAYS_INLINE void avx_vtap_add(const float *m1, const float *m2, pt
   *s2 = _mm256_fmadd_ps(w, _mm256_loadu_ps(m2 + mo), *s2);
 }
 
-static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_padded *m,
+static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const float *const mom[2],
                                                 const float *age, float min_age, float *var,
                                                 int y, int has_empty,
                                                 const svgf_exp2_poly *poly, const int FAST) {
   const int W = g->width, H = g->height;
   vrow r;
-  vrow_of(g, m, age, var, y, &r);
+  vrow_of(g, mom, age, var, y, &r);
+  float win[2][2 * R + 1][VWIN] __attribute__((aligned(64)));
   const avx_vpair *pairs = r.pairs;
   const float *z = r.z, *n0 = r.n0, *n1 = r.n1, *n2 = r.n2, *m1 = r.m1, *m2 = r.m2;
   const float *a = r.a, *gx = r.gx, *gy = r.gy, *zon = r.zon;
@@ -414,10 +476,15 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
     if (!young_bits) continue;
     vrow_prefetch(&r, x);
     if (has_empty && window_has_empty(age, W, H, y, x, n)) {
-      variance_row_valid(g, m, age, min_age, var, y, x, n, poly,
+      variance_row_valid(g, mom, age, min_age, var, y, x, n, poly,
                          FAST ? SVGF_NORMAL_EXP_FAST : SVGF_NORMAL_EXP);
       continue;
     }
+    /* taps past the row's ends (and the tail's lanes past it) read the
+     * moments from a window with clamped columns and rows */
+    const int border = x < R || x + VL + R > W;
+    if (border) fill_window(mom, W, H, y, x, VL, &win[0][0][0], &win[1][0][0], VWIN);
+    const float *m1x = border ? &win[0][R][R] : m1 + x, *m2x = border ? &win[1][R][R] : m2 + x;
     /* the tail's lanes past the row read the pads and the next row: their
      * sums are never stored */
     const __m256 sgx = _mm256_max_ps(_mm256_min_ps(_mm256_mul_ps(sz, LDL(gx)), _mm256_set1_ps(1e20f)),
@@ -458,8 +525,8 @@ static HUSH_ALWAYS_INLINE void avx_variance_row(const svgf_guide *g, const svgf_
           na = avx_vtap_exponent(zx, n0x, n1x, n2x, u->ga, rdd[p + 1], zp, n0p, n1p, n2p, nbias);
           nb = avx_vtap_exponent(zx, n0x, n1x, n2x, u->gb, rdd[p + 1], zp, n0p, n1p, n2p, nbias);
         }
-        avx_vtap_add(m1 + x, m2 + x, t->ma, ta, &sw, &s1, &s2, FAST);
-        avx_vtap_add(m1 + x, m2 + x, t->mb, tb, &sw, &s1, &s2, FAST);
+        avx_vtap_add(m1x, m2x, border ? t->sa : t->ma, ta, &sw, &s1, &s2, FAST);
+        avx_vtap_add(m1x, m2x, border ? t->sb : t->mb, tb, &sw, &s1, &s2, FAST);
         ta = na;
         tb = nb;
       }
@@ -479,26 +546,28 @@ VARIANCE_ROWS(variance_rows_exp_fast, SVGF_NORMAL_EXP_FAST)
 #endif
 
 #if HAVE_AVX_VARIANCE
-static void avx_variance_row_accurate(const svgf_guide *g, const svgf_padded *m,
+static void avx_variance_row_accurate(const svgf_guide *g, const float *const m[2],
                                       const float *age, float min_age, float *var, int y,
                                       int has_empty, const svgf_exp2_poly *poly) {
   avx_variance_row(g, m, age, min_age, var, y, has_empty, poly, 0);
 }
 
-static void avx_variance_row_fast(const svgf_guide *g, const svgf_padded *m, const float *age,
+static void avx_variance_row_fast(const svgf_guide *g, const float *const m[2], const float *age,
                                   float min_age, float *var, int y, int has_empty,
                                   const svgf_exp2_poly *poly) {
   avx_variance_row(g, m, age, min_age, var, y, has_empty, poly, 1);
 }
 
-static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, const float *age,
-                                  float min_age, float *var, int fast, int threads) {
+static void variance_rows_exp_avx(const svgf_guide *g, const float *const m[2], const float *age,
+                                  float min_age, float *var, int fast, int holes, int threads) {
   const svgf_exp2_poly poly = svgf_exp2_poly_scaled(1.0f);
   const long long npix = (long long)g->width * g->height;
   int has_empty = 0;
+  if (holes) {
 #pragma omp parallel for simd reduction(| : has_empty) num_threads(threads)
-  for (long long i = 0; i < npix; i++) has_empty |= !(age[i] > 0.0f);
-  void (*const row)(const svgf_guide *, const svgf_padded *, const float *, float, float *, int,
+    for (long long i = 0; i < npix; i++) has_empty |= !(age[i] > 0.0f);
+  }
+  void (*const row)(const svgf_guide *, const float *const[2], const float *, float, float *, int,
                     int, const svgf_exp2_poly *) =
       fast ? avx_variance_row_fast : avx_variance_row_accurate;
 #pragma omp parallel for schedule(dynamic, 8) num_threads(threads)
@@ -506,11 +575,12 @@ static void variance_rows_exp_avx(const svgf_guide *g, const svgf_padded *m, con
 }
 #endif
 
-void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
-                           float min_age, float *var, int normal_exp, int fast_exp, int threads) {
+void svgf_spatial_variance(const svgf_guide *g, const float *const moments[2], const float *age,
+                           float min_age, float *var, int normal_exp, int fast_exp, int holes,
+                           int threads) {
   if (normal_exp) {
 #if HAVE_AVX_VARIANCE
-    variance_rows_exp_avx(g, moments, age, min_age, var, fast_exp, threads);
+    variance_rows_exp_avx(g, moments, age, min_age, var, fast_exp, holes, threads);
 #else
     if (fast_exp)
       variance_rows_exp_fast(g, moments, age, min_age, var, threads);

@@ -19,16 +19,19 @@
 #include "filters/svgf/guide.h"
 #include "filters/svgf/padded.h"
 
-/* The window radius (7x7); the guide and moment pads must be at least this. */
+/* The window radius (7x7); the guide's pads must be at least this. */
 #define SVGF_SPATIAL_VARIANCE_RADIUS 3
 
-/* moments: padded, 2 planes (E[l], E[l^2]); age: unpadded history lengths;
+/* moments: 2 unpadded planes (E[l], E[l^2]), read where a young pixel's
+ * window lies (the windows past the frame's border through a clamped copy:
+ * no padded copy of the whole planes); age: unpadded history lengths;
  * var (unpadded) is overwritten where age < min_age and kept elsewhere.
  * normal_exp: the normal weight as svgf's normal_weight=exp (weights.h,
  * SVGF_NORMAL_EXP), else the power; fast_exp, with normal_exp: the weights
- * by svgf's weight_exp=fast (weights.h, svgf_exp2_neg_fast). */
-void svgf_spatial_variance(const svgf_guide *g, const svgf_padded *moments, const float *age,
-                           float min_age, float *var, int normal_exp, int fast_exp,
+ * by svgf's weight_exp=fast (weights.h, svgf_exp2_neg_fast). holes: some
+ * pixel may have no data (age 0: progressive frames); 0 promises none. */
+void svgf_spatial_variance(const svgf_guide *g, const float *const moments[2], const float *age,
+                           float min_age, float *var, int normal_exp, int fast_exp, int holes,
                            int threads);
 
 #endif
