@@ -188,6 +188,7 @@ typedef struct first_signal {
   const float *var, *age;
   int valid;
   svgf_padded *sig;
+  int pad; /* pixels of pad written on each side: what the first level reads */
 } first_signal;
 
 /* Pixels [xa, xb) of row y of the first signal, and the pads of the sides
@@ -220,7 +221,7 @@ static void first_signal_span(void *ctx, int y, int xa, int xb) {
   }
   for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
     if (fs->valid || c != SVGF_VALID)
-      svgf_pad_row_sides(svgf_padded_row(sig, c, y), W, sig->pad, xa == 0, xb == W);
+      svgf_pad_row_sides(svgf_padded_row(sig, c, y), W, fs->pad, xa == 0, xb == W);
 }
 
 /* The whole first signal, one pass. */
@@ -367,8 +368,12 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   const float *age = hush__accum_age(&c->acc)->plane[0];
   /* the a-trous's first input: made as its levels go (svgf_atrous_levels_from),
    * unless a level runs alone first or none runs */
+  /* each signal's pads only as wide as the next level's taps reach (the
+   * planes keep room for the widest): fewer lines written */
+  const int radius = fc->kernel->radius;
   first_signal fs = {hush__accum_color(&c->acc), st->var.plane[0], age, fc->holes,
-                     &st->signal[0]};
+                     &st->signal[0],
+                     fc->iterations > 0 ? radius * level_step(fc->order, 0, fc->iterations) : 0};
   const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
   const int alone = feedback && fc->holes && fc->iterations > 0 ? 1 : 0;
   if (alone || fc->iterations == 0) first_signal_pass(&fs, threads);
@@ -431,6 +436,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   const svgf_level_out *outp[SVGF_MAX_ITERATIONS];
   for (int i = 0; i < fc->iterations; i++) {
     outs[i] = i == fc->iterations - 1 ? last : svgf_level_out_padded(&st->signal[1 - cur]);
+    if (i < fc->iterations - 1)
+      outs[i].pad = radius * level_step(fc->order, i + 1, fc->iterations);
     if (i == 0 && feedback_direct)
       for (int k = 0; k < 3; k++) outs[i].also[k] = hush__accum_color(&c->acc)->plane[k];
     lps[i] = lp;
