@@ -1222,24 +1222,10 @@ static svgf_guide wavefront_frame(hush_device dev, int w, int h) {
   return test_guide(&wf_zn, wf_gx, wf_gy, wf_zon, w, h);
 }
 
-/* The first level's input row by row from wf_init (an svgf_row_source's
- * fill), as svgf.c's first signal. */
-static void wf_source_fill(void *ctx, int y, int xa, int xb) {
-  (void)ctx;
-  const int w = wf_init.width;
-  for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) {
-    float *row = svgf_padded_row(&wf_buf[0], c, y);
-    memcpy(row + xa, svgf_padded_row(&wf_init, c, y) + xa, (size_t)(xb - xa) * sizeof(float));
-    svgf_pad_row_sides(row, w, wf_buf[0].pad, xa == 0, xb == w);
-  }
-}
-
 /* Levels of a tap order on the frame of wavefront_frame, the last one into
  * wf_last[slot] (unpadded, as svgf.c's result; ring: through wf_ring) and
  * the first one's colour also into wf_also[slot]. how: 0 one level at a
- * time, 1 svgf_atrous_wavefront (with jitter), 2 svgf_atrous_levels, 3
- * svgf_atrous_levels_from and 4 svgf_atrous_wavefront with the first input
- * made by wf_source_fill as they go (NaN in it before). */
+ * time, 1 svgf_atrous_wavefront (with jitter), 2 svgf_atrous_levels. */
 static void wavefront_run(const svgf_guide *g, int order, int valid, int portable, int how,
                           int threads, int slot, unsigned jitter, int ring) {
   /* steps per level: increasing, decreasing, 0-then-decreasing (5x5), and
@@ -1247,14 +1233,8 @@ static void wavefront_run(const svgf_guide *g, int order, int valid, int portabl
   static const int steps[4][6] = {
       {1, 2, 4, 8, 16}, {16, 8, 4, 2, 1}, {1, 16, 8, 4, 2}, {1, 2, 4, 8, 16, 32}};
   const int n = order == 3 ? 6 : 5, w = g->width, h = g->height;
-  for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++) {
-    if (how < 3) {
-      memcpy(wf_buf[0].mem[c], wf_init.mem[c], wf_buf[0].stride * (size_t)h * sizeof(float));
-      continue;
-    }
-    for (size_t i = 0; i < wf_buf[0].stride * (size_t)h; i++) wf_buf[0].mem[c][i] = NAN;
-  }
-  const svgf_row_source src = {wf_source_fill, NULL};
+  for (int c = 0; c < SVGF_SIGNAL_CHANNELS; c++)
+    memcpy(wf_buf[0].mem[c], wf_init.mem[c], wf_buf[0].stride * (size_t)h * sizeof(float));
   svgf_level_params lp[6];
   svgf_level_out out[6];
   const svgf_padded *in[6];
@@ -1290,12 +1270,10 @@ static void wavefront_run(const svgf_guide *g, int order, int valid, int portabl
   }
   if (how == 0)
     for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], outp[k], threads);
-  else if (how == 1 || how == 4)
-    svgf_atrous_wavefront(g, lp, in, outp, n, how == 4 ? &src : NULL, threads, jitter);
-  else if (how == 2)
-    svgf_atrous_levels(g, lp, in, outp, n, threads);
+  else if (how == 1)
+    svgf_atrous_wavefront(g, lp, in, outp, n, threads, jitter);
   else
-    svgf_atrous_levels_from(g, lp, in, outp, n, &src, threads);
+    svgf_atrous_levels(g, lp, in, outp, n, threads);
 }
 
 static int wavefront_same(int w, int h) {
@@ -1322,20 +1300,13 @@ static void test_wavefront(hush_device dev) {
         for (int threads = 2; threads <= 3; threads++)
           for (unsigned jitter = 0; jitter <= 2; jitter++) {
             const int ring = (int)jitter == 1 + (order & 1);
-            for (int source = 0; source <= 1; source++) {
-              wavefront_run(&g, order, valid, portable, source ? 4 : 1, threads, 1, jitter, ring);
-              CHECK_MSG(wavefront_same(w, h),
-                        "wavefront order %d%s%s, %d threads, split %s%s%s: not the bits of one "
-                        "level at a time",
-                        order, valid ? " validity" : "", portable ? " portable" : "", threads,
-                        jitter ? "at random" : "adaptive", ring ? ", ring" : "",
-                        source ? ", first input made as it goes" : "");
-            }
+            wavefront_run(&g, order, valid, portable, 1, threads, 1, jitter, ring);
+            CHECK_MSG(wavefront_same(w, h),
+                      "wavefront order %d%s%s, %d threads, split %s%s: not the bits of one level "
+                      "at a time",
+                      order, valid ? " validity" : "", portable ? " portable" : "", threads,
+                      jitter ? "at random" : "adaptive", ring ? ", ring" : "");
           }
-        /* below SVGF_WAVEFRONT_MIN_PIXELS: the source's pass, then one level at a time */
-        wavefront_run(&g, order, valid, portable, 3, 2, 1, 0, 0);
-        CHECK_MSG(wavefront_same(w, h), "svgf_atrous_levels_from order %d: not the bits of one "
-                  "level at a time", order);
       }
   REQUIRE((long long)WFW * WFH >= SVGF_WAVEFRONT_MIN_PIXELS);
   g = wavefront_frame(dev, WFW, WFH);
@@ -1343,9 +1314,6 @@ static void test_wavefront(hush_device dev) {
   wavefront_run(&g, 0, 0, 0, 2, 2, 1, 0, 1);
   CHECK_MSG(wavefront_same(WFW, WFH), "svgf_atrous_levels at %dx%d: not the bits of one level at a time",
             WFW, WFH);
-  wavefront_run(&g, 0, 0, 0, 3, 2, 1, 0, 1);
-  CHECK_MSG(wavefront_same(WFW, WFH),
-            "svgf_atrous_levels_from at %dx%d: not the bits of one level at a time", WFW, WFH);
   svgf_padded_free(&wf_zn);
   svgf_padded_free(&wf_init);
   for (int b = 0; b < 2; b++) svgf_padded_free(&wf_buf[b]);

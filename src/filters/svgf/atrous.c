@@ -1119,17 +1119,14 @@ static void wave_measured(wave_progress *p, int width, double ms) {
 
 static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
                       const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                      const svgf_row_source *src, int threads, unsigned jitter) {
+                      int threads, unsigned jitter) {
   level_ctx c[SVGF_WAVEFRONT_LEVELS];
   row_fn row[SVGF_WAVEFRONT_LEVELS];
   int lag[SVGF_WAVEFRONT_LEVELS];
   for (int k = 0; k < n; k++) {
     row[k] = level_init(&c[k], g, &lp[k], in[k], out[k]);
     if (k == 0) {
-      /* the source's rows run at lag 0, as a level with no reach: the
-       * first level's taps (and its variance's rows, within them) reach
-       * radius * step rows */
-      lag[k] = src ? lp[0].kernel->radius * lp[0].step + 1 + SVGF_WAVEFRONT_SLACK : 0;
+      lag[k] = 0;
       continue;
     }
     const int step = lp[k].step > lp[k - 1].step ? lp[k].step : lp[k - 1].step;
@@ -1170,8 +1167,6 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
         }
       }
       const double start = parts > 1 ? hush__now_ms() : 0.0;
-      for (int t = t0; src && t < t1 && t < H; t++)
-        if (xa < xb) src->fill(src->ctx, t, xa, xb);
       for (int k = 0; k < n; k++)
         for (int t = t0; t < t1; t++) {
           const int y = t - lag[k];
@@ -1192,30 +1187,18 @@ static void wavefront(const svgf_guide *g, const svgf_level_params *lp,
 
 void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
                            const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                           const svgf_row_source *src, int threads, unsigned jitter) {
+                           int threads, unsigned jitter) {
   for (int k = 0; k < n; k += SVGF_WAVEFRONT_LEVELS)
     wavefront(g, lp + k, in + k, out + k,
-              n - k < SVGF_WAVEFRONT_LEVELS ? n - k : SVGF_WAVEFRONT_LEVELS, k ? NULL : src,
-              threads, jitter);
-}
-
-void svgf_atrous_levels_from(const svgf_guide *g, const svgf_level_params *lp,
-                             const svgf_padded *const *in, const svgf_level_out *const *out,
-                             int n, const svgf_row_source *src, int threads) {
-  if (svgf_atrous_levels_wavefront(g->width, g->height)) {
-    svgf_atrous_wavefront(g, lp, in, out, n, src, threads, 0);
-    return;
-  }
-  if (src) {
-    const int W = g->width, H = g->height;
-#pragma omp parallel for schedule(static) num_threads(threads)
-    for (int y = 0; y < H; y++) src->fill(src->ctx, y, 0, W);
-  }
-  for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], out[k], threads);
+              n - k < SVGF_WAVEFRONT_LEVELS ? n - k : SVGF_WAVEFRONT_LEVELS, threads, jitter);
 }
 
 void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads) {
-  svgf_atrous_levels_from(g, lp, in, out, n, NULL, threads);
+  if (svgf_atrous_levels_wavefront(g->width, g->height)) {
+    svgf_atrous_wavefront(g, lp, in, out, n, threads, 0);
+    return;
+  }
+  for (int k = 0; k < n; k++) svgf_atrous_level(g, &lp[k], in[k], out[k], threads);
 }

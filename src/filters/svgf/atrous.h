@@ -96,21 +96,6 @@ void svgf_atrous_level(const svgf_guide *g, const svgf_level_params *lp, const s
 #define SVGF_WAVEFRONT_MIN_PIXELS 200000
 
 /*
- * Where the first level's input comes from, row by row, when it is made
- * inside svgf_atrous_levels (svgf.c's first signal: written moments
- * before the first level reads it, it never leaves the cache). fill(ctx,
- * y, xa, xb) writes pixels [xa, xb) of row y of in[0] and the row's pads
- * on the sides that part holds (xa == 0: the left one, xb == width: the
- * right one); it reads nothing a level writes. It is called once for
- * every pixel, before any level reads it, possibly with other rows' and
- * levels' parts at the same time.
- */
-typedef struct svgf_row_source {
-  void (*fill)(void *ctx, int y, int xa, int xb);
-  void *ctx;
-} svgf_row_source;
-
-/*
  * n levels in a row, level k from in[k] to out[k] with lp[k]: the same
  * outputs as svgf_atrous_level on each in turn, but in one pass down the
  * rows (a wavefront), each level a few rows behind the one before, so that
@@ -125,10 +110,6 @@ typedef struct svgf_row_source {
 void svgf_atrous_levels(const svgf_guide *g, const svgf_level_params *lp,
                         const svgf_padded *const *in, const svgf_level_out *const *out, int n,
                         int threads);
-/* The same with in[0] made by src as the levels go (n >= 1). */
-void svgf_atrous_levels_from(const svgf_guide *g, const svgf_level_params *lp,
-                             const svgf_padded *const *in, const svgf_level_out *const *out,
-                             int n, const svgf_row_source *src, int threads);
 
 /* The offset of row y in a level's output planes. */
 static inline size_t svgf_level_out_row(const svgf_level_out *o, int y) {
@@ -158,13 +139,12 @@ static inline int svgf_atrous_levels_wavefront(int width, int height) {
 }
 
 /* The wavefront whatever the frame's size (svgf_atrous_levels keeps one
- * level at a time below SVGF_WAVEFRONT_MIN_PIXELS); for tests. src: as
- * svgf_atrous_levels_from's, or NULL. jitter 0:
+ * level at a time below SVGF_WAVEFRONT_MIN_PIXELS); for tests. jitter 0:
  * the split between threads as in svgf_atrous_levels; else every row's
  * split drawn at random (from the seed jitter), to test that any split
  * gives the same bits. */
 void svgf_atrous_wavefront(const svgf_guide *g, const svgf_level_params *lp,
                            const svgf_padded *const *in, const svgf_level_out *const *out, int n,
-                           const svgf_row_source *src, int threads, unsigned jitter);
+                           int threads, unsigned jitter);
 
 #endif

@@ -192,9 +192,8 @@ typedef struct first_signal {
 } first_signal;
 
 /* Pixels [xa, xb) of row y of the first signal, and the pads of the sides
- * the part holds (an svgf_row_source's fill). */
-static void first_signal_span(void *ctx, int y, int xa, int xb) {
-  const first_signal *fs = ctx;
+ * the part holds. */
+static void first_signal_span(const first_signal *fs, int y, int xa, int xb) {
   const svgf_padded *sig = fs->sig;
   const int W = sig->width, n = xb - xa;
   const size_t o = (size_t)y * W + (size_t)xa;
@@ -224,8 +223,10 @@ static void first_signal_span(void *ctx, int y, int xa, int xb) {
       svgf_pad_row_sides(svgf_padded_row(sig, c, y), W, fs->pad, xa == 0, xb == W);
 }
 
-/* The whole first signal, one pass. */
-static void first_signal_pass(first_signal *fs, int threads) {
+/* The whole first signal, one pass. (Made row by row inside the a-trous's
+ * wavefront instead, it cost the a-trous what it saved here:
+ * docs/svgf-speed.md, twenty-seventh round.) */
+static void first_signal_pass(const first_signal *fs, int threads) {
   const int W = fs->sig->width, H = fs->sig->height;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) first_signal_span(fs, y, 0, W);
@@ -366,17 +367,14 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   const hush_image_view *var_view = hush__filter_view(f, I_VARIANCE_ESTIMATE);
   if (var_view && export_variance) hush__view_export(&st->var, var_view, threads);
   const float *age = hush__accum_age(&c->acc)->plane[0];
-  /* the a-trous's first input: made as its levels go (svgf_atrous_levels_from),
-   * unless a level runs alone first or none runs */
+  /* the a-trous's first input */
   /* each signal's pads only as wide as the next level's taps reach (the
    * planes keep room for the widest): fewer lines written */
   const int radius = fc->kernel->radius;
   first_signal fs = {hush__accum_color(&c->acc), st->var.plane[0], age, fc->holes,
                      &st->signal[0],
                      fc->iterations > 0 ? radius * level_step(fc->order, 0, fc->iterations) : 0};
-  const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
-  const int alone = feedback && fc->holes && fc->iterations > 0 ? 1 : 0;
-  if (alone || fc->iterations == 0) first_signal_pass(&fs, threads);
+  first_signal_pass(&fs, threads);
   hush__filter_timing_stage(f, "variance");
 
   svgf_level_params lp;
@@ -420,6 +418,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   }
   /* the first level's colour written straight into the colour history as
    * well (with holes only where the age allows: copy_color_where) */
+  const int feedback = hush__param_i(f, P_FEEDBACK_FIRST_LEVEL);
   const int feedback_direct = feedback && !fc->holes;
   if (fc->iterations == 0) {
     const svgf_level_out accumulated = svgf_level_out_padded(&st->signal[0]);
@@ -430,6 +429,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
    * of a little extra blur over time. With holes the first level's copy
    * into it is a pass of its own after that level (copy_color_where), so
    * the level runs alone; the others run as one wavefront. */
+  const int alone = feedback && fc->holes && fc->iterations > 0 ? 1 : 0;
   svgf_level_params lps[SVGF_MAX_ITERATIONS];
   svgf_level_out outs[SVGF_MAX_ITERATIONS];
   const svgf_padded *ins[SVGF_MAX_ITERATIONS];
@@ -450,10 +450,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     svgf_atrous_level(fc->gd, &lps[0], ins[0], outp[0], threads);
     copy_color_where(outp[0], hush__accum_color(&c->acc), age, threads);
   }
-  const svgf_row_source src = {first_signal_span, &fs};
-  if (fc->iterations - alone > 0)
-    svgf_atrous_levels_from(fc->gd, lps + alone, ins + alone, outp + alone,
-                            fc->iterations - alone, alone ? NULL : &src, threads);
+  svgf_atrous_levels(fc->gd, lps + alone, ins + alone, outp + alone, fc->iterations - alone,
+                     threads);
   hush__filter_timing_stage(f, "atrous");
 }
 
