@@ -313,7 +313,33 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
       a1[m] = (float)w[1][m];
       a2[m] = (float)w[2][m];
     }
-    for (size_t i = 0; i < ld; i += VF_LANES) {
+    /* two vectors of rows at a time: each sum is a chain of one FMA per
+     * feature, and three chains left the FMA pipes waiting on its latency
+     * (the same operations per lane: the same bits) */
+    size_t i = 0;
+    for (; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
+      const vf mk = vf_load(mask + i), mq = vf_load(mask + i + VF_LANES);
+      vf s0 = vf_load(z0 + i) * mk, s1 = vf_load(z1 + i) * mk, s2 = vf_load(z2 + i) * mk;
+      vf q0 = vf_load(z0 + i + VF_LANES) * mq, q1 = vf_load(z1 + i + VF_LANES) * mq,
+         q2 = vf_load(z2 + i + VF_LANES) * mq;
+      for (int m = 0; m < count; m++) {
+        const vf t = vf_load(T + (size_t)m * ld + i), u = vf_load(T + (size_t)m * ld + i + VF_LANES);
+        const vf c0 = vf_set1(a0[m]), c1 = vf_set1(a1[m]), c2 = vf_set1(a2[m]);
+        s0 = vf_fnma(c0, t, s0);
+        q0 = vf_fnma(c0, u, q0);
+        s1 = vf_fnma(c1, t, s1);
+        q1 = vf_fnma(c1, u, q1);
+        s2 = vf_fnma(c2, t, s2);
+        q2 = vf_fnma(c2, u, q2);
+      }
+      vf_store(r0 + i, s0);
+      vf_store(r1 + i, s1);
+      vf_store(r2 + i, s2);
+      vf_store(r0 + i + VF_LANES, q0);
+      vf_store(r1 + i + VF_LANES, q1);
+      vf_store(r2 + i + VF_LANES, q2);
+    }
+    for (; i < ld; i += VF_LANES) {
       const vf mk = vf_load(mask + i);
       vf s0 = vf_load(z0 + i) * mk, s1 = vf_load(z1 + i) * mk, s2 = vf_load(z2 + i) * mk;
       for (int m = 0; m < count; m++) {
@@ -358,7 +384,28 @@ void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
   /* per vector of rows, the features summed in registers: one store per
    * channel (rows n..ld-1 of T are zero: they give 0) */
   const vf zero = {0};
-  for (size_t i = 0; i < ld; i += VF_LANES) {
+  size_t i = 0;
+  /* two vectors of rows at a time, as the refinement's residuals */
+  for (; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
+    vf s0 = zero, s1 = zero, s2 = zero, q0 = zero, q1 = zero, q2 = zero;
+    for (int m = 0; m < count; m++) {
+      const vf t = vf_load(T + (size_t)m * ld + i), u = vf_load(T + (size_t)m * ld + i + VF_LANES);
+      const vf k0 = vf_set1(c0[m]), k1 = vf_set1(c1[m]), k2 = vf_set1(c2[m]);
+      s0 = vf_fma(k0, t, s0);
+      q0 = vf_fma(k0, u, q0);
+      s1 = vf_fma(k1, t, s1);
+      q1 = vf_fma(k1, u, q1);
+      s2 = vf_fma(k2, t, s2);
+      q2 = vf_fma(k2, u, q2);
+    }
+    vf_store(y0 + i, vf_select(s0 > zero, s0, zero));
+    vf_store(y1 + i, vf_select(s1 > zero, s1, zero));
+    vf_store(y2 + i, vf_select(s2 > zero, s2, zero));
+    vf_store(y0 + i + VF_LANES, vf_select(q0 > zero, q0, zero));
+    vf_store(y1 + i + VF_LANES, vf_select(q1 > zero, q1, zero));
+    vf_store(y2 + i + VF_LANES, vf_select(q2 > zero, q2, zero));
+  }
+  for (; i < ld; i += VF_LANES) {
     vf s0 = zero, s1 = zero, s2 = zero;
     for (int m = 0; m < count; m++) {
       const vf t = vf_load(T + (size_t)m * ld + i);
