@@ -257,6 +257,29 @@ static void forward_substitute(const r_factor *R, const double b[BMFR_CHANNELS][
   }
 }
 
+/*
+ * s[c][v] -= (NEG) or += sum_m k[c][m] T[m][i + v VF_LANES .. +VF_LANES) for
+ * the three channels and V (1 or 2) vectors of rows, the features in order.
+ * Each sum is a chain of one FMA per feature: three chains (one vector) left
+ * the FMA pipes waiting on its latency, six keep them busy (refinement
+ * residuals and weighted sum: fit 19.05 -> 18.8 ms on one thread,
+ * docs/bmfr.md, eighth round). Per lane the same operations in the same
+ * order whatever V: the same bits.
+ */
+static HUSH_INLINE void feature_sums(const float *T, int count, size_t ld, size_t i,
+                                     const float *const k[BMFR_CHANNELS], const int V,
+                                     const int NEG, vf s[BMFR_CHANNELS][2]) {
+  for (int m = 0; m < count; m++) {
+    vf t[2];
+    for (int v = 0; v < V; v++) t[v] = vf_load(T + (size_t)m * ld + i + (size_t)v * VF_LANES);
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      const vf kc = vf_set1(k[c][m]);
+      for (int v = 0; v < V; v++)
+        s[c][v] = NEG ? vf_fnma(kc, t[v], s[c][v]) : vf_fma(kc, t[v], s[c][v]);
+    }
+  }
+}
+
 void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNELS],
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
                     int refine, float *scratch, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
@@ -306,51 +329,33 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
     /* residuals of the three channels (one pass, the features summed
      * per row), then their dots with each feature (one pass per feature) */
     float *restrict r0 = scratch, *restrict r1 = scratch + ld, *restrict r2 = scratch + 2 * ld;
-    const float *restrict z0 = z[0], *restrict z1 = z[1], *restrict z2 = z[2];
     float a0[BMFR_MAX_FEATURES], a1[BMFR_MAX_FEATURES], a2[BMFR_MAX_FEATURES];
     for (int m = 0; m < count; m++) {
       a0[m] = (float)w[0][m];
       a1[m] = (float)w[1][m];
       a2[m] = (float)w[2][m];
     }
-    /* two vectors of rows at a time: each sum is a chain of one FMA per
-     * feature, and three chains left the FMA pipes waiting on its latency
-     * (the same operations per lane: the same bits) */
+    const float *const a[BMFR_CHANNELS] = {a0, a1, a2};
+    float *const res[BMFR_CHANNELS] = {r0, r1, r2};
     size_t i = 0;
     for (; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
-      const vf mk = vf_load(mask + i), mq = vf_load(mask + i + VF_LANES);
-      vf s0 = vf_load(z0 + i) * mk, s1 = vf_load(z1 + i) * mk, s2 = vf_load(z2 + i) * mk;
-      vf q0 = vf_load(z0 + i + VF_LANES) * mq, q1 = vf_load(z1 + i + VF_LANES) * mq,
-         q2 = vf_load(z2 + i + VF_LANES) * mq;
-      for (int m = 0; m < count; m++) {
-        const vf t = vf_load(T + (size_t)m * ld + i), u = vf_load(T + (size_t)m * ld + i + VF_LANES);
-        const vf c0 = vf_set1(a0[m]), c1 = vf_set1(a1[m]), c2 = vf_set1(a2[m]);
-        s0 = vf_fnma(c0, t, s0);
-        q0 = vf_fnma(c0, u, q0);
-        s1 = vf_fnma(c1, t, s1);
-        q1 = vf_fnma(c1, u, q1);
-        s2 = vf_fnma(c2, t, s2);
-        q2 = vf_fnma(c2, u, q2);
+      vf sums[BMFR_CHANNELS][2];
+      for (int v = 0; v < 2; v++) {
+        const vf mk = vf_load(mask + i + (size_t)v * VF_LANES);
+        for (int c = 0; c < BMFR_CHANNELS; c++)
+          sums[c][v] = vf_load(z[c] + i + (size_t)v * VF_LANES) * mk;
       }
-      vf_store(r0 + i, s0);
-      vf_store(r1 + i, s1);
-      vf_store(r2 + i, s2);
-      vf_store(r0 + i + VF_LANES, q0);
-      vf_store(r1 + i + VF_LANES, q1);
-      vf_store(r2 + i + VF_LANES, q2);
+      feature_sums(T, count, ld, i, a, 2, 1, sums);
+      for (int v = 0; v < 2; v++)
+        for (int c = 0; c < BMFR_CHANNELS; c++)
+          vf_store(res[c] + i + (size_t)v * VF_LANES, sums[c][v]);
     }
     for (; i < ld; i += VF_LANES) {
+      vf sums[BMFR_CHANNELS][2] = {{{0}}};
       const vf mk = vf_load(mask + i);
-      vf s0 = vf_load(z0 + i) * mk, s1 = vf_load(z1 + i) * mk, s2 = vf_load(z2 + i) * mk;
-      for (int m = 0; m < count; m++) {
-        const vf t = vf_load(T + (size_t)m * ld + i);
-        s0 = vf_fnma(vf_set1(a0[m]), t, s0);
-        s1 = vf_fnma(vf_set1(a1[m]), t, s1);
-        s2 = vf_fnma(vf_set1(a2[m]), t, s2);
-      }
-      vf_store(r0 + i, s0);
-      vf_store(r1 + i, s1);
-      vf_store(r2 + i, s2);
+      for (int c = 0; c < BMFR_CHANNELS; c++) sums[c][0] = vf_load(z[c] + i) * mk;
+      feature_sums(T, count, ld, i, a, 1, 1, sums);
+      for (int c = 0; c < BMFR_CHANNELS; c++) vf_store(res[c] + i, sums[c][0]);
     }
     double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
     for (int m = 0; m < count; m += 3) {
@@ -379,43 +384,23 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
 void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
                            const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
                            float *const y[BMFR_CHANNELS]) {
-  float *restrict y0 = y[0], *restrict y1 = y[1], *restrict y2 = y[2];
-  const float *c0 = coef[0], *c1 = coef[1], *c2 = coef[2];
-  /* per vector of rows, the features summed in registers: one store per
-   * channel (rows n..ld-1 of T are zero: they give 0) */
+  const float *const k[BMFR_CHANNELS] = {coef[0], coef[1], coef[2]};
+  /* the features summed in registers per vector of rows: one store per
+   * channel (rows n..ld-1 of T are zero: they give 0); > 0 also maps a NaN
+   * (impossible with finite inputs) to 0 */
   const vf zero = {0};
   size_t i = 0;
-  /* two vectors of rows at a time, as the refinement's residuals */
   for (; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
-    vf s0 = zero, s1 = zero, s2 = zero, q0 = zero, q1 = zero, q2 = zero;
-    for (int m = 0; m < count; m++) {
-      const vf t = vf_load(T + (size_t)m * ld + i), u = vf_load(T + (size_t)m * ld + i + VF_LANES);
-      const vf k0 = vf_set1(c0[m]), k1 = vf_set1(c1[m]), k2 = vf_set1(c2[m]);
-      s0 = vf_fma(k0, t, s0);
-      q0 = vf_fma(k0, u, q0);
-      s1 = vf_fma(k1, t, s1);
-      q1 = vf_fma(k1, u, q1);
-      s2 = vf_fma(k2, t, s2);
-      q2 = vf_fma(k2, u, q2);
-    }
-    vf_store(y0 + i, vf_select(s0 > zero, s0, zero));
-    vf_store(y1 + i, vf_select(s1 > zero, s1, zero));
-    vf_store(y2 + i, vf_select(s2 > zero, s2, zero));
-    vf_store(y0 + i + VF_LANES, vf_select(q0 > zero, q0, zero));
-    vf_store(y1 + i + VF_LANES, vf_select(q1 > zero, q1, zero));
-    vf_store(y2 + i + VF_LANES, vf_select(q2 > zero, q2, zero));
+    vf sums[BMFR_CHANNELS][2] = {{zero, zero}, {zero, zero}, {zero, zero}};
+    feature_sums(T, count, ld, i, k, 2, 0, sums);
+    for (int v = 0; v < 2; v++)
+      for (int c = 0; c < BMFR_CHANNELS; c++)
+        vf_store(y[c] + i + (size_t)v * VF_LANES, vf_select(sums[c][v] > zero, sums[c][v], zero));
   }
   for (; i < ld; i += VF_LANES) {
-    vf s0 = zero, s1 = zero, s2 = zero;
-    for (int m = 0; m < count; m++) {
-      const vf t = vf_load(T + (size_t)m * ld + i);
-      s0 = vf_fma(vf_set1(c0[m]), t, s0);
-      s1 = vf_fma(vf_set1(c1[m]), t, s1);
-      s2 = vf_fma(vf_set1(c2[m]), t, s2);
-    }
-    /* > 0 also maps a NaN (impossible with finite inputs) to 0 */
-    vf_store(y0 + i, vf_select(s0 > zero, s0, zero));
-    vf_store(y1 + i, vf_select(s1 > zero, s1, zero));
-    vf_store(y2 + i, vf_select(s2 > zero, s2, zero));
+    vf sums[BMFR_CHANNELS][2] = {{zero, zero}, {zero, zero}, {zero, zero}};
+    feature_sums(T, count, ld, i, k, 1, 0, sums);
+    for (int c = 0; c < BMFR_CHANNELS; c++)
+      vf_store(y[c] + i, vf_select(sums[c][0] > zero, sums[c][0], zero));
   }
 }
