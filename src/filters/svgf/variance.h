@@ -6,7 +6,9 @@
  * weights (weights.h; no luminance weight) and var = max(0, m2 - m1^2).
  *
  * Vectorised like the a-trous (atrous.h): mirrored tap pairs sharing the
- * depth-gradient denominator, padding for the columns; a block (a vector
+ * depth-gradient denominator, the guide's padding for its columns, the
+ * moments read in place or, where a block's window passes the frame's
+ * border, from a copy with clamped columns and rows; a block (a vector
  * of 16 pixels in the AVX-512 loop) with no short-history pixel is
  * skipped. Progressive frames
  * (Dundr §4.2): a pixel without data (age 0, a hole nothing reached) is
