@@ -315,8 +315,10 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
  * (1280x720, 2 threads, Zen 3, medians of alternated runs; docs/svgf-speed.md,
  * twenty-first round): svgf's reprojection 7.9 -> 7.6 ms, its blend 5.3 ->
  * 4.9, TAA's resolve 5.8 -> 4.9, bmfr's phase III 3.0 -> 2.75. 16 pixels
- * ahead was slower, 48 or 64 the same. */
-#define HUSH_PREFETCH_AHEAD 32
+ * ahead was slower, 48 or 64 the same. On Zen 5, whose chunks run faster,
+ * 32 was too close: 64 took svgf's reprojection 4.50 -> 4.27 ms and bmfr's
+ * phase I 5.44 -> 5.14 (three alternated pairs); 128 was in between. */
+#define HUSH_PREFETCH_AHEAD 64
 
 /* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped); j may
  * lie outside the planes (hush__prefetch). */
