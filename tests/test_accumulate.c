@@ -15,6 +15,7 @@
 #include "core/hmath.h"
 #include "core/rng.h"
 #include "core/timer.h"
+#include "filters/albedo.h"
 #include "filters/emission.h"
 #include "temporal/accumulation.h"
 #include "temporal/reproject.h"
@@ -2166,6 +2167,59 @@ static void test_module_emission_rows(hush_device dev) {
   gpair_free(&g);
 }
 
+/* hush__emission_subtract_demodulate is hush__emission_subtract followed
+ * by hush__demodulate, bit for bit, lit rows included: colour below, at and
+ * above the emission, albedo below the floor, 0 and -0 emission, rows with
+ * and without light. */
+static void test_module_emission_subtract_demodulate(hush_device dev) {
+  const int W = 37, H = 11;
+  const size_t n = (size_t)W * H;
+  hush_planar em, alb, two, one;
+  REQUIRE(hush__planar_init(dev, &em, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &alb, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &two, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__planar_init(dev, &one, 3, (uint32_t)W, (uint32_t)H) == HUSH_OK);
+  hush_emission_history ha, hb;
+  memset(&ha, 0, sizeof ha);
+  memset(&hb, 0, sizeof hb);
+  REQUIRE(hush__emission_history_rows(dev, &ha, (uint32_t)H) == HUSH_OK);
+  REQUIRE(hush__emission_history_rows(dev, &hb, (uint32_t)H) == HUSH_OK);
+  for (int c = 0; c < 3; c++)
+    for (size_t i = 0; i < n; i++) {
+      const int y = (int)(i / (size_t)W);
+      const uint32_t k = (uint32_t)(c * (int)n) + (uint32_t)i;
+      const float u = hush_rng_float(17, 0, k);
+      /* rows 2 and 7 unlit (one of them by -0 only), the rest lit in part */
+      em.plane[c][i] = y == 2 ? 0.0f : y == 7 ? -0.0f : u < 0.5f ? 0.0f : 4.0f * u;
+      two.plane[c][i] = one.plane[c][i] = 5.0f * hush_rng_float(17, 1, k);
+      const float a = hush_rng_float(17, 2, k);
+      alb.plane[c][i] = a < 0.2f ? 0.001f : a;
+    }
+  hush__emission_subtract(&two, &em, &ha, 2);
+  hush__demodulate(&two, &alb, 2);
+  hush__emission_subtract_demodulate(&one, &em, &alb, &hb, 3);
+  int same = 1;
+  for (int c = 0; c < 3; c++) same &= memcmp(two.plane[c], one.plane[c], n * sizeof(float)) == 0;
+  CHECK(same);
+  int rows_same = hb.lit_fresh == ha.lit_fresh && ha.lit_fresh == 1;
+  for (int y = 0; y < H; y++)
+    rows_same &= ha.rows.plane[EMISSION_ROW_LIT][y] == hb.rows.plane[EMISSION_ROW_LIT][y];
+  CHECK(rows_same);
+  CHECK(hb.rows.plane[EMISSION_ROW_LIT][2] == 0.0f && hb.rows.plane[EMISSION_ROW_LIT][3] == 1.0f);
+  /* a value the two steps give: (3 - 1) / max(0.001, 0.02) = 100 */
+  em.plane[0][0] = 1.0f;
+  one.plane[0][0] = 3.0f;
+  alb.plane[0][0] = 0.001f;
+  hush__emission_subtract_demodulate(&one, &em, &alb, NULL, 1);
+  CHECK(fabsf(one.plane[0][0] - 100.0f) < 1e-4f);
+  hush__emission_history_free(&ha);
+  hush__emission_history_free(&hb);
+  hush__planar_free(&em);
+  hush__planar_free(&alb);
+  hush__planar_free(&two);
+  hush__planar_free(&one);
+}
+
 static int32_t floor_div(int32_t a, int32_t b) { return a >= 0 ? a / b : -((-a + b - 1) / b); }
 
 /* The plan's tap tests read a chunk's taps as vectors (from one base or in
@@ -2316,6 +2370,7 @@ int main(void) {
   test_module_window16();
   test_module_diagonals();
   test_module_emission_rows(dev);
+  test_module_emission_subtract_demodulate(dev);
   test_convergence(dev);
   test_static_jitter(dev);
   test_camera_move(dev);

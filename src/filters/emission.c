@@ -4,6 +4,8 @@
  */
 #include "filters/emission.h"
 
+#include "filters/albedo.h"
+
 #include "temporal/accumulation.h"
 
 #include <math.h>
@@ -25,6 +27,35 @@ void hush__emission_subtract(hush_planar *color, const hush_planar *emission,
       for (size_t x = 0; x < W; x++) {
         const float r = col[x] - em[x];
         col[x] = r > 0.0f ? r : 0.0f;
+        uint32_t bits;
+        memcpy(&bits, &em[x], sizeof bits);
+        any |= bits;
+      }
+    }
+    if (lit) lit[y] = any ? 1.0f : 0.0f;
+  }
+  if (lit) h->lit_fresh = 1;
+}
+
+void hush__emission_subtract_demodulate(hush_planar *color, const hush_planar *emission,
+                                        const hush_planar *albedo, hush_emission_history *h,
+                                        int threads) {
+  const int H = (int)color->height;
+  const size_t W = color->width;
+  float *lit = h ? h->rows.plane[EMISSION_ROW_LIT] : NULL;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) {
+    uint32_t any = 0;
+    for (int c = 0; c < 3; c++) {
+      float *restrict col = color->plane[c] + (size_t)y * W;
+      const float *restrict em = emission->plane[c] + (size_t)y * W;
+      const float *restrict alb = albedo->plane[c] + (size_t)y * W;
+      /* hush__emission_subtract's value, then hush__demodulate's division:
+       * the same operations, so the same bits as the two passes */
+      for (size_t x = 0; x < W; x++) {
+        const float r = col[x] - em[x];
+        const float a = alb[x] > HUSH_ALBEDO_EPS ? alb[x] : HUSH_ALBEDO_EPS;
+        col[x] = (r > 0.0f ? r : 0.0f) / a;
         uint32_t bits;
         memcpy(&bits, &em[x], sizeof bits);
         any |= bits;

@@ -217,8 +217,12 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- accumulate */
-  if (emis) hush__emission_subtract(&st->color, &st->emission, &st->eh, threads);
-  if (demod && !fused) hush__demodulate(&st->color, &st->albedo, threads);
+  if (emis && demod)
+    hush__emission_subtract_demodulate(&st->color, &st->emission, &st->albedo, &st->eh, threads);
+  else if (emis)
+    hush__emission_subtract(&st->color, &st->emission, &st->eh, threads);
+  else if (demod && !fused)
+    hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA_MIN);
   ap.alpha_moments_min = hush__param_f(f, P_ALPHA_MOMENTS_MIN);

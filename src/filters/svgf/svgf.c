@@ -270,6 +270,7 @@ typedef struct frame_ctx {
   hush_accum_params ap;
   int demod, merge, iterations, order, threads;
   int demod_fused; /* the colour was demodulated as it was imported */
+  int demod_emission; /* the first component's, as its emission came off */
   int holes; /* progressive: this frame has untraced pixels */
   const svgf_kernel *kernel;
   svgf_adaptive *ad; /* asvgf: the adaptive temporal stage, else NULL */
@@ -305,7 +306,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   hush_filter f = fc->f;
   svgf_state *st = fc->st;
   const int threads = fc->threads, W = (int)f->width;
-  if (fc->demod && !fc->demod_fused) hush__demodulate(&c->color, &st->albedo, threads);
+  const int demodulated = fc->demod_fused || (fc->demod_emission && c == &st->comp[0]);
+  if (fc->demod && !demodulated) hush__demodulate(&c->color, &st->albedo, threads);
   /* the history before the blend writes the other buffer set */
   const float *prev[6] = {NULL};
   const int had_history = c->acc.has_history;
@@ -541,8 +543,15 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
       ((s = svgf_progressive_init(f->device, &st->prog, f->width, f->height)) ||
        (s = hush__filter_scratch(f, &st->eps, 1))))
     return s;
-  /* light seen directly is all direct light: with the split it comes off 'direct' */
-  if (emis) hush__emission_subtract(&st->comp[0].color, &st->emission, &st->eh, threads);
+  /* light seen directly is all direct light: with the split it comes off
+   * 'direct'; demodulated in the same pass unless holes may change the
+   * albedo first or asvgf's gradient samples need the radiance itself */
+  const int demod_emission = emis && demod && !holes && !ad;
+  if (demod_emission)
+    hush__emission_subtract_demodulate(&st->comp[0].color, &st->emission, &st->albedo, &st->eh,
+                                       threads);
+  else if (emis)
+    hush__emission_subtract(&st->comp[0].color, &st->emission, &st->eh, threads);
   hush__filter_timing_stage(f, "import");
 
   /* ---- progressive: the G-buffer holes filled (Dundr §4.2.1) */
@@ -625,6 +634,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   fc.ap.max_age = hush__param_i(f, P_MAX_AGE);
   fc.demod = demod;
   fc.demod_fused = demod_fused;
+  fc.demod_emission = demod_emission;
   /* the renderer's sample variance is of the whole radiance: not split */
   fc.merge = has_svar && !split && hush__param_i(f, P_SAMPLE_VARIANCE);
   fc.iterations = iterations;
