@@ -11,30 +11,33 @@
 #include <math.h>
 #include <string.h>
 
-void hush__emission_subtract(hush_planar *color, const hush_planar *emission,
-                             hush_emission_history *h, int threads) {
-  const int H = (int)color->height;
-  const size_t W = color->width;
-  float *lit = h ? h->rows.plane[EMISSION_ROW_LIT] : NULL;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++) {
-    uint32_t any = 0;
-    for (int c = 0; c < 3; c++) {
-      float *col = color->plane[c] + (size_t)y * W;
-      const float *em = emission->plane[c] + (size_t)y * W;
-      /* the reflected part is never negative; rounding (or a colour that
-       * is not the renderer's mean) must not make it so */
-      for (size_t x = 0; x < W; x++) {
-        const float r = col[x] - em[x];
-        col[x] = r > 0.0f ? r : 0.0f;
-        uint32_t bits;
-        memcpy(&bits, &em[x], sizeof bits);
-        any |= bits;
-      }
+/* One row of one channel: col = max(col - em, 0), divided by
+ * max(alb, eps) unless alb is NULL; returns the OR of em's bits. */
+static uint32_t subtract_row(float *restrict col, const float *restrict em,
+                             const float *restrict alb, size_t n) {
+  uint32_t any = 0;
+  /* the reflected part is never negative; rounding (or a colour that is not
+   * the renderer's mean) must not make it so */
+  if (alb) {
+    /* hush__demodulate's division, so the same bits as its pass after */
+    for (size_t x = 0; x < n; x++) {
+      const float r = col[x] - em[x];
+      const float a = alb[x] > HUSH_ALBEDO_EPS ? alb[x] : HUSH_ALBEDO_EPS;
+      col[x] = (r > 0.0f ? r : 0.0f) / a;
+      uint32_t bits;
+      memcpy(&bits, &em[x], sizeof bits);
+      any |= bits;
     }
-    if (lit) lit[y] = any ? 1.0f : 0.0f;
+  } else {
+    for (size_t x = 0; x < n; x++) {
+      const float r = col[x] - em[x];
+      col[x] = r > 0.0f ? r : 0.0f;
+      uint32_t bits;
+      memcpy(&bits, &em[x], sizeof bits);
+      any |= bits;
+    }
   }
-  if (lit) h->lit_fresh = 1;
+  return any;
 }
 
 void hush__emission_subtract_demodulate(hush_planar *color, const hush_planar *emission,
@@ -47,23 +50,18 @@ void hush__emission_subtract_demodulate(hush_planar *color, const hush_planar *e
   for (int y = 0; y < H; y++) {
     uint32_t any = 0;
     for (int c = 0; c < 3; c++) {
-      float *restrict col = color->plane[c] + (size_t)y * W;
-      const float *restrict em = emission->plane[c] + (size_t)y * W;
-      const float *restrict alb = albedo->plane[c] + (size_t)y * W;
-      /* hush__emission_subtract's value, then hush__demodulate's division:
-       * the same operations, so the same bits as the two passes */
-      for (size_t x = 0; x < W; x++) {
-        const float r = col[x] - em[x];
-        const float a = alb[x] > HUSH_ALBEDO_EPS ? alb[x] : HUSH_ALBEDO_EPS;
-        col[x] = (r > 0.0f ? r : 0.0f) / a;
-        uint32_t bits;
-        memcpy(&bits, &em[x], sizeof bits);
-        any |= bits;
-      }
+      const size_t at = (size_t)y * W;
+      any |= subtract_row(color->plane[c] + at, emission->plane[c] + at,
+                          albedo ? albedo->plane[c] + at : NULL, W);
     }
     if (lit) lit[y] = any ? 1.0f : 0.0f;
   }
   if (lit) h->lit_fresh = 1;
+}
+
+void hush__emission_subtract(hush_planar *color, const hush_planar *emission,
+                             hush_emission_history *h, int threads) {
+  hush__emission_subtract_demodulate(color, emission, NULL, h, threads);
 }
 
 void hush__emission_add(hush_planar *out, const hush_planar *emission, const hush_planar *filtered,

@@ -25,9 +25,9 @@ typedef struct hush_emission_history hush_emission_history;
 void hush__emission_subtract(hush_planar *color, const hush_planar *emission,
                              hush_emission_history *h, int threads);
 /* hush__emission_subtract followed by hush__demodulate (albedo: 3
- * planes), in one pass over the rows instead of two over the frame (on
- * rendered frames, where the emission is bound, 0.3-0.4 ms of a 1280x720
- * frame at 2 threads); the same bits. */
+ * planes; NULL: no demodulation), in one pass over the rows instead of two
+ * over the frame (on rendered frames, where the emission is bound, about
+ * 0.4 ms of a 1280x720 frame at 2 threads); the same bits. */
 void hush__emission_subtract_demodulate(hush_planar *color, const hush_planar *emission,
                                         const hush_planar *albedo, hush_emission_history *h,
                                         int threads);

@@ -217,10 +217,9 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   hush__filter_timing_stage(f, "reproject");
 
   /* ---- accumulate */
-  if (emis && demod)
-    hush__emission_subtract_demodulate(&st->color, &st->emission, &st->albedo, &st->eh, threads);
-  else if (emis)
-    hush__emission_subtract(&st->color, &st->emission, &st->eh, threads);
+  if (emis)
+    hush__emission_subtract_demodulate(&st->color, &st->emission, demod ? &st->albedo : NULL,
+                                       &st->eh, threads);
   else if (demod && !fused)
     hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;

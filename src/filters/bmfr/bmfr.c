@@ -646,10 +646,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
   if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
   if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-  if (emis && demod)
-    hush__emission_subtract_demodulate(&st->color, &st->emission, &st->albedo, &st->eh, threads);
-  else if (emis)
-    hush__emission_subtract(&st->color, &st->emission, &st->eh, threads);
+  if (emis)
+    hush__emission_subtract_demodulate(&st->color, &st->emission, demod ? &st->albedo : NULL,
+                                       &st->eh, threads);
   else if (demod && !demod_fused)
     hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;

@@ -547,11 +547,9 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
    * 'direct'; demodulated in the same pass unless holes may change the
    * albedo first or asvgf's gradient samples need the radiance itself */
   const int demod_emission = emis && demod && !holes && !ad;
-  if (demod_emission)
-    hush__emission_subtract_demodulate(&st->comp[0].color, &st->emission, &st->albedo, &st->eh,
-                                       threads);
-  else if (emis)
-    hush__emission_subtract(&st->comp[0].color, &st->emission, &st->eh, threads);
+  if (emis)
+    hush__emission_subtract_demodulate(&st->comp[0].color, &st->emission,
+                                       demod_emission ? &st->albedo : NULL, &st->eh, threads);
   hush__filter_timing_stage(f, "import");
 
   /* ---- progressive: the G-buffer holes filled (Dundr §4.2.1) */
