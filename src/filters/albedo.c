@@ -72,6 +72,7 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
 #define EXPORT_SPAN 512
 
 void hush__export_remodulated_span(const float *const filtered[3], const float *const albedo[3],
+                                   const float *const add[3], int add_zero,
                                    const hush_image_view *view, uint32_t y, uint32_t x0,
                                    uint32_t n) {
   float buf[3][EXPORT_SPAN];
@@ -87,6 +88,13 @@ void hush__export_remodulated_span(const float *const filtered[3], const float *
       } else {
         memcpy(o, flt, m * sizeof(float));
       }
+      if (add && add_zero) {
+        /* + 0 as the row holds (a -0 becomes +0, as with the load) */
+        for (uint32_t x = 0; x < m; x++) o[x] = o[x] + 0.0f;
+      } else if (add) {
+        const float *restrict a = add[c] + s0;
+        for (uint32_t x = 0; x < m; x++) o[x] = o[x] + a[x];
+      }
     }
     hush__view_export_span(in, 3, view, y, x0 + s0, m);
   }
@@ -99,30 +107,16 @@ void hush__export_remodulated(const hush_planar *filtered, const hush_planar *al
   const size_t W = filtered->width;
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
-    const int add_zero = add && add_rows && add_rows[y] == 0.0f;
-    float buf[3][EXPORT_SPAN];
-    const float *const in[3] = {buf[0], buf[1], buf[2]};
-    for (size_t x0 = 0; x0 < W; x0 += EXPORT_SPAN) {
-      const size_t n = W - x0 < EXPORT_SPAN ? W - x0 : EXPORT_SPAN;
-      for (int c = 0; c < 3; c++) {
-        const size_t at = (size_t)y * W + x0;
-        const float *restrict flt = filtered->plane[c] + at;
-        float *restrict o = buf[c];
-        if (albedo) {
-          const float *restrict alb = albedo->plane[c] + at;
-          for (size_t x = 0; x < n; x++) o[x] = flt[x] * albedo_clamped(alb[x]);
-        } else {
-          memcpy(o, flt, n * sizeof(float));
-        }
-        if (add_zero) {
-          /* + 0 as the row holds (a -0 becomes +0, as with the load) */
-          for (size_t x = 0; x < n; x++) o[x] = o[x] + 0.0f;
-        } else if (add) {
-          const float *restrict a = add->plane[c] + at;
-          for (size_t x = 0; x < n; x++) o[x] = o[x] + a[x];
-        }
-      }
-      hush__view_export_span(in, 3, view, (uint32_t)y, (uint32_t)x0, (uint32_t)n);
-    }
+    const size_t at = (size_t)y * W;
+    const float *const flt[3] = {filtered->plane[0] + at, filtered->plane[1] + at,
+                                 filtered->plane[2] + at};
+    const float *const alb[3] = {albedo ? albedo->plane[0] + at : NULL,
+                                 albedo ? albedo->plane[1] + at : NULL,
+                                 albedo ? albedo->plane[2] + at : NULL};
+    const float *const a[3] = {add ? add->plane[0] + at : NULL, add ? add->plane[1] + at : NULL,
+                               add ? add->plane[2] + at : NULL};
+    hush__export_remodulated_span(flt, albedo ? alb : NULL, add ? a : NULL,
+                                  add_rows && add_rows[y] == 0.0f, view, (uint32_t)y, 0,
+                                  (uint32_t)W);
   }
 }

@@ -52,11 +52,13 @@ void hush__export_remodulated(const hush_planar *filtered, const hush_planar *al
                               const hush_planar *add, const float *add_rows,
                               const hush_image_view *view, int threads);
 
-/* hush__export_remodulated's work for pixels x0..x0+n-1 of row y, without
- * an addition: filtered[c] and albedo[c] (albedo NULL: none) point at pixel
- * x0 of their rows; the same values, for a caller that exports rows as it
- * finishes them. */
+/* hush__export_remodulated's work for pixels x0..x0+n-1 of row y:
+ * filtered[c], albedo[c] and add[c] (albedo, add NULL: none) point at
+ * pixel x0 of their rows; add_zero: add's row is all +0 (not read, +0
+ * added). The same values, for a caller that exports rows as it finishes
+ * them. */
 void hush__export_remodulated_span(const float *const filtered[3], const float *const albedo[3],
+                                   const float *const add[3], int add_zero,
                                    const hush_image_view *view, uint32_t y, uint32_t x0,
                                    uint32_t n);
 

@@ -279,12 +279,15 @@ typedef struct frame_ctx {
    * instead of into the component's result */
   const hush_image_view *out_view;
   const hush_planar *out_albedo;
+  int out_emission; /* with out_view: the emission accumulated and added as the rows go out */
 } frame_ctx;
 
 /* Where the last level's finished rows go (svgf_level_out.span_done). */
 typedef struct row_export {
   const svgf_level_out *level; /* where the rows are: a ring of SVGF_WAVEFRONT_RING rows */
   const hush_planar *albedo;
+  const hush_planar *add;    /* the accumulated emission, added after the remodulation */
+  const float *add_rows;     /* its rows' flags (hush__emission_rows_of), or NULL */
   const hush_image_view *view;
 } row_export;
 
@@ -297,8 +300,12 @@ static void export_span(void *ctx, int y, int xa, int xb) {
   const float *const alb[3] = {e->albedo ? e->albedo->plane[0] + at : NULL,
                                e->albedo ? e->albedo->plane[1] + at : NULL,
                                e->albedo ? e->albedo->plane[2] + at : NULL};
-  hush__export_remodulated_span(in, e->albedo ? alb : NULL, e->view, (uint32_t)y, (uint32_t)xa,
-                                (uint32_t)(xb - xa));
+  const float *const add[3] = {e->add ? e->add->plane[0] + at : NULL,
+                               e->add ? e->add->plane[1] + at : NULL,
+                               e->add ? e->add->plane[2] + at : NULL};
+  hush__export_remodulated_span(in, e->albedo ? alb : NULL, e->add ? add : NULL,
+                                e->add_rows && e->add_rows[y] == 0.0f, e->view, (uint32_t)y,
+                                (uint32_t)xa, (uint32_t)(xb - xa));
 }
 
 /* Accumulation, variance and a-trous of one component: c->result. */
@@ -337,6 +344,14 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
       v[i] = d > 0.0f ? d : 0.0f;
     }
   }
+  /* the emission's history, when its rows go out with the last level's:
+   * its blend needs the ages just made, nothing the a-trous writes */
+  const hush_planar *emission = NULL;
+  if (fc->out_emission)
+    emission = hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
+                                               hush__accum_age(&c->acc)->plane[0],
+                                               fc->ap.alpha_min, &st->emission,
+                                               fc->holes ? st->spp.plane[0] : NULL, threads);
   hush__filter_timing_stage(f, "accumulate");
 
   /* the history behind each pixel's moments, in samples (frames at 1 spp) */
@@ -410,6 +425,8 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
     const size_t ring = (size_t)SVGF_WAVEFRONT_RING * (size_t)W;
     rx.level = &last;
     rx.albedo = fc->out_albedo;
+    rx.add = emission;
+    rx.add_rows = emission ? hush__emission_rows_of(&st->eh) : NULL;
     rx.view = fc->out_view;
     last.plane[SVGF_R] = st->line;
     last.plane[SVGF_G] = st->line + ring;
@@ -643,17 +660,21 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   fc.ad = ad;
   /* the output written as the last level finishes its rows (one pass over
    * the frame less), when nothing comes after the a-trous but the
-   * remodulation: no TAA, emission or second component, a last level
-   * whose rows nothing reads again (with holes and the feedback, a single
-   * level is copied into the history afterwards), and the wavefront, whose
-   * threads share a ring of rows (SVGF_WAVEFRONT_RING) */
+   * remodulation and the emission's addition: no TAA or second component,
+   * a last level whose rows nothing reads again (with holes and the
+   * feedback, a single level is copied into the history afterwards), and
+   * the wavefront, whose threads share a ring of rows
+   * (SVGF_WAVEFRONT_RING). The emission's history is then accumulated
+   * before the a-trous (filter_component). */
   const int feedback_alone =
       hush__param_i(f, P_FEEDBACK_FIRST_LEVEL) && holes && iterations == 1;
   fc.out_view = NULL;
   fc.out_albedo = demod ? &st->albedo : NULL;
-  if (!with_taa && !emis && !split && iterations > 0 && !feedback_alone &&
+  fc.out_emission = 0;
+  if (!with_taa && !split && iterations > 0 && !feedback_alone &&
       svgf_atrous_levels_wavefront(W, H)) {
     fc.out_view = hush__filter_view(f, I_OUTPUT);
+    fc.out_emission = emis;
   }
   filter_component(&fc, &st->comp[0], 1);
   if (split) {
@@ -668,8 +689,8 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   /* ---- export */
   const hush_planar *result = &st->comp[0].result;
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
-  const hush_planar *e = NULL; /* the emission to add back */
-  if (emis)
+  const hush_planar *e = NULL; /* the emission to add back (done with out_view) */
+  if (emis && !fc.out_emission)
     e = hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
                                         hush__accum_age(&st->comp[0].acc)->plane[0],
                                         fc.ap.alpha_min, &st->emission,
