@@ -1450,27 +1450,34 @@ static void test_emission(hush_device dev, const char *cls) {
 }
 
 /* On a frame large enough for the a-trous wavefront, svgf writes the
- * output row by row as its last level finishes them (svgf.c, span_done);
- * with an emission layer of zeros bound it exports the whole frame after
- * the a-trous instead. Both must give the same bits (x - 0 and x + 0 are
- * x for the non-negative radiance here), frame after frame, with textured
- * albedo and noise, so a row or column put in the wrong place, or a part
- * not exported, shows. */
+ * output row by row as its last level finishes them (svgf.c, span_done),
+ * with the accumulated emission added there; with the light split into
+ * 'direct' (the colour) and 'indirect' (zeros, which filter to exactly 0)
+ * it filters the same signal and exports the whole frame after the a-trous
+ * instead. Both must give the same bits (x + 0 is x for the non-negative
+ * radiance here), frame after frame, with textured albedo, noise and a
+ * lamp in some rows (others without emission: their rows' flags), so a
+ * row or column put in the wrong place, a part not exported or an
+ * emission not added shows. */
 static void test_row_export(hush_device dev) {
   enum { BW = 640, BH = 360, BN = BW * BH };
   REQUIRE(svgf_atrous_levels_wavefront(BW, BH));
   float *color = malloc(sizeof(float) * BN * 3), *albedo = malloc(sizeof(float) * BN * 3);
   float *normal = malloc(sizeof(float) * BN * 3), *depth = malloc(sizeof(float) * BN);
-  float *zero = calloc((size_t)BN * 3, sizeof(float));
+  float *zero = calloc((size_t)BN * 3, sizeof(float)), *lamp = malloc(sizeof(float) * BN * 3);
   float *out[2] = {malloc(sizeof(float) * BN * 3), malloc(sizeof(float) * BN * 3)};
-  REQUIRE(color && albedo && normal && depth && zero && out[0] && out[1]);
+  REQUIRE(color && albedo && normal && depth && zero && lamp && out[0] && out[1]);
   for (int i = 0; i < BN; i++) {
     const int x = i % BW, y = i / BW;
     depth[i] = x < BW / 3 ? 2.0f : 3.0f + 0.002f * (float)y;
     normal[3 * i + 0] = 0.0f;
     normal[3 * i + 1] = y < BH / 2 ? 0.0f : 0.6f;
     normal[3 * i + 2] = y < BH / 2 ? 1.0f : 0.8f;
-    for (int c = 0; c < 3; c++) albedo[3 * i + c] = 0.1f + 0.8f * (float)((x * 7 + y * 3 + c) % 11) / 11.0f;
+    const int lit = x >= 200 && x < 260 && y >= 100 && y < 140;
+    for (int c = 0; c < 3; c++) {
+      albedo[3 * i + c] = 0.1f + 0.8f * (float)((x * 7 + y * 3 + c) % 11) / 11.0f;
+      lamp[3 * i + c] = lit ? 3.0f + (float)c : 0.0f;
+    }
   }
   hush_filter f[2];
   for (int k = 0; k < 2; k++) {
@@ -1481,10 +1488,11 @@ static void test_row_export(hush_device dev) {
     v.width = BW;
     v.height = BH;
     const struct { const char *name; void *data; hush_format format; } img[] = {
-        {"color", color, HUSH_FORMAT_FLOAT3},   {"depth", depth, HUSH_FORMAT_FLOAT},
-        {"normal", normal, HUSH_FORMAT_FLOAT3}, {"albedo", albedo, HUSH_FORMAT_FLOAT3},
-        {"output", out[k], HUSH_FORMAT_FLOAT3}, {"emission", zero, HUSH_FORMAT_FLOAT3}};
-    for (int j = 0; j < (k ? 6 : 5); j++) {
+        {"depth", depth, HUSH_FORMAT_FLOAT},    {"normal", normal, HUSH_FORMAT_FLOAT3},
+        {"albedo", albedo, HUSH_FORMAT_FLOAT3}, {"output", out[k], HUSH_FORMAT_FLOAT3},
+        {"emission", lamp, HUSH_FORMAT_FLOAT3}, {"color", color, HUSH_FORMAT_FLOAT3},
+        {"direct", color, HUSH_FORMAT_FLOAT3},  {"indirect", zero, HUSH_FORMAT_FLOAT3}};
+    for (int j = 0; j < (k ? 8 : 6); j++) {
       v.data = img[j].data;
       v.format = img[j].format;
       REQUIRE(hush_filter_set_image(f[k], img[j].name, &v) == HUSH_OK);
@@ -1492,7 +1500,7 @@ static void test_row_export(hush_device dev) {
     REQUIRE(hush_filter_commit(f[k]) == HUSH_OK);
   }
   for (int frame = 0; frame < 3; frame++) {
-    for (int i = 0; i < BN * 3; i++) color[i] = albedo[i] * (0.2f + 1.6f * rnd());
+    for (int i = 0; i < BN * 3; i++) color[i] = lamp[i] + albedo[i] * (0.2f + 1.6f * rnd());
     hush_frame_info fi;
     hush_frame_info_init(&fi);
     fi.frame_index = (uint64_t)frame;
@@ -1508,6 +1516,10 @@ static void test_row_export(hush_device dev) {
               "frame %d: the row-by-row export differs from the export pass", frame);
   }
   CHECK(all_finite(out[0], BN * 3));
+  /* the lamp's own pixels come out as its emission (plus a little wall) */
+  const size_t at = 3 * ((size_t)120 * BW + 230);
+  CHECK_MSG(out[0][at] >= 3.0f && out[0][at + 2] >= 5.0f, "lamp pixel %g %g", (double)out[0][at],
+            (double)out[0][at + 2]);
   for (int k = 0; k < 2; k++) {
     hush_filter_release(f[k]);
     free(out[k]);
@@ -1517,6 +1529,7 @@ static void test_row_export(hush_device dev) {
   free(normal);
   free(depth);
   free(zero);
+  free(lamp);
 }
 
 int main(void) {
