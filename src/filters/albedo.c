@@ -108,14 +108,9 @@ void hush__export_remodulated(const hush_planar *filtered, const hush_planar *al
 #pragma omp parallel for schedule(static) num_threads(threads)
   for (int y = 0; y < H; y++) {
     const size_t at = (size_t)y * W;
-    const float *const flt[3] = {filtered->plane[0] + at, filtered->plane[1] + at,
-                                 filtered->plane[2] + at};
-    const float *const alb[3] = {albedo ? albedo->plane[0] + at : NULL,
-                                 albedo ? albedo->plane[1] + at : NULL,
-                                 albedo ? albedo->plane[2] + at : NULL};
-    const float *const a[3] = {add ? add->plane[0] + at : NULL, add ? add->plane[1] + at : NULL,
-                               add ? add->plane[2] + at : NULL};
-    hush__export_remodulated_span(flt, albedo ? alb : NULL, add ? a : NULL,
+    const float *flt[3], *alb[3], *a[3];
+    hush__export_remodulated_span(hush__planar_at3(filtered, at, flt),
+                                  hush__planar_at3(albedo, at, alb), hush__planar_at3(add, at, a),
                                   add_rows && add_rows[y] == 0.0f, view, (uint32_t)y, 0,
                                   (uint32_t)W);
   }

@@ -52,6 +52,15 @@ void hush__export_remodulated(const hush_planar *filtered, const hush_planar *al
                               const hush_planar *add, const float *add_rows,
                               const hush_image_view *view, int threads);
 
+/* r[c] = p's plane c at element `at` (3 channels); returns r, or NULL when p
+ * is NULL: the arguments of hush__export_remodulated_span. */
+static inline const float *const *hush__planar_at3(const hush_planar *p, size_t at,
+                                                   const float *r[3]) {
+  if (!p) return NULL;
+  for (int c = 0; c < 3; c++) r[c] = p->plane[c] + at;
+  return r;
+}
+
 /* hush__export_remodulated's work for pixels x0..x0+n-1 of row y:
  * filtered[c], albedo[c] and add[c] (albedo, add NULL: none) point at
  * pixel x0 of their rows; add_zero: add's row is all +0 (not read, +0

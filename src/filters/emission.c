@@ -4,6 +4,7 @@
  */
 #include "filters/emission.h"
 
+#include "core/vecmath.h"
 #include "filters/albedo.h"
 
 #include "temporal/accumulation.h"
@@ -12,32 +13,28 @@
 #include <string.h>
 
 /* One row of one channel: col = max(col - em, 0), divided by
- * max(alb, eps) unless alb is NULL; returns the OR of em's bits. */
-static uint32_t subtract_row(float *restrict col, const float *restrict em,
-                             const float *restrict alb, size_t n) {
+ * max(alb, eps) with DEMOD; returns the OR of em's bits. */
+static HUSH_ALWAYS_INLINE uint32_t subtract_row_of(float *restrict col, const float *restrict em,
+                                                   const float *restrict alb, size_t n,
+                                                   const int DEMOD) {
   uint32_t any = 0;
-  /* the reflected part is never negative; rounding (or a colour that is not
-   * the renderer's mean) must not make it so */
-  if (alb) {
+  for (size_t x = 0; x < n; x++) {
+    /* the reflected part is never negative; rounding (or a colour that is
+     * not the renderer's mean) must not make it so */
+    const float r = col[x] - em[x];
+    const float v = r > 0.0f ? r : 0.0f;
     /* hush__demodulate's division, so the same bits as its pass after */
-    for (size_t x = 0; x < n; x++) {
-      const float r = col[x] - em[x];
-      const float a = alb[x] > HUSH_ALBEDO_EPS ? alb[x] : HUSH_ALBEDO_EPS;
-      col[x] = (r > 0.0f ? r : 0.0f) / a;
-      uint32_t bits;
-      memcpy(&bits, &em[x], sizeof bits);
-      any |= bits;
-    }
-  } else {
-    for (size_t x = 0; x < n; x++) {
-      const float r = col[x] - em[x];
-      col[x] = r > 0.0f ? r : 0.0f;
-      uint32_t bits;
-      memcpy(&bits, &em[x], sizeof bits);
-      any |= bits;
-    }
+    col[x] = DEMOD ? v / (alb[x] > HUSH_ALBEDO_EPS ? alb[x] : HUSH_ALBEDO_EPS) : v;
+    uint32_t bits;
+    memcpy(&bits, &em[x], sizeof bits);
+    any |= bits;
   }
   return any;
+}
+
+/* subtract_row_of with the division when alb is not NULL. */
+static uint32_t subtract_row(float *col, const float *em, const float *alb, size_t n) {
+  return alb ? subtract_row_of(col, em, alb, n, 1) : subtract_row_of(col, em, NULL, n, 0);
 }
 
 void hush__emission_subtract_demodulate(hush_planar *color, const hush_planar *emission,

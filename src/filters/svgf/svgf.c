@@ -297,15 +297,20 @@ static void export_span(void *ctx, int y, int xa, int xb) {
   const size_t r = svgf_level_out_row(e->level, y) + (size_t)xa;
   const float *const in[3] = {e->level->plane[SVGF_R] + r, e->level->plane[SVGF_G] + r,
                               e->level->plane[SVGF_B] + r};
-  const float *const alb[3] = {e->albedo ? e->albedo->plane[0] + at : NULL,
-                               e->albedo ? e->albedo->plane[1] + at : NULL,
-                               e->albedo ? e->albedo->plane[2] + at : NULL};
-  const float *const add[3] = {e->add ? e->add->plane[0] + at : NULL,
-                               e->add ? e->add->plane[1] + at : NULL,
-                               e->add ? e->add->plane[2] + at : NULL};
-  hush__export_remodulated_span(in, e->albedo ? alb : NULL, e->add ? add : NULL,
+  const float *alb[3], *add[3];
+  hush__export_remodulated_span(in, hush__planar_at3(e->albedo, at, alb),
+                                hush__planar_at3(e->add, at, add),
                                 e->add_rows && e->add_rows[y] == 0.0f, e->view, (uint32_t)y,
                                 (uint32_t)xa, (uint32_t)(xb - xa));
+}
+
+/* The emission's history blended with this frame's (svgf_state.eh), with
+ * the first component's ages after its blend; the planes to add back. */
+static const hush_planar *emission_history(svgf_state *st, float alpha_min, int holes,
+                                           int threads) {
+  return hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
+                                         hush__accum_age(&st->comp[0].acc)->plane[0], alpha_min,
+                                         &st->emission, holes ? st->spp.plane[0] : NULL, threads);
 }
 
 /* Accumulation, variance and a-trous of one component: c->result. */
@@ -347,11 +352,7 @@ static void filter_component(const frame_ctx *fc, svgf_component *c, int export_
   /* the emission's history, when its rows go out with the last level's:
    * its blend needs the ages just made, nothing the a-trous writes */
   const hush_planar *emission = NULL;
-  if (fc->out_emission)
-    emission = hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
-                                               hush__accum_age(&c->acc)->plane[0],
-                                               fc->ap.alpha_min, &st->emission,
-                                               fc->holes ? st->spp.plane[0] : NULL, threads);
+  if (fc->out_emission) emission = emission_history(st, fc->ap.alpha_min, fc->holes, threads);
   hush__filter_timing_stage(f, "accumulate");
 
   /* the history behind each pixel's moments, in samples (frames at 1 spp) */
@@ -690,11 +691,7 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   const hush_planar *result = &st->comp[0].result;
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
   const hush_planar *e = NULL; /* the emission to add back (done with out_view) */
-  if (emis && !fc.out_emission)
-    e = hush__emission_accumulate_holes(&st->eh, &st->rp.plan,
-                                        hush__accum_age(&st->comp[0].acc)->plane[0],
-                                        fc.ap.alpha_min, &st->emission,
-                                        holes ? st->spp.plane[0] : NULL, threads);
+  if (emis && !fc.out_emission) e = emission_history(st, fc.ap.alpha_min, holes, threads);
   if (fc.out_view) {
     if (age_view) hush__view_export(hush__accum_age(&st->comp[0].acc), age_view, threads);
     hush__filter_timing_stage(f, "export");
