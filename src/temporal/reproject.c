@@ -738,12 +738,11 @@ static void span_footprints(int W, int H, const float *restrict spx, const float
 }
 
 /* How a chunk's taps are read: gathered one by one, as vectors (the
- * footprints follow each other: base + k), as vectors twice (the pixels
- * split between two such bases, as where the motion carries the footprints
- * a column or a row further; test_chunk), from a window (reproject.h), or
- * as two vectors per tap picked per pixel (the same split; x86-64-v3
- * builds, reproject.h's diagonals). */
-enum { TAPS_GATHER, TAPS_CONTIGUOUS, TAPS_TWO, TAPS_WINDOW, TAPS_DIAGONALS };
+ * footprints follow each other: base + k), from a window (reproject.h), or
+ * as two vectors per tap picked per pixel (the pixels split between two
+ * such bases, as where the motion carries the footprints a column or a row
+ * further: reproject.h's diagonals). */
+enum { TAPS_GATHER, TAPS_CONTIGUOUS, TAPS_WINDOW, TAPS_DIAGONALS };
 
 /* The planes a window of the tap tests reads: depth, normal, id. */
 #define WINDOW_PLANES 5
@@ -822,9 +821,8 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
 }
 
 /* The tap tests of pixels k0..k1-1 of a span (one chunk), the taps read as
- * mode says: TAPS_CONTIGUOUS from base[0] + k, TAPS_TWO from base[0] + k
- * and base[1] + k (every pixel tested with both, each keeping the results
- * of its own), TAPS_WINDOW from tb. */
+ * mode says: TAPS_CONTIGUOUS from base[0] + k, TAPS_DIAGONALS from base[0]
+ * + k or base[1] + k (each pixel's own), TAPS_WINDOW from tb. */
 static HUSH_ALWAYS_INLINE void test_chunk(const build_ctx *c, size_t row, int k0, int k1,
                                           const float *restrict sze, span_taps *restrict o,
                                           int mode, const int32_t base[2],
@@ -839,20 +837,7 @@ static HUSH_ALWAYS_INLINE void test_chunk(const build_ctx *c, size_t row, int k0
   else if (mode == TAPS_DIAGONALS)
     test_pixels(c, row, k0, CHUNK, sze, o, base[0], base[1], TAPS_DIAGONALS, NULL, use_id,
                 grad_test);
-  else if (mode == TAPS_TWO) {
-    int32_t mask[CHUNK], kind[CHUNK], retry[CHUNK];
-    test_pixels(c, row, k0, CHUNK, sze, o, base[0], 0, TAPS_CONTIGUOUS, NULL, use_id, grad_test);
-    memcpy(mask, o->mask + k0, sizeof mask);
-    memcpy(kind, o->kind + k0, sizeof kind);
-    memcpy(retry, o->retry + k0, sizeof retry);
-    test_pixels(c, row, k0, CHUNK, sze, o, base[1], 0, TAPS_CONTIGUOUS, NULL, use_id, grad_test);
-    for (int k = 0; k < CHUNK; k++) {
-      const int first = o->origin[k0 + k] != base[1] + (k0 + k);
-      o->mask[k0 + k] = first ? mask[k] : o->mask[k0 + k];
-      o->kind[k0 + k] = first ? kind[k] : o->kind[k0 + k];
-      o->retry[k0 + k] = first ? retry[k] : o->retry[k0 + k];
-    }
-  } else if (mode == TAPS_WINDOW)
+  else if (mode == TAPS_WINDOW)
     test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, TAPS_WINDOW, tb, use_id, grad_test);
   else
     test_pixels(c, row, k0, CHUNK, sze, o, 0, 0, TAPS_GATHER, NULL, use_id, grad_test);
@@ -880,10 +865,14 @@ static int window_read(const int32_t *origin, const uint8_t *use, int32_t W, siz
  * How the full chunk of pixels k0.. reads its taps, and from where (base,
  * test_chunk; base[0] is origin[k0] - k0 on entry). AVX-512 builds. The
  * footprints inside the image (plan_pixel redoes the
- * others) at base + k for one base: TAPS_CONTIGUOUS; for two: TAPS_TWO,
- * when every pixel's taps at either base lie inside the planes (two vector
- * passes cost a chunk ~15 % less than a window's reads and tests on Zen
- * 4); else TAPS_WINDOW when they form a window, read into tb
+ * others) at base + k for one base: TAPS_CONTIGUOUS; for two:
+ * TAPS_DIAGONALS, when every pixel's taps at either base lie inside the
+ * planes (each tap of each plane loaded at both bases and picked per
+ * pixel: one test pass where two vector passes, each pixel keeping its
+ * own, had cost a chunk ~15 % less than a window's reads and tests on Zen
+ * 4; the reprojection on the bench frames 3.66 -> 3.57 ms on 2 threads,
+ * 6.32 -> 6.12 on one, Zen 5, the same bits); else TAPS_WINDOW when they
+ * form a window, read into tb
  * (depth, normal, and the ids with use_id); else TAPS_GATHER. Out of line:
  * its code in test_span's loop would cost the common contiguous chunks
  * more than the call costs the others.
@@ -905,7 +894,7 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
   int in_planes = bases > 0 && bases < 3;
   for (int t = 0; t < bases && t < 2; t++)
     in_planes &= (int64_t)base[t] + k0 >= 0 && (int64_t)base[t] < last;
-  if (in_planes) return bases == 1 ? TAPS_CONTIGUOUS : TAPS_TWO;
+  if (in_planes) return bases == 1 ? TAPS_CONTIGUOUS : TAPS_DIAGONALS;
   _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
   uint8_t use[CHUNK];
   for (int k = 0; k < CHUNK; k++) use[k] = o->inside[k0 + k] != 0;

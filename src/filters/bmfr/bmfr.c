@@ -520,6 +520,28 @@ static void fit_gathered(const fit_frame *fr, block_cols *b) {
   }
 }
 
+/*
+ * Asks for the lines of the fitted planes that block g's write-back will
+ * store into, before the block is fitted: its rows of 32 floats at a 5 KiB
+ * stride (1280 wide) cover three lines each, which the hardware
+ * prefetchers do not foresee, and a store to an absent line waits for it
+ * to be read. Fit stage 7.9 -> 7.65 ms (1280x720, 2 threads, Zen 5,
+ * alternated runs); the same bits.
+ */
+static void prefetch_write_back(const fit_frame *fr, const block_geom *g) {
+  const int W = fr->grid.width;
+  for (int r = g->r0; r < g->r1; r++) {
+    const size_t first = (size_t)(g->y0 + r) * W + (size_t)(g->x0 + g->c0);
+    const size_t last = first + (size_t)(g->c1 - g->c0) - 1;
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      /* each line from the first pixel's to the last pixel's */
+      const uintptr_t a = (uintptr_t)(fr->out[c] + first) & ~(uintptr_t)63;
+      const uintptr_t e = (uintptr_t)(fr->out[c] + last);
+      for (uintptr_t p = a; p <= e; p += 64) __builtin_prefetch((const void *)p, 1, 3);
+    }
+  }
+}
+
 /* Blocks per strip: side by side in a block row, gathered and written
  * back row by row across the strip (gather_strip). */
 #define STRIP_MAX 4
@@ -543,7 +565,10 @@ static void fit_strip(const fit_frame *fr, int bx0, int count, int by, float *sc
     gather_strip(fr->z[c], W, g, count, B, scratch, span, zb_col + (size_t)c * ld);
   for (int k = 0; k < BMFR_BASE_COUNT; k++)
     if (fr->base[k]) gather_strip(fr->base[k], W, g, count, B, scratch, span, base_col + (size_t)k * ld);
-  for (int k = 0; k < count; k++) fit_gathered(fr, &b[k]);
+  for (int k = 0; k < count; k++) {
+    prefetch_write_back(fr, &g[k]);
+    fit_gathered(fr, &b[k]);
+  }
   for (int r = g[0].r0; r < g[0].r1; r++) {
     const size_t row = (size_t)(g[0].y0 + r) * W;
     const int i0 = r * B;

@@ -61,10 +61,14 @@ static float dot_from(const float *restrict a, const float *restrict b, int k, s
  * products dots[j] = sum_{i >= k} y[i] a_j[i] after the update. y == NULL:
  * a[0] is the next pivot column itself (y = a[0], updated first in each
  * vector). Each vector of x and y is loaded once for the whole group and
- * each column streamed once, with its running sum in a register. The
+ * each column streamed once, with its running sums in registers. The
  * vector holding row k is done with a 0/1 weight per row (rows above k:
  * a - (0 c) x = a exactly, and no term in the sum), so no row is left to
- * a scalar loop.
+ * a scalar loop. Two running sums per column, for the even and the odd
+ * vectors of rows: with one, each vector waited on the previous one's FMA
+ * (4 cycles), where Zen 5 issues the group's four FMAs in two (the
+ * stand-alone fit 9.2k -> 8.1k TSC ticks per 32x32 block without
+ * refinement; docs/bmfr.md, tenth round).
  */
 static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const int g,
                                       const float *restrict x, const float *restrict y, int k,
@@ -83,7 +87,24 @@ static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const
       s[j] = keep * yv * t;
     }
   }
-  for (i += VF_LANES; i < ld; i += VF_LANES) {
+  vf odd[4] = {{0}, {0}, {0}, {0}};
+  for (i += VF_LANES; i + VF_LANES < ld; i += 2 * VF_LANES) {
+    const vf xv = vf_load(x + i), xw = vf_load(x + i + VF_LANES);
+    vf yv = y ? vf_load(y + i) : (vf){0}, yw = y ? vf_load(y + i + VF_LANES) : (vf){0};
+    for (int j = 0; j < g; j++) {
+      const vf t = vf_fnma(cv[j], xv, vf_load(a[j] + i));
+      const vf u = vf_fnma(cv[j], xw, vf_load(a[j] + i + VF_LANES));
+      vf_store(a[j] + i, t);
+      vf_store(a[j] + i + VF_LANES, u);
+      if (!y && j == 0) {
+        yv = t;
+        yw = u;
+      }
+      s[j] = vf_fma(yv, t, s[j]);
+      odd[j] = vf_fma(yw, u, odd[j]);
+    }
+  }
+  for (; i < ld; i += VF_LANES) {
     const vf xv = vf_load(x + i);
     vf yv = y ? vf_load(y + i) : (vf){0};
     for (int j = 0; j < g; j++) {
@@ -93,7 +114,7 @@ static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const
       s[j] = vf_fma(yv, t, s[j]);
     }
   }
-  for (int j = 0; j < g; j++) dots[j] = vf_sum(s[j]);
+  for (int j = 0; j < g; j++) dots[j] = vf_sum(s[j] + odd[j]);
 }
 
 /* Columns per group of householder_r's update passes (reflect_group takes
@@ -132,20 +153,35 @@ static HUSH_INLINE void dot3_group(const float *const t[3], const int g,
     for (int c = 0; c < BMFR_CHANNELS; c++) d[j][c] = vf_sum(s[j][c]);
 }
 
+/* Vector i of build_column's column: a = t + mask (u - mean), stored and
+ * returned. */
+static HUSH_INLINE vf column_vector(float *restrict a, const float *restrict t,
+                                   const float *restrict u, vf mv, vf mk, size_t i) {
+  const vf v = vf_fma(mk, vf_load(u + i) - mv, t ? vf_load(t + i) : (vf){0});
+  vf_store(a + i, v);
+  return v;
+}
+
 /* One column of the augmented matrix: a = t + mask (u - mean) (t NULL: 0),
  * returning sum_{i >= 1} mask[i] a[i], the first reflection's dot product
- * with column 0 (the mask), taken while the column is written. */
+ * with column 0 (the mask), taken while the column is written; in two
+ * running sums (even and odd vectors), as reflect_group's. */
 static float build_column(float *restrict a, const float *restrict t, const float *restrict u,
                           float mean, const float *restrict mask, size_t ld) {
   const vf mv = vf_set1(mean);
-  vf s = {0};
-  for (size_t i = 0; i < ld; i += VF_LANES) {
-    const vf mk = vf_load(mask + i);
-    const vf v = vf_fma(mk, vf_load(u + i) - mv, t ? vf_load(t + i) : (vf){0});
-    vf_store(a + i, v);
-    s = vf_fma(i ? mk : vf_from(0, 1) * mk, v, s);
+  const vf mk0 = vf_load(mask);
+  vf s = vf_from(0, 1) * mk0 * column_vector(a, t, u, mv, mk0, 0), odd = {0};
+  size_t i = VF_LANES;
+  for (; i + VF_LANES < ld; i += 2 * VF_LANES) {
+    const vf mk = vf_load(mask + i), mk1 = vf_load(mask + i + VF_LANES);
+    s = vf_fma(mk, column_vector(a, t, u, mv, mk, i), s);
+    odd = vf_fma(mk1, column_vector(a, t, u, mv, mk1, i + VF_LANES), odd);
   }
-  return vf_sum(s);
+  for (; i < ld; i += VF_LANES) {
+    const vf mk = vf_load(mask + i);
+    s = vf_fma(mk, column_vector(a, t, u, mv, mk, i), s);
+  }
+  return vf_sum(s + odd);
 }
 
 /*
