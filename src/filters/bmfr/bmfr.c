@@ -45,6 +45,7 @@
 #include "temporal/reproject.h"
 #include "temporal/taa.h"
 
+#include <float.h>
 #include <omp.h>
 #include <stdlib.h>
 #include <string.h>
@@ -398,13 +399,18 @@ static void gather_strip(const float *plane, int W, const block_geom *g, int cou
  * lum: B^2 floats, pad: (B + 2)^2 floats of scratch.
  */
 static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask, int B,
-                            float ratio, float *restrict lum, float *restrict pad) {
+                            float ratio, int nvalid, float *restrict lum, float *restrict pad) {
   const int n = B * B, P = B + 2;
   const float *restrict r = z[0], *restrict g = z[1], *restrict b = z[2];
-#pragma omp simd
-  for (int i = 0; i < n; i++) lum[i] = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
-  memset(pad, 0, (size_t)P * P * sizeof *pad);
-  int nvalid = 0;
+  /* the luminances with their brightest: a block with none above the
+   * limit (the usual one) leaves after this pass and the sums */
+  float brightest = -FLT_MAX;
+#pragma omp simd reduction(max : brightest)
+  for (int i = 0; i < n; i++) {
+    const float l = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
+    lum[i] = l;
+    brightest = l > brightest ? l : brightest;
+  }
   for (int pass = 0; pass < 2; pass++) {
     /* lane sums in a fixed order: vectorised and deterministic */
     enum { LANES = 16 };
@@ -426,38 +432,30 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
     }
     if (!(count > 0.0f)) return 0;
     const float limit = ratio * total / count;
+    /* nothing above the limit: the mask stays, and so would a second
+     * pass's mean and limit (the luminances are finite) */
+    if (!(brightest > limit)) return nvalid;
+    if (pass == 0) memset(pad, 0, (size_t)P * P * sizeof *pad);
     /* bright flags on a grid with a zero border, then the neighbour count */
-    int bright = 0;
     for (int y = 0; y < B; y++) {
       float *restrict row = pad + (size_t)(y + 1) * P + 1;
       const float *restrict l = lum + (size_t)y * B;
-#pragma omp simd reduction(+ : bright)
-      for (int x = 0; x < B; x++) {
-        row[x] = l[x] > limit ? 1.0f : 0.0f;
-        bright += l[x] > limit;
-      }
+#pragma omp simd
+      for (int x = 0; x < B; x++) row[x] = l[x] > limit ? 1.0f : 0.0f;
     }
-    if (bright == 0) {
-      /* nothing above the limit (the usual block): the mask stays, and so
-       * would a second pass's mean and limit */
-      if (pass == 0) {
-        nvalid = 0;
-#pragma omp simd reduction(+ : nvalid)
-        for (int k = 0; k < n; k++) nvalid += mask[k] > 0.0f;
-      }
-      return nvalid;
-    }
+    brightest = -FLT_MAX;
     for (int y = 0; y < B; y++) {
       const float *restrict up = pad + (size_t)y * P + 1, *restrict mid = up + P,
                             *restrict dn = mid + P;
       float *restrict m = mask + (size_t)y * B, *restrict l = lum + (size_t)y * B;
-#pragma omp simd
+#pragma omp simd reduction(max : brightest)
       for (int x = 0; x < B; x++) {
         const float around = up[x - 1] + up[x] + up[x + 1] + mid[x - 1] + mid[x + 1] +
                              dn[x - 1] + dn[x] + dn[x + 1];
         const float keep = mid[x] > 0.0f && around >= 3.0f ? 0.0f : m[x];
         m[x] = keep;
         l[x] *= keep;
+        brightest = l[x] > brightest ? l[x] : brightest;
       }
     }
     nvalid = 0;
@@ -501,7 +499,7 @@ static void fit_gathered(const fit_frame *fr, block_cols *b) {
     for (size_t i = (size_t)n; i < ld; i++) zc[c][i] = 0.0f; /* the fit reads ld rows */
   }
   if (fr->outlier > 0.0f)
-    nvalid = exclude_outliers(zc, b->mask, B, fr->outlier, b->spare, b->spare + ld);
+    nvalid = exclude_outliers(zc, b->mask, B, fr->outlier, nvalid, b->spare, b->spare + ld);
   if (fr->set->gradients)
     for (int r = 0; r < B; r++)
       for (int c = 0; c < B; c++) {
