@@ -291,6 +291,39 @@ static void streamed_rows(hush_format format, uint32_t W) {
   free(buf);
 }
 
+/* The normals' row flag of hush__view_import_row_normals against
+ * hush__normals_odd on the imported planes: rows of unit normals and zeros
+ * (not odd), then one normal of length 0.9, 1 + 3e-3 in its square, or a
+ * NaN, at each lane of the first vector and at the last pixel (odd), on
+ * the streamed path (a width of whole vectors) and the plain one. */
+static void normal_rows(uint32_t W) {
+  float *buf = malloc(sizeof(float) * W * 3);
+  REQUIRE(buf != NULL);
+  hush_planar a;
+  REQUIRE(hush__planar_init(NULL, &a, 3, W, 1) == HUSH_OK);
+  hush_image_view v = {buf, HUSH_FORMAT_FLOAT3, W, 1, 0, 0, 0};
+  const float odd_values[][3] = {{0.9f, 0.0f, 0.0f}, {0.0f, 0.0f, sqrtf(1.003f)}, {NAN, 0.0f, 1.0f}};
+  int ok = 1;
+  for (int trial = -1; trial < 3 * 17; trial++) {
+    for (uint32_t x = 0; x < W; x++) {
+      const float t = 0.37f * (float)x;
+      const float n[3] = {cosf(t) * 0.6f, sinf(t) * 0.6f, 0.8f};
+      for (int c = 0; c < 3; c++) buf[3 * x + c] = x % 5 == 3 ? 0.0f : n[c];
+    }
+    if (trial >= 0) {
+      const uint32_t x = trial % 17 == 16 ? W - 1 : (uint32_t)(trial % 17);
+      for (int c = 0; c < 3; c++) buf[3 * x + c] = odd_values[trial / 17][c];
+    }
+    int odd = -1;
+    hush__view_import_row_normals(&v, 0, &a, &odd);
+    const int want = hush__normals_odd(a.plane[0], a.plane[1], a.plane[2], W);
+    ok &= odd == want && want == (trial >= 0);
+  }
+  CHECK_MSG(ok, "width %u: the normals' row flag differs from hush__normals_odd", W);
+  hush__planar_free(&a);
+  free(buf);
+}
+
 /* The export of three planes into an interleaved float row, at every
  * start alignment of the output (the streamed path has a head, 64-byte
  * groups and a tail): every pixel of the span lands, nothing around it is
@@ -539,6 +572,8 @@ int main(void) {
   streamed_rows(HUSH_FORMAT_FLOAT, 32);
   streamed_rows(HUSH_FORMAT_FLOAT2, 64);
   streamed_rows(HUSH_FORMAT_FLOAT3, 37);
+  normal_rows(48);
+  normal_rows(37);
   export_spans();
   for (int bad = 0; bad < 2; bad++) {
     demodulated_import(48, bad);

@@ -266,6 +266,17 @@ static void import_row(const hush_image_view *v, size_t ps, size_t rs, uint32_t 
     for (int c = 0; c < nc; c++) memcpy(&out[c][x], row + (size_t)x * ps + 4 * (size_t)c, 4);
 }
 
+int hush__normals_odd(const float *a, const float *b, const float *c, size_t n) {
+  int odd = 0;
+#pragma omp simd reduction(| : odd)
+  for (size_t x = 0; x < n; x++) {
+    const float d = a[x] * a[x] + b[x] * b[x] + c[x] * c[x];
+    const int unit = fabsf(d - 1.0f) <= HUSH_UNIT_TOLERANCE;
+    odd |= (unit ^ 1) & ((a[x] != 0.0f) | (b[x] != 0.0f) | (c[x] != 0.0f));
+  }
+  return odd;
+}
+
 /* Values beyond HUSH_INPUT_MAX (Inf included) in one row of planes: a
  * branch-free count (NaN fails the comparison, so it counts too). */
 static size_t count_nonfinite(float *const *planes, int nc, uint32_t w) {
@@ -284,6 +295,20 @@ static HUSH_IMAGE_INLINE size_t count_nonfinite16(__m512 v) {
   return (size_t)__builtin_popcount((unsigned)(__mmask16)~ok);
 }
 
+/* hush__normals_odd's test of 16 normals (its arithmetic, unfused), as a
+ * mask of the odd ones. */
+static HUSH_IMAGE_INLINE __mmask16 normals_odd16(__m512 a, __m512 b, __m512 c) {
+  const __m512 d = _mm512_add_ps(_mm512_add_ps(_mm512_mul_ps(a, a), _mm512_mul_ps(b, b)),
+                                 _mm512_mul_ps(c, c));
+  const __mmask16 unit = _mm512_cmp_ps_mask(_mm512_abs_ps(_mm512_sub_ps(d, _mm512_set1_ps(1.0f))),
+                                            _mm512_set1_ps(HUSH_UNIT_TOLERANCE), _CMP_LE_OQ);
+  const __m512 z = _mm512_setzero_ps();
+  const __mmask16 nonzero = _mm512_cmp_ps_mask(a, z, _CMP_NEQ_UQ) |
+                            _mm512_cmp_ps_mask(b, z, _CMP_NEQ_UQ) |
+                            _mm512_cmp_ps_mask(c, z, _CMP_NEQ_UQ);
+  return (__mmask16)~unit & nonzero;
+}
+
 /*
  * A row of w floats (w a multiple of 16) of one, two or three interleaved
  * channels into 64-byte aligned planes with streaming stores: the import
@@ -294,7 +319,8 @@ static HUSH_IMAGE_INLINE size_t count_nonfinite16(__m512 v) {
  * 1280x720 frame on 2 threads (docs/svgf-speed.md). Returns the count of
  * NaN/Inf values, taken from the registers.
  */
-static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *const *out) {
+static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *const *out,
+                         int *odd) {
   size_t bad = 0;
   if (nc == 1) {
     for (uint32_t x = 0; x < w; x += 16) {
@@ -326,6 +352,7 @@ static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *co
   const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
   const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
   const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+  __mmask16 odd_lanes = 0;
   for (uint32_t x = 0; x < w; x += 16) {
     const float *p = rf + 3 * (size_t)x;
     const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
@@ -333,10 +360,12 @@ static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *co
     const __m512 r1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
     const __m512 r2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
     bad += count_nonfinite16(r0) + count_nonfinite16(r1) + count_nonfinite16(r2);
+    if (odd) odd_lanes |= normals_odd16(r0, r1, r2);
     _mm512_stream_ps(out[0] + x, r0);
     _mm512_stream_ps(out[1] + x, r1);
     _mm512_stream_ps(out[2] + x, r2);
   }
+  if (odd) *odd = odd_lanes != 0;
   return bad;
 }
 
@@ -505,7 +534,7 @@ static int streamable8(const hush_image_view *v, int nc, const char *row, float 
 #endif
 
 static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst,
-                              int stream) {
+                              int stream, int *odd) {
   const int nc = dst->channels;
   const uint32_t w = v->width;
   float *out[4];
@@ -513,26 +542,41 @@ static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar 
 #if defined(__AVX512F__) && defined(__x86_64__)
   const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
   if (stream && streamable(v, nc, (const float *)(const void *)row, out)) {
-    const size_t bad = stream_row((const float *)(const void *)row, nc, w, out);
+    const size_t bad = stream_row((const float *)(const void *)row, nc, w, out, nc == 3 ? odd : NULL);
     _mm_sfence(); /* streamed stores are weakly ordered: visible before the row is done */
+    if (odd && nc != 3) *odd = 0;
     return bad;
   }
 #elif defined(__x86_64__)
 #if defined(__AVX2__)
   const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
-  if (stream && streamable8(v, nc, row, out))
-    return stream_row8((const float *)(const void *)row, nc, w, out, NULL, 0.0f);
+  if (stream && streamable8(v, nc, row, out)) {
+    const size_t bad = stream_row8((const float *)(const void *)row, nc, w, out, NULL, 0.0f);
+    /* (read back: the x86-64-v3 build's streamed rows, as the separate pass did) */
+    if (odd) *odd = nc == 3 && hush__normals_odd(out[0], out[1], out[2], w);
+    return bad;
+  }
 #endif
-  if (stream && spans_streamable(v, nc, out)) return import_spans(v, y, nc, out, NULL, 0.0f);
+  if (stream && spans_streamable(v, nc, out)) {
+    const size_t bad = import_spans(v, y, nc, out, NULL, 0.0f);
+    if (odd) *odd = nc == 3 && hush__normals_odd(out[0], out[1], out[2], w);
+    return bad;
+  }
 #else
   (void)stream;
 #endif
   import_row(v, hush__view_pixel_stride(v), hush__view_row_stride(v), y, nc, out);
+  if (odd) *odd = nc == 3 && hush__normals_odd(out[0], out[1], out[2], w);
   return count_nonfinite(out, nc, w);
 }
 
 size_t hush__view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst) {
-  return view_import_row(v, y, dst, 1);
+  return view_import_row(v, y, dst, 1, NULL);
+}
+
+size_t hush__view_import_row_normals(const hush_image_view *v, uint32_t y, hush_planar *dst,
+                                     int *odd) {
+  return view_import_row(v, y, dst, 1, odd);
 }
 
 int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_planar *dst,
@@ -597,7 +641,7 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
 }
 
 size_t hush__view_import_row_cached(const hush_image_view *v, uint32_t y, hush_planar *dst) {
-  return view_import_row(v, y, dst, 0);
+  return view_import_row(v, y, dst, 0, NULL);
 }
 
 hush_status hush__view_import_nonfinite(hush_device device, const hush_image_view *v,

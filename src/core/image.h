@@ -104,6 +104,24 @@ hush_status hush__view_import(hush_device device, const hush_image_view *view, c
  * away takes hush__view_import_row_cached. */
 size_t hush__view_import_row(const hush_image_view *view, uint32_t y, hush_planar *dst);
 size_t hush__view_import_row_cached(const hush_image_view *view, uint32_t y, hush_planar *dst);
+
+/* A normal whose squared length is this far from 1 is not of unit length
+ * (gbuffer.h's hush__unit_normals rescales it): unit normals keep their
+ * bits, and so do half-float ones (off by up to 1e-3 in the squared
+ * length), which are not worth a pass. */
+#define HUSH_UNIT_TOLERANCE 2e-3f
+
+/* Whether one of the n normals (a, b, c) is neither 0 nor of unit length
+ * (its squared length a a + b b + c c within HUSH_UNIT_TOLERANCE of 1, in
+ * float, in that order); NaN counts as not unit. */
+int hush__normals_odd(const float *a, const float *b, const float *c, size_t n);
+
+/* hush__view_import_row of a 3-channel view of normals that also sets *odd
+ * when the row holds a normal that hush__normals_odd would report, taken
+ * from the registers where the row is streamed, so that it is not read
+ * again (a row with a NaN counts, whatever the policy then makes of it). */
+size_t hush__view_import_row_normals(const hush_image_view *view, uint32_t y, hush_planar *dst,
+                                     int *odd);
 /* Row y of a 3-channel view into dst (3 planes), each channel divided by
  * max(divisor's plane, floor) (albedo demodulation, albedo.h), in one
  * streamed pass, with *bad the count of NaN/Inf values read (the row is

@@ -515,8 +515,8 @@ hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar 
 }
 
 hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const int *images,
-                                    hush_planar *const *dst) {
-  if (count > HUSH_IMPORT_MANY_MAX) return HUSH_ERROR_UNKNOWN; /* a caller's bug */
+                                    hush_planar *const *dst, int normals, uint8_t *odd_rows) {
+  if (count > HUSH_IMPORT_MANY_MAX || normals >= count) return HUSH_ERROR_UNKNOWN; /* a bug */
   const int threads = hush__filter_threads(f);
   const int H = (int)f->height;
   size_t bad[HUSH_IMPORT_MANY_MAX] = {0};
@@ -524,8 +524,16 @@ hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const i
 #pragma omp parallel for schedule(static) num_threads(threads) \
     reduction(+ : bad[:HUSH_IMPORT_MANY_MAX])
   for (int y = 0; y < H; y++)
-    for (int j = 0; j < count; j++)
-      bad[j] += hush__view_import_row(&f->views[images[j]], (uint32_t)y, dst[j]);
+    for (int j = 0; j < count; j++) {
+      const hush_image_view *v = &f->views[images[j]];
+      if (j == normals) {
+        int odd = 0;
+        bad[j] += hush__view_import_row_normals(v, (uint32_t)y, dst[j], &odd);
+        odd_rows[y] = (uint8_t)odd;
+      } else {
+        bad[j] += hush__view_import_row(v, (uint32_t)y, dst[j]);
+      }
+    }
   const hush_nonfinite_policy policy =
       hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
   for (int j = 0; j < count; j++) {

@@ -117,10 +117,13 @@ hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar 
 /* hush__filter_import of `count` (<= HUSH_IMPORT_MANY_MAX) bound images
  * images[j] into dst[j], in one parallel pass over the rows (one fork and
  * join, not one per image); the NaN/Inf policy is then applied image by
- * image in that order (the first failing one is reported). */
+ * image in that order (the first failing one is reported). normals >= 0:
+ * images[normals] is a 3-channel image of normals, and odd_rows[y] (one
+ * byte per row) is set to whether row y holds one that is neither 0 nor of
+ * unit length (hush__view_import_row_normals). */
 #define HUSH_IMPORT_MANY_MAX 8
 hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const int *images,
-                                    hush_planar *const *dst);
+                                    hush_planar *const *dst, int normals, uint8_t *odd_rows);
 
 /* hush__filter_import fused with the demodulation (albedo.h): dst <- the
  * radiance image / max(albedo, eps), albedo imported already; the same

@@ -28,6 +28,7 @@ typedef struct hush_gbuffer_inputs {
   int has_holes;    /* this frame has pixels with spp 0 */
   hush_planar depth_data; /* 1, allocated with the first holes: see below */
   hush_planar surface;    /* 3, frames with holes: hush__holes_split_background's scratch */
+  uint8_t *odd_normals;   /* per row: it holds a normal to rescale (height bytes) */
 } hush_gbuffer_inputs;
 
 /* Rescales the normals (3 planes) whose squared length is not within 2e-3
