@@ -17,6 +17,7 @@
 #include <float.h>
 #include <math.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -395,6 +396,68 @@ static void demodulated_import(uint32_t W, int with_bad) {
   free(buf);
 }
 
+/* The albedo's import with the radiance's demodulated import in one pass
+ * gives the bits, counts and errors of the two in turn (hush__view_import
+ * of the albedo, then hush__import_demodulated): bad values in neither,
+ * the radiance, the albedo (NaN, Inf, beyond HUSH_INPUT_MAX), or both,
+ * under either policy; at a width of whole vectors (the paired streamed
+ * rows) and one that is not. */
+static void albedo_demodulated_import(uint32_t W, int bad_color, int bad_albedo,
+                                      hush_nonfinite_policy policy) {
+  const uint32_t H = 4;
+  float *buf = malloc(sizeof(float) * W * H * 3), *abuf = malloc(sizeof(float) * W * H * 3);
+  REQUIRE(buf != NULL && abuf != NULL);
+  const float values[] = {0.0f, 1e-4f, HUSH_ALBEDO_EPS, 0.002f, 0.5f, 1.0f, 3.0f};
+  for (size_t i = 0; i < (size_t)W * H * 3; i++) {
+    buf[i] = (float)(i % 97) * 0.37f - 3.0f;
+    abuf[i] = values[(i + i / 3) % 7];
+  }
+  if (bad_color) buf[3 * (size_t)(W + 5) + 1] = NAN;
+  if (bad_albedo) {
+    abuf[3 * (size_t)(2 * W + 15) + 2] = INFINITY;
+    abuf[3 * (size_t)(W + 5)] = NAN;
+    abuf[7] = 2e15f;
+  }
+  const hush_image_view v = {buf, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
+  const hush_image_view av = {abuf, HUSH_FORMAT_FLOAT3, W, H, 0, 0, 0};
+  hush_device d = hush_device_new(NULL);
+  REQUIRE(d != NULL);
+  hush_planar alb_a, alb_b, a, b;
+  REQUIRE(hush__planar_init(NULL, &alb_a, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &alb_b, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &a, 3, W, H) == HUSH_OK);
+  REQUIRE(hush__planar_init(NULL, &b, 3, W, H) == HUSH_OK);
+  size_t ra = 0, raa = 0, rb = 0, rab = 0;
+  const hush_status sa = hush__import_albedo_demodulated(d, &v, "color", &a, &av, "albedo",
+                                                         &alb_a, policy, &ra, &raa, 2);
+  const char *msg = NULL;
+  hush_device_get_error(d, &msg);
+  char msg_a[256];
+  snprintf(msg_a, sizeof msg_a, "%s", msg ? msg : "");
+  hush_status sb = hush__view_import(d, &av, "albedo", &alb_b, policy, &rab);
+  if (!sb) sb = hush__import_demodulated(d, &v, "color", &b, &alb_b, policy, &rb, 2);
+  hush_device_get_error(d, &msg);
+  CHECK_MSG(sa == sb && strcmp(msg_a, msg ? msg : "") == 0,
+            "width %u bad %d/%d: status %d '%s' against %d '%s'", W, bad_color, bad_albedo,
+            (int)sa, msg_a, (int)sb, msg ? msg : "");
+  CHECK(sa != HUSH_OK || (raa == (bad_albedo ? 3u : 0u) && ra == (bad_color ? 1u : 0u)));
+  if (sa == HUSH_OK && sb == HUSH_OK) {
+    int same = 1;
+    for (int c = 0; c < 3; c++)
+      same &= memcmp(a.plane[c], b.plane[c], sizeof(float) * W * H) == 0 &&
+              memcmp(alb_a.plane[c], alb_b.plane[c], sizeof(float) * W * H) == 0;
+    CHECK_MSG(same, "width %u bad %d/%d: the paired import differs from the two in turn", W,
+              bad_color, bad_albedo);
+  }
+  hush__planar_free(&alb_a);
+  hush__planar_free(&alb_b);
+  hush__planar_free(&a);
+  hush__planar_free(&b);
+  hush_device_release(d);
+  free(buf);
+  free(abuf);
+}
+
 /* The remodulating export (filters/albedo.c) gives the bits of the
  * separate passes: remodulate, add the emission (filters/emission.c does
  * o = filtered + emission), export; with the albedo or the addition left
@@ -579,6 +642,12 @@ int main(void) {
     demodulated_import(48, bad);
     demodulated_import(37, bad);
   }
+  for (int k = 0; k < 8; k++)
+    albedo_demodulated_import(k & 1 ? 37 : 48, (k >> 1) & 1, (k >> 2) & 1,
+                              HUSH_NONFINITE_REPLACE);
+  albedo_demodulated_import(48, 1, 0, HUSH_NONFINITE_ERROR);
+  albedo_demodulated_import(48, 0, 1, HUSH_NONFINITE_ERROR);
+  albedo_demodulated_import(48, 1, 1, HUSH_NONFINITE_ERROR);
   remodulated_export(37);
   remodulated_export(1100);
   test_math();

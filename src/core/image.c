@@ -640,6 +640,63 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
 #endif
 }
 
+int hush__view_import_row_pair_divided(const hush_image_view *v, const hush_image_view *dv,
+                                       uint32_t y, hush_planar *dst, hush_planar *divisor,
+                                       float floor, size_t *bad, size_t *bad_divisor) {
+#if defined(__AVX512F__) && defined(__x86_64__)
+  const uint32_t w = v->width;
+  if (dst->channels != 3 || divisor->channels != 3 || dv->width != w) return 0;
+  float *out[3], *dout[3];
+  for (int c = 0; c < 3; c++) {
+    out[c] = dst->plane[c] + (size_t)y * w;
+    dout[c] = divisor->plane[c] + (size_t)y * w;
+  }
+  const float *rf = (const float *)(const void *)((const char *)v->data + v->byte_offset +
+                                                  (size_t)y * hush__view_row_stride(v));
+  const float *df = (const float *)(const void *)((const char *)dv->data + dv->byte_offset +
+                                                  (size_t)y * hush__view_row_stride(dv));
+  if (!streamable(v, 3, rf, out) || !streamable(dv, 3, df, dout)) return 0;
+  /* as stream_row's three channels (both views), then the division */
+  const __m512i ia0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+  const __m512i ic0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+  const __m512i ia1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+  const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+  const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+  const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+  const __m512 fl = _mm512_set1_ps(floor);
+  size_t n = 0, nd = 0;
+  for (uint32_t x = 0; x < w; x += 16) {
+    const float *q = df + 3 * (size_t)x;
+    const __m512 da = _mm512_loadu_ps(q), db = _mm512_loadu_ps(q + 16), dc = _mm512_loadu_ps(q + 32);
+    const __m512 d0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(da, ia0, db), ic0, dc);
+    const __m512 d1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(da, ia1, db), ic1, dc);
+    const __m512 d2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(da, ia2, db), ic2, dc);
+    nd += count_nonfinite16(d0) + count_nonfinite16(d1) + count_nonfinite16(d2);
+    _mm512_stream_ps(dout[0] + x, d0);
+    _mm512_stream_ps(dout[1] + x, d1);
+    _mm512_stream_ps(dout[2] + x, d2);
+    const float *p = rf + 3 * (size_t)x;
+    const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
+    const __m512 r0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia0, b), ic0, c);
+    const __m512 r1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
+    const __m512 r2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
+    n += count_nonfinite16(r0) + count_nonfinite16(r1) + count_nonfinite16(r2);
+    /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
+     * hush__view_import_row_divided */
+    _mm512_stream_ps(out[0] + x, _mm512_div_ps(r0, _mm512_max_ps(d0, fl)));
+    _mm512_stream_ps(out[1] + x, _mm512_div_ps(r1, _mm512_max_ps(d1, fl)));
+    _mm512_stream_ps(out[2] + x, _mm512_div_ps(r2, _mm512_max_ps(d2, fl)));
+  }
+  _mm_sfence();
+  *bad = n;
+  *bad_divisor = nd;
+  return 1;
+#else
+  (void)v, (void)dv, (void)y, (void)dst, (void)divisor, (void)floor, (void)bad, (void)bad_divisor;
+  return 0;
+#endif
+}
+
 size_t hush__view_import_row_cached(const hush_image_view *v, uint32_t y, hush_planar *dst) {
   return view_import_row(v, y, dst, 0, NULL);
 }

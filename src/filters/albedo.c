@@ -67,6 +67,49 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
   return HUSH_OK;
 }
 
+hush_status hush__import_albedo_demodulated(hush_device device, const hush_image_view *view,
+                                            const char *what, hush_planar *dst,
+                                            const hush_image_view *albedo_view,
+                                            const char *albedo_what, hush_planar *albedo,
+                                            hush_nonfinite_policy policy, size_t *replaced,
+                                            size_t *replaced_albedo, int threads) {
+  const int H = (int)view->height;
+  const size_t W = view->width;
+  size_t bad = 0, bad_albedo = 0;
+#pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad, bad_albedo)
+  for (int y = 0; y < H; y++) {
+    size_t row_bad = 0, row_bad_albedo = 0;
+    if (hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
+                                           HUSH_ALBEDO_EPS, &row_bad, &row_bad_albedo)) {
+      bad += row_bad;
+      bad_albedo += row_bad_albedo;
+      continue;
+    }
+    /* the albedo's row kept in the cache for the division, which then
+     * goes as in hush__import_demodulated */
+    bad_albedo += hush__view_import_row_cached(albedo_view, (uint32_t)y, albedo);
+    if (hush__view_import_row_divided(view, (uint32_t)y, dst, albedo, HUSH_ALBEDO_EPS, &row_bad)) {
+      bad += row_bad;
+      continue;
+    }
+    row_bad = hush__view_import_row_cached(view, (uint32_t)y, dst);
+    bad += row_bad;
+    if (!row_bad)
+      for (int c = 0; c < 3; c++)
+        demodulate_row(dst->plane[c] + (size_t)y * W, albedo->plane[c] + (size_t)y * W, W);
+  }
+  if (replaced) *replaced = bad;
+  if (replaced_albedo) *replaced_albedo = bad_albedo;
+  hush_status s =
+      hush__view_import_nonfinite(device, albedo_view, albedo_what, albedo, policy, bad_albedo);
+  if (s || (!bad && !bad_albedo)) return s;
+  /* rare: as the separate passes (the albedo's values replaced, the
+   * radiance's replaced, then all divided) */
+  if ((s = hush__view_import(device, view, what, dst, policy, NULL))) return s;
+  hush__demodulate(dst, albedo, threads);
+  return HUSH_OK;
+}
+
 /* Pixels per span of the remodulating export: 3 stack rows of this many
  * floats (L1-resident) between the multiply and the interleave. */
 #define EXPORT_SPAN 512

@@ -39,6 +39,21 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
                                      size_t *replaced, int threads);
 
 /*
+ * hush__view_import of the albedo view (albedo_what names it) into albedo,
+ * then hush__import_demodulated of the radiance view by it, bit for bit
+ * (the albedo's policy applied, and reported, first), in one pass over
+ * the rows: each albedo row divides its radiance row from the registers
+ * (hush__view_import_row_pair_divided) instead of being read back from
+ * memory. *replaced and *replaced_albedo: the counts of NaN/Inf values.
+ */
+hush_status hush__import_albedo_demodulated(hush_device device, const hush_image_view *view,
+                                            const char *what, hush_planar *dst,
+                                            const hush_image_view *albedo_view,
+                                            const char *albedo_what, hush_planar *albedo,
+                                            hush_nonfinite_policy policy, size_t *replaced,
+                                            size_t *replaced_albedo, int threads);
+
+/*
  * The remodulation fused with the export: view <- filtered * max(albedo,
  * eps) + add (3 channels), bit for bit hush__remodulate, then
  * hush__emission_add of `add`, then hush__view_export, in one pass and

@@ -563,6 +563,26 @@ hush_status hush__filter_import_demodulated(struct hush_filter_t *f, int image,
   return s;
 }
 
+hush_status hush__filter_import_albedo_demodulated(struct hush_filter_t *f, int albedo_image,
+                                                   int color_image, hush_planar *albedo,
+                                                   hush_planar *dst) {
+  const hush_nonfinite_policy policy =
+      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
+  const char *name = f->cls->info->images[color_image].name;
+  const char *albedo_name = f->cls->info->images[albedo_image].name;
+  size_t replaced = 0, replaced_albedo = 0;
+  const hush_status s = hush__import_albedo_demodulated(
+      f->device, &f->views[color_image], name, dst, &f->views[albedo_image], albedo_name, albedo,
+      policy, &replaced, &replaced_albedo, hush__filter_threads(f));
+  if (!s && replaced_albedo)
+    hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
+              f->cls->info->name, replaced_albedo, albedo_name);
+  if (!s && replaced)
+    hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
+              f->cls->info->name, replaced, name);
+  return s;
+}
+
 hush_status hush__filter_scratch(struct hush_filter_t *f, hush_planar *img, int channels) {
   if (img->plane[0]) return HUSH_OK;
   return hush__planar_init(f->device, img, channels, f->width, f->height);

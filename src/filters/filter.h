@@ -131,6 +131,13 @@ hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const i
 hush_status hush__filter_import_demodulated(struct hush_filter_t *f, int image,
                                             const hush_planar *albedo, hush_planar *dst);
 
+/* hush__filter_import of albedo_image into albedo, then
+ * hush__filter_import_demodulated of color_image by it, in one pass
+ * (albedo.h's hush__import_albedo_demodulated). */
+hush_status hush__filter_import_albedo_demodulated(struct hush_filter_t *f, int albedo_image,
+                                                   int color_image, hush_planar *albedo,
+                                                   hush_planar *dst);
+
 /* Allocates a planar image of the filter's size the first time it is
  * needed (a no-op when img already has planes). */
 hush_status hush__filter_scratch(struct hush_filter_t *f, hush_planar *img, int channels);

@@ -196,9 +196,12 @@ static hush_status accumulate_execute(hush_filter f, void *state, const hush_fra
   if (!fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
-  if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
-  if (fused && (s = hush__filter_import_demodulated(f, I_COLOR, &st->albedo, &st->color)))
+  if (fused) {
+    if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo, &st->color)))
+      return s;
+  } else if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) {
     return s;
+  }
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   /* holes: the G-buffer, albedo and emission filled from around */
   hush_planar *const fill[2] = {demod ? &st->albedo : NULL, emis ? &st->emission : NULL};

@@ -650,9 +650,12 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if (!demod_fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
-  if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
-  if (demod_fused && (s = hush__filter_import_demodulated(f, I_COLOR, &st->albedo, &st->color)))
+  if (demod_fused) {
+    if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo, &st->color)))
+      return s;
+  } else if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) {
     return s;
+  }
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
   if (adaptive && (s = bmfr_adaptive_import(f, &st->ad, I_GRADIENT))) return s;

@@ -540,12 +540,15 @@ hush_status svgf_run(hush_filter f, void *state, const hush_frame_info *info, sv
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
   if (has_dgrad && (s = hush__filter_import(f, I_DEPTH_GRADIENT, &st->grad))) return s;
-  if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) return s;
-  if (demod_fused &&
-      ((s = hush__filter_import_demodulated(f, color_image, &st->albedo, &st->comp[0].color)) ||
-       (split && (s = hush__filter_import_demodulated(f, I_INDIRECT, &st->albedo,
-                                                      &st->comp[1].color)))))
+  if (demod_fused) {
+    if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, color_image, &st->albedo,
+                                                    &st->comp[0].color)) ||
+        (split && (s = hush__filter_import_demodulated(f, I_INDIRECT, &st->albedo,
+                                                       &st->comp[1].color))))
+      return s;
+  } else if (demod && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) {
     return s;
+  }
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
   if (has_spp && (s = hush__filter_import(f, I_SPP, &st->spp))) return s;
   if (has_svar && (s = hush__filter_import(f, I_SAMPLE_VARIANCE, &st->sample_var))) return s;
