@@ -1003,10 +1003,14 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
 #endif
     test_chunk(c, row, k0, k1, sze, o, mode, base, (const float(*)[4][CHUNK])tb, use_id, 0);
     if (!grad_test) continue;
+    /* plan_pixel needs the slopes only for the open pixels it tests again:
+     * those not wholly inside, and any with the 3x3 fallback on (without
+     * it an inside pixel with no consistent tap is final: build_row) */
     int retry = 0, open = 0;
+    const int fallback = c->fallback;
     for (int k = k0; k < k1; k++) {
       retry |= o->retry[k];
-      open |= o->kind[k] != HUSH_FOOTPRINT_BILINEAR;
+      open |= (o->kind[k] != HUSH_FOOTPRINT_BILINEAR) & (fallback | (o->inside[k] == 0));
     }
     if (!(retry | open)) continue;
     span_slopes(c, y, x_begin + k0, k1 - k0, sze + k0, o->gx + k0, o->gy + k0, use_id);
@@ -1100,12 +1104,21 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
         int open = 0;
         for (int k = k0; k < k1; k++) open |= st.kind[k] != HUSH_FOOTPRINT_BILINEAR;
         if (!open) continue;
-        for (int k = k0; k < k1; k++)
-          if (st.kind[k] != HUSH_FOOTPRINT_BILINEAR)
-            span_set(&st, k,
-                     plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
-                                grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f,
-                                st.inside[k]));
+        for (int k = k0; k < k1; k++) {
+          if (st.kind[k] == HUSH_FOOTPRINT_BILINEAR) continue;
+          if (st.inside[k] && !c->fallback) {
+            /* what plan_pixel returns for it: no tap of its footprint
+             * passed (the span test is tap_ok's), and no fallback; most
+             * open pixels are such disocclusions */
+            const footprint none = {0, 0u, HUSH_FOOTPRINT_NONE, 0.0f, 0.0f};
+            span_set(&st, k, none);
+            continue;
+          }
+          span_set(&st, k,
+                   plan_pixel(c, 1, x0 + k, y, span_px[k], span_py[k], span_ze[k], grad_test,
+                              grad_test ? st.gx[k] : 0.0f, grad_test ? st.gy[k] : 0.0f,
+                              st.inside[k]));
+        }
       }
     }
     const size_t i = row + (size_t)x0;
