@@ -661,6 +661,16 @@ int hush__window_read(const hush_reproject_plan *plan, size_t i, const float *co
 #if !defined(HUSH_HAVE_WINDOW) && defined(__AVX2__)
 #  define HUSH_HAVE_DIAGONALS 1
 #endif
+/* TAA's resolve takes a chunk on two diagonals as such in every AVX2
+ * build, the AVX-512 ones before trying a window: for its three planes two
+ * loads and a blend a tap cost less than the window's extent reductions,
+ * loads and permutes (TAA 2.83-2.87 -> 2.71-2.76 ms, bmfr on the bench
+ * frames, 2 threads; docs/svgf-speed.md, twenty-ninth round). The blends,
+ * with four planes and more, keep the window first: no gain for bmfr's,
+ * svgf's seven planes slower. */
+#if defined(__AVX2__)
+#  define HUSH_HAVE_DIAGONAL_READS 1
+#endif
 
 /*
  * Gathers `channels` (1..8) previous-frame planes through the plan:

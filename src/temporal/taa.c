@@ -257,13 +257,7 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
       span_gather(t, plan, prev, row, W, x, n, j, has, clip, tonemap);
       continue;
     }
-#ifdef HUSH_HAVE_WINDOW
-    float tb[3][4][TAA_RUN] __attribute__((aligned(64)));
-    if (hush__window_read(plan, row + (size_t)x, prev, 3, tb)) {
-      span_window(t, plan, row, x, (const float(*)[4][TAA_RUN])tb, has, clip, tonemap);
-      continue;
-    }
-#elif defined(HUSH_HAVE_DIAGONALS)
+#ifdef HUSH_HAVE_DIAGONAL_READS
     _Static_assert(TAA_RUN == HUSH_DIAGONAL_CHUNK, "a TAA chunk is the diagonals' chunk");
     int32_t base[2];
     const int diagonals = hush__reproject_diagonals(origin + x, kind + x, NULL, (int32_t)W,
@@ -274,6 +268,13 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
     }
     if (diagonals == 1) {
       span_run(t, plan, prev, row, W, x, base[0], base[0], has, 0, 0, clip, tonemap);
+      continue;
+    }
+#endif
+#ifdef HUSH_HAVE_WINDOW
+    float tb[3][4][TAA_RUN] __attribute__((aligned(64)));
+    if (hush__window_read(plan, row + (size_t)x, prev, 3, tb)) {
+      span_window(t, plan, row, x, (const float(*)[4][TAA_RUN])tb, has, clip, tonemap);
       continue;
     }
 #endif
