@@ -66,8 +66,7 @@ static void fit_refined(block *b, const bmfr_feature_set *set, uint64_t frame, f
   float *y[BMFR_CHANNELS] = {b->y[0], b->y[1], b->y[2]};
   hush__bmfr_noise_table(b->noise, set->count, BN, BN, frame, eps);
   hush__bmfr_features_block(set, b->base, b->mask, BN, BN, b->T, b->scratch);
-  hush__bmfr_fit(b->T, set->count, z, b->noise, b->mask, BN, nvalid, BN, b->A, refine,
-                 &b->y[0][0], coef);
+  hush__bmfr_fit(b->T, set->count, z, b->noise, b->mask, BN, nvalid, BN, b->A, refine, coef);
   hush__bmfr_synthesize(b->T, set->count, BN, BN, (const float(*)[BMFR_MAX_FEATURES])coef, y);
 }
 
@@ -334,7 +333,7 @@ static void test_fit_reference(void) {
     float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
     hush__bmfr_noise_table(noise, M, n, ld, 11, 0.01f);
     hush__bmfr_features_block(&set, base, mask, n, ld, T, scratch);
-    hush__bmfr_fit(T, M, zc, noise, mask, n, nvalid, ld, A, refine, scratch, coef);
+    hush__bmfr_fit(T, M, zc, noise, mask, n, nvalid, ld, A, refine, coef);
     hush__bmfr_synthesize(T, M, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
 
     /* the definition, in double */
@@ -418,7 +417,7 @@ static void fit_with_ld(size_t ld, int refine, float coef[BMFR_CHANNELS][BMFR_MA
   float *yc[3] = {y, y + ld, y + 2 * ld};
   hush__bmfr_noise_table(noise, M, n, ld, 5, 0.01f);
   hush__bmfr_features_block(&set, base, mask, n, ld, T, scratch);
-  hush__bmfr_fit(T, M, zc, noise, mask, n, nvalid, ld, A, refine, scratch, coef);
+  hush__bmfr_fit(T, M, zc, noise, mask, n, nvalid, ld, A, refine, coef);
   hush__bmfr_synthesize(T, M, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   for (int c = 0; c < 3; c++) memcpy(y_out + c * n, yc[c], (size_t)n * sizeof *y_out);
   fit_bufs_free(&fb);

@@ -513,7 +513,7 @@ static void fit_gathered(const fit_frame *fr, block_cols *b) {
     for (int c = 0; c < BMFR_CHANNELS; c++) yc[c] = b->y + (size_t)c * ld;
     hush__bmfr_features_block(fr->set, b->base, b->mask, n, ld, b->T, b->spare);
     hush__bmfr_fit(b->T, count, (const float *const *)zc, fr->noise, b->mask, n, nvalid, ld, b->A,
-                   fr->refine, b->y, coef);
+                   fr->refine, coef);
     hush__bmfr_synthesize(b->T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   }
 }

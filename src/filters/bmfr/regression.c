@@ -130,29 +130,6 @@ static HUSH_INLINE void reflect_group(float *const a[4], const float c[4], const
  * 640x360, 1 thread) */
 _Static_assert(REFLECT_GROUP == 1 || REFLECT_GROUP == 2, "householder_r calls g = 1 or 2");
 
-/* d[j][c] = sum_i t_j[i] r_c[i] over the ld rows for the three residuals
- * and g <= 3 features t_j, one pass. Each of the 3 g sums is a chain of one
- * FMA per vector, so a pass over one feature (three chains) waits on the
- * FMA's latency; three features keep the FMA pipes busy. Each sum is the
- * same operations in the same order whatever g (same bits). */
-static HUSH_INLINE void dot3_group(const float *const t[3], const int g,
-                                   const float *restrict r0, const float *restrict r1,
-                                   const float *restrict r2, size_t ld,
-                                   float d[3][BMFR_CHANNELS]) {
-  vf s[3][BMFR_CHANNELS] = {{{0}}};
-  for (size_t i = 0; i < ld; i += VF_LANES) {
-    const vf a = vf_load(r0 + i), b = vf_load(r1 + i), c = vf_load(r2 + i);
-    for (int j = 0; j < g; j++) {
-      const vf tv = vf_load(t[j] + i);
-      s[j][0] = vf_fma(tv, a, s[j][0]);
-      s[j][1] = vf_fma(tv, b, s[j][1]);
-      s[j][2] = vf_fma(tv, c, s[j][2]);
-    }
-  }
-  for (int j = 0; j < g; j++)
-    for (int c = 0; c < BMFR_CHANNELS; c++) d[j][c] = vf_sum(s[j][c]);
-}
-
 /* Vector i of build_column's column: a = t + mask (u - mean), stored and
  * returned. */
 static HUSH_INLINE vf column_vector(float *restrict a, const float *restrict t,
@@ -294,31 +271,139 @@ static void forward_substitute(const r_factor *R, const double b[BMFR_CHANNELS][
 }
 
 /*
- * s[c][v] -= (NEG) or += sum_m k[c][m] T[m][i + v VF_LANES .. +VF_LANES) for
- * the three channels and V (1 or 2) vectors of rows, the features in order.
- * Each sum is a chain of one FMA per feature: three chains (one vector) left
- * the FMA pipes waiting on its latency, six keep them busy (refinement
- * residuals and weighted sum: fit 19.05 -> 18.8 ms on one thread,
- * docs/bmfr.md, eighth round). Per lane the same operations in the same
- * order whatever V: the same bits.
+ * s[c][v] += sum_m k[c][m] T[m][i + v VF_LANES .. +VF_LANES) for the three
+ * channels and V (1 or 2) vectors of rows, the features in order. Each sum
+ * is a chain of one FMA per feature: three chains (one vector) left the FMA
+ * pipes waiting on its latency, six keep them busy (the weighted sum: fit
+ * 19.05 -> 18.8 ms on one thread, docs/bmfr.md, eighth round). Per lane the
+ * same operations in the same order whatever V: the same bits.
  */
 static HUSH_INLINE void feature_sums(const float *T, int count, size_t ld, size_t i,
                                      const float *const k[BMFR_CHANNELS], const int V,
-                                     const int NEG, vf s[BMFR_CHANNELS][2]) {
+                                     vf s[BMFR_CHANNELS][2]) {
   for (int m = 0; m < count; m++) {
     vf t[2];
     for (int v = 0; v < V; v++) t[v] = vf_load(T + (size_t)m * ld + i + (size_t)v * VF_LANES);
     for (int c = 0; c < BMFR_CHANNELS; c++) {
       const vf kc = vf_set1(k[c][m]);
-      for (int v = 0; v < V; v++)
-        s[c][v] = NEG ? vf_fnma(kc, t[v], s[c][v]) : vf_fma(kc, t[v], s[c][v]);
+      for (int v = 0; v < V; v++) s[c][v] = vf_fma(kc, t[v], s[c][v]);
     }
   }
 }
 
+/* out[a][b] = sum over the ld rows of X[a][i] Y[b][i], for na x nb <= 24
+ * pairs of columns (na, nb <= 6, constants at each call, so the 24 sums
+ * stay in registers: each row vector's loads serve them all). */
+static HUSH_INLINE void gram_block(const float *const *X, const int na, const float *const *Y,
+                                   const int nb, size_t ld, float out[6][6]) {
+  vf acc[6][6];
+  for (int a = 0; a < na; a++)
+    for (int b = 0; b < nb; b++) acc[a][b] = (vf){0};
+  for (size_t i = 0; i < ld; i += VF_LANES) {
+    vf x[6], y[6];
+    for (int a = 0; a < na; a++) x[a] = vf_load(X[a] + i);
+    for (int b = 0; b < nb; b++) y[b] = vf_load(Y[b] + i);
+    for (int a = 0; a < na; a++)
+      for (int b = 0; b < nb; b++) acc[a][b] = vf_fma(x[a], y[b], acc[a][b]);
+  }
+  for (int a = 0; a < na; a++)
+    for (int b = 0; b < nb; b++) out[a][b] = vf_sum(acc[a][b]);
+}
+
+/* A tile of the generic Gram pass: GRAM_RA x GRAM_RB sums, as many as the
+ * register file holds with the loads (32 vectors with AVX-512, 16 else). */
+#if VF_LANES == 16
+#  define GRAM_RA 4
+#  define GRAM_RB 6
+#else
+#  define GRAM_RA 2
+#  define GRAM_RB 4
+#endif
+
+/* A column of zeros standing in for the columns past the last in a tile
+ * (their sums are computed and dropped); blocks up to 64x64 padded. */
+#define GRAM_ZERO_LD (64 * 64 + 64)
+static const float gram_zero[GRAM_ZERO_LD];
+
+/*
+ * The refinement's Gram matrix G = T^T T (count x count) and h[c] = T^T
+ * z_c over the ld rows (T is 0 on holes and past n, so z needs no mask).
+ * AVX-512 builds take the default ten features in six register-blocked
+ * passes (98 FMAs a row vector for the 85 sums: P = features 0-3, Q = 4-7,
+ * R = 8-9: P x (P, R), Q x (Q, R), P x Q, (P, R) x z, Q x z, R x R); other
+ * sets and builds tile the upper triangle of [T | z]'s columns GRAM_RA x
+ * GRAM_RB at a time, padding with zero columns.
+ */
+static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS], size_t ld,
+                 double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
+                 double h[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  const float *t[BMFR_MAX_FEATURES + BMFR_CHANNELS];
+  for (int m = 0; m < count; m++) t[m] = T + (size_t)m * ld;
+  for (int c = 0; c < BMFR_CHANNELS; c++) t[count + c] = z[c];
+  float o[6][6];
+#if VF_LANES == 16
+  if (count == 10) {
+    const float *P[4] = {t[0], t[1], t[2], t[3]}, *Q[4] = {t[4], t[5], t[6], t[7]};
+    const float *PR[6] = {t[0], t[1], t[2], t[3], t[8], t[9]};
+    const float *QR[6] = {t[4], t[5], t[6], t[7], t[8], t[9]};
+    const float *R[2] = {t[8], t[9]};
+    gram_block(P, 4, PR, 6, ld, o);
+    for (int a = 0; a < 4; a++)
+      for (int b = 0; b < 6; b++) {
+        const int j = b < 4 ? b : b + 4;
+        G[a][j] = G[j][a] = o[a][b];
+      }
+    gram_block(Q, 4, QR, 6, ld, o);
+    for (int a = 0; a < 4; a++)
+      for (int b = 0; b < 6; b++) G[4 + a][4 + b] = G[4 + b][4 + a] = o[a][b];
+    gram_block(P, 4, Q, 4, ld, o);
+    for (int a = 0; a < 4; a++)
+      for (int b = 0; b < 4; b++) G[a][4 + b] = G[4 + b][a] = o[a][b];
+    gram_block(PR, 6, z, 3, ld, o);
+    for (int a = 0; a < 6; a++)
+      for (int c = 0; c < 3; c++) h[c][a < 4 ? a : a + 4] = o[a][c];
+    gram_block(Q, 4, z, 3, ld, o);
+    for (int a = 0; a < 4; a++)
+      for (int c = 0; c < 3; c++) h[c][4 + a] = o[a][c];
+    gram_block(R, 2, R, 2, ld, o);
+    G[8][8] = o[0][0];
+    G[8][9] = G[9][8] = o[0][1];
+    G[9][9] = o[1][1];
+    return;
+  }
+#endif
+  const int cols = count + BMFR_CHANNELS;
+  if (ld > GRAM_ZERO_LD) { /* (no padding column this long: pair by pair) */
+    for (int i = 0; i < count; i++)
+      for (int j = i; j < cols; j++) {
+        gram_block(&t[i], 1, &t[j], 1, ld, o);
+        if (j >= count)
+          h[j - count][i] = o[0][0];
+        else
+          G[i][j] = G[j][i] = o[0][0];
+      }
+    return;
+  }
+  for (int a0 = 0; a0 < count; a0 += GRAM_RA)
+    for (int b0 = a0; b0 < cols; b0 += GRAM_RB) {
+      const float *X[GRAM_RA], *Y[GRAM_RB];
+      for (int a = 0; a < GRAM_RA; a++) X[a] = a0 + a < count ? t[a0 + a] : gram_zero;
+      for (int b = 0; b < GRAM_RB; b++) Y[b] = b0 + b < cols ? t[b0 + b] : gram_zero;
+      gram_block(X, GRAM_RA, Y, GRAM_RB, ld, o);
+      for (int a = 0; a < GRAM_RA && a0 + a < count; a++)
+        for (int b = 0; b < GRAM_RB && b0 + b < cols; b++) {
+          const int i = a0 + a, j = b0 + b;
+          if (j >= count)
+            h[j - count][i] = o[a][b];
+          else if (j >= i)
+            G[i][j] = G[j][i] = o[a][b];
+        }
+    }
+}
+
 void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNELS],
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
-                    int refine, float *scratch, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+                    int refine, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
   /* A = [T + N, z] (eq. 7), holes zero in every column; while each column
    * is written, its dot product with column 0 below row 0 (the first
    * reflection's) is taken, which saves the QR a pass per column */
@@ -360,58 +445,33 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * a += (R^T R)^-1 T^T (z - T a) with the noisy R as the preconditioner
    * removes that to first order; in the directions the noise regularises
    * (near-collinear features), R^T R is dominated by the noise and the
-   * step stays small, so the regularisation keeps its effect there. */
-  for (int it = 0; it < refine; it++) {
-    /* residuals of the three channels (one pass, the features summed
-     * per row), then their dots with each feature (one pass per feature) */
-    float *restrict r0 = scratch, *restrict r1 = scratch + ld, *restrict r2 = scratch + 2 * ld;
-    float a0[BMFR_MAX_FEATURES], a1[BMFR_MAX_FEATURES], a2[BMFR_MAX_FEATURES];
-    for (int m = 0; m < count; m++) {
-      a0[m] = (float)w[0][m];
-      a1[m] = (float)w[1][m];
-      a2[m] = (float)w[2][m];
+   * step stays small, so the regularisation keeps its effect there.
+   * T^T (z - T a) is taken as h - G a from the Gram matrix G = T^T T and
+   * h = T^T z, summed once in float (one register-blocked pass set, 98
+   * FMAs a row vector) where each step's residuals and their dot products
+   * took 60 FMAs a row vector and step, and loads of broadcast weights:
+   * the stand-alone fit with two steps 13.7k -> 13.0k TSC ticks, the fit
+   * stage -2.6 % (docs/bmfr.md, tenth round). The difference of two
+   * float sums loses the residual's own precision: an exact combination
+   * of the features comes out to about 2e-6 instead of 1e-6 (test_bmfr),
+   * far inside the 1e-3 asked. */
+  if (refine > 0) {
+    double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES], h[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+    gram(T, count, z, ld, G, h);
+    for (int it = 0; it < refine; it++) {
+      double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+      for (int c = 0; c < BMFR_CHANNELS; c++)
+        for (int m = 0; m < count; m++) {
+          double sum = h[c][m];
+          for (int j = 0; j < count; j++) sum -= G[m][j] * w[c][j];
+          g[c][m] = sum;
+        }
+      double u[BMFR_CHANNELS][BMFR_MAX_FEATURES], d[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+      forward_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])g, u);
+      back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])u, d);
+      for (int c = 0; c < BMFR_CHANNELS; c++)
+        for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[c][m]);
     }
-    const float *const a[BMFR_CHANNELS] = {a0, a1, a2};
-    float *const res[BMFR_CHANNELS] = {r0, r1, r2};
-    size_t i = 0;
-    for (; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
-      vf sums[BMFR_CHANNELS][2];
-      for (int v = 0; v < 2; v++) {
-        const vf mk = vf_load(mask + i + (size_t)v * VF_LANES);
-        for (int c = 0; c < BMFR_CHANNELS; c++)
-          sums[c][v] = vf_load(z[c] + i + (size_t)v * VF_LANES) * mk;
-      }
-      feature_sums(T, count, ld, i, a, 2, 1, sums);
-      for (int v = 0; v < 2; v++)
-        for (int c = 0; c < BMFR_CHANNELS; c++)
-          vf_store(res[c] + i + (size_t)v * VF_LANES, sums[c][v]);
-    }
-    for (; i < ld; i += VF_LANES) {
-      vf sums[BMFR_CHANNELS][2] = {{{0}}};
-      const vf mk = vf_load(mask + i);
-      for (int c = 0; c < BMFR_CHANNELS; c++) sums[c][0] = vf_load(z[c] + i) * mk;
-      feature_sums(T, count, ld, i, a, 1, 1, sums);
-      for (int c = 0; c < BMFR_CHANNELS; c++) vf_store(res[c] + i, sums[c][0]);
-    }
-    double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-    for (int m = 0; m < count; m += 3) {
-      const int k = count - m < 3 ? count - m : 3;
-      const float *t[3] = {T + (size_t)m * ld, T + (size_t)(m + 1) * ld, T + (size_t)(m + 2) * ld};
-      float d3[3][BMFR_CHANNELS];
-      if (k == 3)
-        dot3_group(t, 3, r0, r1, r2, ld, d3);
-      else if (k == 2)
-        dot3_group(t, 2, r0, r1, r2, ld, d3);
-      else
-        dot3_group(t, 1, r0, r1, r2, ld, d3);
-      for (int j = 0; j < k; j++)
-        for (int c = 0; c < BMFR_CHANNELS; c++) g[c][m + j] = d3[j][c];
-    }
-    double u[BMFR_CHANNELS][BMFR_MAX_FEATURES], d[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-    forward_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])g, u);
-    back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])u, d);
-    for (int c = 0; c < BMFR_CHANNELS; c++)
-      for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[c][m]);
   }
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
@@ -428,14 +488,14 @@ void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
   size_t i = 0;
   for (; i + 2 * VF_LANES <= ld; i += 2 * VF_LANES) {
     vf sums[BMFR_CHANNELS][2] = {{zero, zero}, {zero, zero}, {zero, zero}};
-    feature_sums(T, count, ld, i, k, 2, 0, sums);
+    feature_sums(T, count, ld, i, k, 2, sums);
     for (int v = 0; v < 2; v++)
       for (int c = 0; c < BMFR_CHANNELS; c++)
         vf_store(y[c] + i + (size_t)v * VF_LANES, vf_select(sums[c][v] > zero, sums[c][v], zero));
   }
   for (; i < ld; i += VF_LANES) {
     vf sums[BMFR_CHANNELS][2] = {{zero, zero}, {zero, zero}, {zero, zero}};
-    feature_sums(T, count, ld, i, k, 1, 0, sums);
+    feature_sums(T, count, ld, i, k, 1, sums);
     for (int c = 0; c < BMFR_CHANNELS; c++)
       vf_store(y[c] + i, vf_select(sums[c][0] > zero, sums[c][0], zero));
   }

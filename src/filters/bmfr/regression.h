@@ -43,14 +43,14 @@ void hush__bmfr_noise_table(float *table, int count, int n, size_t ld, uint64_t 
  * is re-centred over the valid rows, and holes get none). A is the
  * (count + 3) x ld scratch the QR works in. refine: steps of iterative
  * refinement of the weights towards the noise-free least-squares solution
- * (0: the paper's plain solve), using scratch (3 ld floats).
+ * (0: the paper's plain solve).
  * Writes coef[c][m], the fitted weights of channel c; a feature whose pivot
  * vanished (rank deficiency that the noise did not cure, or a block with no
  * valid pixel) gets weight 0, so the result is always finite.
  */
 void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNELS],
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
-                    int refine, float *scratch, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]);
+                    int refine, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]);
 
 /* y[c][i] = sum_m coef[c][m] T_m[i] (eq. 6), clamped below at 0 as the
  * published code does (radiance is not negative); y: columns of ld floats,
