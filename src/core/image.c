@@ -295,6 +295,23 @@ static HUSH_IMAGE_INLINE size_t count_nonfinite16(__m512 v) {
   return (size_t)__builtin_popcount((unsigned)(__mmask16)~ok);
 }
 
+/* The three channels of 16 pixels of 3 interleaved floats at p: lane j of
+ * channel k is element 3 j + k of the 48 in a|b|c, those below 32 picked
+ * from a|b, then the rest from c (the constants hoist out of the callers'
+ * loops). */
+static HUSH_IMAGE_INLINE void rgb16(const float *p, __m512 r[3]) {
+  const __m512i ia0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
+  const __m512i ic0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
+  const __m512i ia1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
+  const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
+  const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
+  const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
+  const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
+  r[0] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia0, b), ic0, c);
+  r[1] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
+  r[2] = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
+}
+
 /* hush__normals_odd's test of 16 normals (its arithmetic, unfused), as a
  * mask of the odd ones. */
 static HUSH_IMAGE_INLINE __mmask16 normals_odd16(__m512 a, __m512 b, __m512 c) {
@@ -344,26 +361,15 @@ static size_t stream_row(const float *restrict rf, int nc, uint32_t w, float *co
     }
     return bad;
   }
-  /* lane j of channel k is element 3 j + k of the 48 in a|b|c: those below
-   * 32 picked from a|b, then the rest from c */
-  const __m512i ia0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
-  const __m512i ic0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
-  const __m512i ia1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
-  const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
-  const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
-  const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
   __mmask16 odd_lanes = 0;
   for (uint32_t x = 0; x < w; x += 16) {
-    const float *p = rf + 3 * (size_t)x;
-    const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
-    const __m512 r0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia0, b), ic0, c);
-    const __m512 r1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
-    const __m512 r2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
-    bad += count_nonfinite16(r0) + count_nonfinite16(r1) + count_nonfinite16(r2);
-    if (odd) odd_lanes |= normals_odd16(r0, r1, r2);
-    _mm512_stream_ps(out[0] + x, r0);
-    _mm512_stream_ps(out[1] + x, r1);
-    _mm512_stream_ps(out[2] + x, r2);
+    __m512 r[3];
+    rgb16(rf + 3 * (size_t)x, r);
+    bad += count_nonfinite16(r[0]) + count_nonfinite16(r[1]) + count_nonfinite16(r[2]);
+    if (odd) odd_lanes |= normals_odd16(r[0], r[1], r[2]);
+    _mm512_stream_ps(out[0] + x, r[0]);
+    _mm512_stream_ps(out[1] + x, r[1]);
+    _mm512_stream_ps(out[2] + x, r[2]);
   }
   if (odd) *odd = odd_lanes != 0;
   return bad;
@@ -596,20 +602,12 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
   const float *rf = (const float *)(const void *)row;
   if (!streamable(v, 3, rf, out)) return 0;
   /* as stream_row's three channels, each divided by max(divisor, floor) */
-  const __m512i ia0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
-  const __m512i ic0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
-  const __m512i ia1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
-  const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
-  const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
-  const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
   const __m512 fl = _mm512_set1_ps(floor);
   size_t n = 0;
   for (uint32_t x = 0; x < w; x += 16) {
-    const float *p = rf + 3 * (size_t)x;
-    const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
-    const __m512 r0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia0, b), ic0, c);
-    const __m512 r1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
-    const __m512 r2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
+    __m512 r[3];
+    rgb16(rf + 3 * (size_t)x, r);
+    const __m512 r0 = r[0], r1 = r[1], r2 = r[2];
     n += count_nonfinite16(r0) + count_nonfinite16(r1) + count_nonfinite16(r2);
     /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
      * albedo.c's scalar clamp */
@@ -657,35 +655,20 @@ int hush__view_import_row_pair_divided(const hush_image_view *v, const hush_imag
                                                   (size_t)y * hush__view_row_stride(dv));
   if (!streamable(v, 3, rf, out) || !streamable(dv, 3, df, dout)) return 0;
   /* as stream_row's three channels (both views), then the division */
-  const __m512i ia0 = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 24, 27, 30, 0, 0, 0, 0, 0);
-  const __m512i ic0 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 17, 20, 23, 26, 29);
-  const __m512i ia1 = _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 25, 28, 31, 0, 0, 0, 0, 0);
-  const __m512i ic1 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 18, 21, 24, 27, 30);
-  const __m512i ia2 = _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 26, 29, 0, 0, 0, 0, 0, 0);
-  const __m512i ic2 = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 16, 19, 22, 25, 28, 31);
   const __m512 fl = _mm512_set1_ps(floor);
   size_t n = 0, nd = 0;
   for (uint32_t x = 0; x < w; x += 16) {
-    const float *q = df + 3 * (size_t)x;
-    const __m512 da = _mm512_loadu_ps(q), db = _mm512_loadu_ps(q + 16), dc = _mm512_loadu_ps(q + 32);
-    const __m512 d0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(da, ia0, db), ic0, dc);
-    const __m512 d1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(da, ia1, db), ic1, dc);
-    const __m512 d2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(da, ia2, db), ic2, dc);
-    nd += count_nonfinite16(d0) + count_nonfinite16(d1) + count_nonfinite16(d2);
-    _mm512_stream_ps(dout[0] + x, d0);
-    _mm512_stream_ps(dout[1] + x, d1);
-    _mm512_stream_ps(dout[2] + x, d2);
-    const float *p = rf + 3 * (size_t)x;
-    const __m512 a = _mm512_loadu_ps(p), b = _mm512_loadu_ps(p + 16), c = _mm512_loadu_ps(p + 32);
-    const __m512 r0 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia0, b), ic0, c);
-    const __m512 r1 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia1, b), ic1, c);
-    const __m512 r2 = _mm512_permutex2var_ps(_mm512_permutex2var_ps(a, ia2, b), ic2, c);
-    n += count_nonfinite16(r0) + count_nonfinite16(r1) + count_nonfinite16(r2);
-    /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
-     * hush__view_import_row_divided */
-    _mm512_stream_ps(out[0] + x, _mm512_div_ps(r0, _mm512_max_ps(d0, fl)));
-    _mm512_stream_ps(out[1] + x, _mm512_div_ps(r1, _mm512_max_ps(d1, fl)));
-    _mm512_stream_ps(out[2] + x, _mm512_div_ps(r2, _mm512_max_ps(d2, fl)));
+    __m512 d[3], r[3];
+    rgb16(df + 3 * (size_t)x, d);
+    nd += count_nonfinite16(d[0]) + count_nonfinite16(d[1]) + count_nonfinite16(d[2]);
+    rgb16(rf + 3 * (size_t)x, r);
+    n += count_nonfinite16(r[0]) + count_nonfinite16(r[1]) + count_nonfinite16(r[2]);
+    for (int k = 0; k < 3; k++) {
+      _mm512_stream_ps(dout[k] + x, d[k]);
+      /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
+       * hush__view_import_row_divided */
+      _mm512_stream_ps(out[k] + x, _mm512_div_ps(r[k], _mm512_max_ps(d[k], fl)));
+    }
   }
   _mm_sfence();
   *bad = n;

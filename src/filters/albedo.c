@@ -36,27 +36,29 @@ void hush__remodulate(hush_planar *albedo, const hush_planar *filtered, int thre
     }
 }
 
+/* Row y of view into dst divided by the albedo's row, while it is in L1
+ * (left undivided when it has NaN/Inf: the caller redoes the frame);
+ * returns the count of those. */
+static size_t import_row_demodulated(const hush_image_view *view, uint32_t y, hush_planar *dst,
+                                     const hush_planar *albedo) {
+  size_t bad = 0;
+  if (hush__view_import_row_divided(view, y, dst, albedo, HUSH_ALBEDO_EPS, &bad)) return bad;
+  bad = hush__view_import_row_cached(view, y, dst);
+  const size_t W = view->width;
+  if (!bad)
+    for (int c = 0; c < 3; c++)
+      demodulate_row(dst->plane[c] + (size_t)y * W, albedo->plane[c] + (size_t)y * W, W);
+  return bad;
+}
+
 hush_status hush__import_demodulated(hush_device device, const hush_image_view *view,
                                      const char *what, hush_planar *dst,
                                      const hush_planar *albedo, hush_nonfinite_policy policy,
                                      size_t *replaced, int threads) {
   const int H = (int)view->height;
-  const size_t W = view->width;
   size_t bad = 0;
-  /* each row is divided while it is in L1, unless it has NaN/Inf */
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad)
-  for (int y = 0; y < H; y++) {
-    size_t row_bad = 0;
-    if (hush__view_import_row_divided(view, (uint32_t)y, dst, albedo, HUSH_ALBEDO_EPS, &row_bad)) {
-      bad += row_bad;
-      continue;
-    }
-    row_bad = hush__view_import_row_cached(view, (uint32_t)y, dst);
-    bad += row_bad;
-    if (!row_bad)
-      for (int c = 0; c < 3; c++)
-        demodulate_row(dst->plane[c] + (size_t)y * W, albedo->plane[c] + (size_t)y * W, W);
-  }
+  for (int y = 0; y < H; y++) bad += import_row_demodulated(view, (uint32_t)y, dst, albedo);
   if (replaced) *replaced = bad;
   if (!bad) return HUSH_OK;
   /* rare: as the separate passes (the values replaced first, then all
@@ -74,7 +76,6 @@ hush_status hush__import_albedo_demodulated(hush_device device, const hush_image
                                             hush_nonfinite_policy policy, size_t *replaced,
                                             size_t *replaced_albedo, int threads) {
   const int H = (int)view->height;
-  const size_t W = view->width;
   size_t bad = 0, bad_albedo = 0;
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad, bad_albedo)
   for (int y = 0; y < H; y++) {
@@ -85,18 +86,9 @@ hush_status hush__import_albedo_demodulated(hush_device device, const hush_image
       bad_albedo += row_bad_albedo;
       continue;
     }
-    /* the albedo's row kept in the cache for the division, which then
-     * goes as in hush__import_demodulated */
+    /* the albedo's row kept in the cache for the division */
     bad_albedo += hush__view_import_row_cached(albedo_view, (uint32_t)y, albedo);
-    if (hush__view_import_row_divided(view, (uint32_t)y, dst, albedo, HUSH_ALBEDO_EPS, &row_bad)) {
-      bad += row_bad;
-      continue;
-    }
-    row_bad = hush__view_import_row_cached(view, (uint32_t)y, dst);
-    bad += row_bad;
-    if (!row_bad)
-      for (int c = 0; c < 3; c++)
-        demodulate_row(dst->plane[c] + (size_t)y * W, albedo->plane[c] + (size_t)y * W, W);
+    bad += import_row_demodulated(view, (uint32_t)y, dst, albedo);
   }
   if (replaced) *replaced = bad;
   if (replaced_albedo) *replaced_albedo = bad_albedo;
