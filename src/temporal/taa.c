@@ -326,15 +326,19 @@ static void ycocg_row(const float *const *color, const float *const *albedo, siz
 }
 
 /*
- * One pass over the frame: each thread resolves a band of rows, keeping the
+ * One pass over the frame: each thread resolves bands of rows, keeping the
  * YCoCg of the three rows the 3x3 box reads in a ring of its own (rows of
  * taa->current: thread t owns rows 3t..3t+2 of each plane, so at most H / 3
- * threads), converting each source row once as the band moves down (the
- * rows just above and below a band are converted by both neighbours). No
- * whole-frame intermediate is written or read back. Every pixel is
- * computed the same way whatever the banding, so the result does not
- * depend on the thread count.
+ * threads), converting each source row once as a band moves down (the
+ * rows just above and below a band are converted again by its neighbours).
+ * No whole-frame intermediate is written or read back. TAA_BANDS bands a
+ * thread, handed out as threads finish: with one band each, the half of
+ * the frame with more history to gather (the ground under the bench's sky,
+ * the classroom's) kept one thread 20-36 % longer than the other. Every
+ * pixel is computed the same way whatever the banding, so the result does
+ * not depend on the thread count.
  */
+#define TAA_BANDS 8
 void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
                                  const float *const *color, const float *const *albedo,
                                  const hush_taa_params *params, int threads) {
@@ -347,49 +351,56 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
   if (threads > H / 3) threads = H / 3;
   if (threads < 1) threads = 1;
 
+  /* bands of at least 8 rows (each converts its two edge rows again) */
+  int bands = threads * TAA_BANDS;
+  if (bands > H / 8) bands = H / 8;
+  if (bands < threads) bands = threads;
 #pragma omp parallel num_threads(threads)
   {
-    const int nt = omp_get_num_threads(), me = omp_get_thread_num();
-    const int y0 = (int)((long)H * me / nt), y1 = (int)((long)H * (me + 1) / nt);
+    const int me = omp_get_thread_num();
     float *slot[3][3]; /* [row mod 3][component] */
-    int held[3] = {-1, -1, -1}; /* the source row in each slot */
     for (int s = 0; s < 3; s++) /* a frame of fewer than 3 rows uses slots 0..H-1 only */
       for (int k = 0; k < 3; k++)
         slot[s][k] = cur->plane[k] + (size_t)(3 * me + (s < H ? s : 0)) * W;
-    for (int y = y0; y < y1; y++) {
-      const int yu = y > 0 ? y - 1 : 0, yd = y + 1 < H ? y + 1 : y;
-      const int need[3] = {yu, y, yd};
-      for (int q = 0; q < 3; q++)
-        if (held[need[q] % 3] != need[q]) {
-          ycocg_row(color, albedo, (size_t)need[q] * W, W, tonemap, slot[need[q] % 3]);
-          held[need[q] % 3] = need[q];
+#pragma omp for schedule(dynamic, 1)
+    for (int band = 0; band < bands; band++) {
+      const int y0 = (int)((long)H * band / bands), y1 = (int)((long)H * (band + 1) / bands);
+      int held[3] = {-1, -1, -1}; /* the source row in each slot */
+      for (int y = y0; y < y1; y++) {
+        const int yu = y > 0 ? y - 1 : 0, yd = y + 1 < H ? y + 1 : y;
+        const int need[3] = {yu, y, yd};
+        for (int q = 0; q < 3; q++)
+          if (held[need[q] % 3] != need[q]) {
+            ycocg_row(color, albedo, (size_t)need[q] * W, W, tonemap, slot[need[q] % 3]);
+            held[need[q] % 3] = need[q];
+          }
+        const size_t row = (size_t)y * W;
+        taa_row t;
+        for (int k = 0; k < 3; k++) {
+          t.up[k] = slot[yu % 3][k];
+          t.mid[k] = slot[y % 3][k];
+          t.dn[k] = slot[yd % 3][k];
+          t.out[k] = out->plane[k] + row;
         }
-      const size_t row = (size_t)y * W;
-      taa_row t;
-      for (int k = 0; k < 3; k++) {
-        t.up[k] = slot[yu % 3][k];
-        t.mid[k] = slot[y % 3][k];
-        t.dn[k] = slot[yd % 3][k];
-        t.out[k] = out->plane[k] + row;
+        t.alpha = params->alpha;
+        t.tonemap = tonemap;
+        t.clip = params->box == HUSH_TAA_CLIP;
+        if (!use_history || !plan->blocks) {
+          for (int x = 0; x < W; x++) resolve_taps(&t, use_history ? plan : NULL, prev, x, y, W);
+        } else {
+          interior_row(&t, plan, prev, row, W);
+          /* the border columns and the 3X3 footprints, through the taps */
+          resolve_taps(&t, plan, prev, 0, y, W);
+          if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
+          const size_t last = row + (size_t)W - 1;
+          for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
+               i = hush__reproject_next_3x3(plan, i + 1, last))
+            resolve_taps(&t, plan, prev, (int)(i - row), y, W);
+        }
+        if (params->out_view)
+          hush__view_export_span((const float *const *)t.out, 3, params->out_view, (uint32_t)y, 0,
+                                 (uint32_t)W);
       }
-      t.alpha = params->alpha;
-      t.tonemap = tonemap;
-      t.clip = params->box == HUSH_TAA_CLIP;
-      if (!use_history || !plan->blocks) {
-        for (int x = 0; x < W; x++) resolve_taps(&t, use_history ? plan : NULL, prev, x, y, W);
-      } else {
-        interior_row(&t, plan, prev, row, W);
-        /* the border columns and the 3X3 footprints, through the taps */
-        resolve_taps(&t, plan, prev, 0, y, W);
-        if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
-        const size_t last = row + (size_t)W - 1;
-        for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
-             i = hush__reproject_next_3x3(plan, i + 1, last))
-          resolve_taps(&t, plan, prev, (int)(i - row), y, W);
-      }
-      if (params->out_view)
-        hush__view_export_span((const float *const *)t.out, 3, params->out_view, (uint32_t)y, 0,
-                               (uint32_t)W);
     }
   }
   taa->latest = 1 - taa->latest;
