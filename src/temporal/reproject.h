@@ -320,8 +320,14 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
  * phase I 5.44 -> 5.14 (three alternated pairs); 128 was in between. */
 #define HUSH_PREFETCH_AHEAD 64
 
-/* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped); j may
- * lie outside the planes (hush__prefetch). */
+/* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped), the line
+ * of pixel j and the next: a chunk that is not contiguous reads up to 32
+ * pixels of each row (a window's two loads, the diagonals' two bases),
+ * and on the classroom's frames a profile put a third of window_read's
+ * samples on its load of the second line (bmfr's phase I 8.9-9.1 -> 8.2-8.5
+ * ms, phase III 2.64-2.69 -> 2.46-2.54, 2 threads, three alternated runs;
+ * the bench frames within the noise or better). j may lie outside the
+ * planes (hush__prefetch). */
 static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, int n, int64_t j,
                                                    int32_t W) {
   const ptrdiff_t top = (ptrdiff_t)j * (ptrdiff_t)sizeof(float);
@@ -330,6 +336,8 @@ static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, i
     if (planes[p]) {
       hush__prefetch(planes[p], top);
       hush__prefetch(planes[p], bottom);
+      hush__prefetch(planes[p], top + 64);
+      hush__prefetch(planes[p], bottom + 64);
     }
 }
 
@@ -355,10 +363,15 @@ static HUSH_ALWAYS_INLINE void hush__prefetch_row(const hush_reproject_plan *pla
 
 /* The footprint origin HUSH_PREFETCH_AHEAD pixels after pixel k of a run
  * of n origins: its own, or past the run's end the last one's moved on by
- * as many pixels (the next run, under smooth motion). */
+ * as many pixels (the next run, under smooth motion). A pixel without a
+ * footprint has origin 0 (the plan's NONE; the span test's outside), which
+ * would ask for the frame's first row: pixel k's moved on instead
+ * (disocclusions are common on rendered frames). */
 static inline int64_t hush__prefetch_origin(const int32_t *origin, int k, int n) {
   const int kp = k + HUSH_PREFETCH_AHEAD;
-  return kp < n ? (int64_t)origin[kp] : (int64_t)origin[n - 1] + (kp - (n - 1));
+  if (kp < n && origin[kp] != 0) return (int64_t)origin[kp];
+  if (kp < n) return (int64_t)origin[k] + HUSH_PREFETCH_AHEAD;
+  return (int64_t)origin[n - 1] + (kp - (n - 1));
 }
 
 /* ---- a chunk of footprints on two diagonals --------------------------------
