@@ -320,14 +320,17 @@ static inline float hush__reproject_apply4(const float *p, size_t o, size_t widt
  * phase I 5.44 -> 5.14 (three alternated pairs); 128 was in between. */
 #define HUSH_PREFETCH_AHEAD 64
 
-/* Prefetches rows j and j + W of planes[0..n-1] (NULL: skipped), the line
- * of pixel j and the next: a chunk that is not contiguous reads up to 32
- * pixels of each row (a window's two loads, the diagonals' two bases),
- * and on the classroom's frames a profile put a third of window_read's
- * samples on its load of the second line (bmfr's phase I 8.9-9.1 -> 8.2-8.5
- * ms, phase III 2.64-2.69 -> 2.46-2.54, 2 threads, three alternated runs;
- * the bench frames within the noise or better). j may lie outside the
- * planes (hush__prefetch). */
+/* Prefetches rows j, j + W and j + 2W of planes[0..n-1] (NULL: skipped),
+ * the line of pixel j and the next. A chunk that is not contiguous reads up
+ * to 32 pixels of each row (a window's two loads, the diagonals' two
+ * bases), and a window whose footprints start on two rows reads three; on
+ * the classroom's frames a profile put a third of window_read's samples on
+ * the loads of those lines. With the next line: bmfr's phase I 8.9-9.1 ->
+ * 8.2-8.5 ms, phase III 2.64-2.69 -> 2.46-2.54; with the third row too,
+ * phase I 8.7-9.3 -> 7.9-8.0, phase III 2.6-3.1 -> 2.3-2.4, TAA 3.9-4.0 ->
+ * 3.4 (2 threads, three alternated runs each); the bench frames' phase I
+ * 5.0-5.07 -> 4.73-4.87 and TAA 2.47-2.52 -> 2.31-2.38, svgf 24.3 -> 23.8
+ * ms. j may lie outside the planes (hush__prefetch). */
 static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, int n, int64_t j,
                                                    int32_t W) {
   const ptrdiff_t top = (ptrdiff_t)j * (ptrdiff_t)sizeof(float);
@@ -338,6 +341,8 @@ static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, i
       hush__prefetch(planes[p], bottom);
       hush__prefetch(planes[p], top + 64);
       hush__prefetch(planes[p], bottom + 64);
+      hush__prefetch(planes[p], bottom + (ptrdiff_t)W * (ptrdiff_t)sizeof(float));
+      hush__prefetch(planes[p], bottom + (ptrdiff_t)W * (ptrdiff_t)sizeof(float) + 64);
     }
 }
 
