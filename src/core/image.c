@@ -548,32 +548,34 @@ static size_t view_import_row(const hush_image_view *v, uint32_t y, hush_planar 
 #if defined(__AVX512F__) && defined(__x86_64__)
   const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
   if (stream && streamable(v, nc, (const float *)(const void *)row, out)) {
+    /* the normals' test from the registers */
     const size_t bad = stream_row((const float *)(const void *)row, nc, w, out, nc == 3 ? odd : NULL);
     _mm_sfence(); /* streamed stores are weakly ordered: visible before the row is done */
     if (odd && nc != 3) *odd = 0;
     return bad;
   }
-#elif defined(__x86_64__)
-#if defined(__AVX2__)
+#endif
+  size_t bad;
+#if !defined(__AVX512F__) && defined(__x86_64__) && defined(__AVX2__)
   const char *row = (const char *)v->data + v->byte_offset + (size_t)y * hush__view_row_stride(v);
-  if (stream && streamable8(v, nc, row, out)) {
-    const size_t bad = stream_row8((const float *)(const void *)row, nc, w, out, NULL, 0.0f);
-    /* (read back: the x86-64-v3 build's streamed rows, as the separate pass did) */
-    if (odd) *odd = nc == 3 && hush__normals_odd(out[0], out[1], out[2], w);
-    return bad;
-  }
+  if (stream && streamable8(v, nc, row, out))
+    bad = stream_row8((const float *)(const void *)row, nc, w, out, NULL, 0.0f);
+  else
 #endif
+#if !defined(__AVX512F__) && defined(__x86_64__)
   if (stream && spans_streamable(v, nc, out)) {
-    const size_t bad = import_spans(v, y, nc, out, NULL, 0.0f);
-    if (odd) *odd = nc == 3 && hush__normals_odd(out[0], out[1], out[2], w);
-    return bad;
-  }
-#else
-  (void)stream;
+    bad = import_spans(v, y, nc, out, NULL, 0.0f);
+  } else
 #endif
-  import_row(v, hush__view_pixel_stride(v), hush__view_row_stride(v), y, nc, out);
+  {
+    (void)stream;
+    import_row(v, hush__view_pixel_stride(v), hush__view_row_stride(v), y, nc, out);
+    bad = count_nonfinite(out, nc, w);
+  }
+  /* the other paths read the row back for the normals' test (streamed rows
+   * of the x86-64-v3 build, as the separate pass did) */
   if (odd) *odd = nc == 3 && hush__normals_odd(out[0], out[1], out[2], w);
-  return count_nonfinite(out, nc, w);
+  return bad;
 }
 
 size_t hush__view_import_row(const hush_image_view *v, uint32_t y, hush_planar *dst) {

@@ -502,15 +502,24 @@ hush_status hush_filter_get_timings(hush_filter filter, const char *const **name
 
 /* ---- helpers for filter classes ---------------------------------------- */
 
-hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar *dst) {
-  const hush_nonfinite_policy policy =
-      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
-  size_t replaced = 0;
-  const hush_status s = hush__view_import(f->device, &f->views[image],
-                                          f->cls->info->images[image].name, dst, policy, &replaced);
-  if (!s && replaced)
+/* The NaN/Inf policy of the filter's `nonfinite` parameter (index 0). */
+static hush_nonfinite_policy nonfinite_policy(const struct hush_filter_t *f) {
+  return hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
+}
+
+/* Logs that `replaced` values of image `image` were replaced (none: nothing). */
+static void log_replaced(const struct hush_filter_t *f, size_t replaced, int image) {
+  if (replaced)
     hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
               f->cls->info->name, replaced, f->cls->info->images[image].name);
+}
+
+hush_status hush__filter_import(struct hush_filter_t *f, int image, hush_planar *dst) {
+  size_t replaced = 0;
+  const hush_status s =
+      hush__view_import(f->device, &f->views[image], f->cls->info->images[image].name, dst,
+                        nonfinite_policy(f), &replaced);
+  if (!s) log_replaced(f, replaced, image);
   return s;
 }
 
@@ -534,52 +543,39 @@ hush_status hush__filter_import_many(struct hush_filter_t *f, int count, const i
         bad[j] += hush__view_import_row(v, (uint32_t)y, dst[j]);
       }
     }
-  const hush_nonfinite_policy policy =
-      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
   for (int j = 0; j < count; j++) {
-    const char *name = f->cls->info->images[images[j]].name;
     const hush_status s =
-        hush__view_import_nonfinite(f->device, &f->views[images[j]], name, dst[j], policy, bad[j]);
+        hush__view_import_nonfinite(f->device, &f->views[images[j]],
+                                    f->cls->info->images[images[j]].name, dst[j],
+                                    nonfinite_policy(f), bad[j]);
     if (s) return s;
-    if (bad[j])
-      hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
-                f->cls->info->name, bad[j], name);
+    log_replaced(f, bad[j], images[j]);
   }
   return HUSH_OK;
 }
 
 hush_status hush__filter_import_demodulated(struct hush_filter_t *f, int image,
                                             const hush_planar *albedo, hush_planar *dst) {
-  const hush_nonfinite_policy policy =
-      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
   size_t replaced = 0;
-  const int threads = hush__filter_threads(f);
   const hush_status s =
       hush__import_demodulated(f->device, &f->views[image], f->cls->info->images[image].name, dst,
-                               albedo, policy, &replaced, threads);
-  if (!s && replaced)
-    hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
-              f->cls->info->name, replaced, f->cls->info->images[image].name);
+                               albedo, nonfinite_policy(f), &replaced, hush__filter_threads(f));
+  if (!s) log_replaced(f, replaced, image);
   return s;
 }
 
 hush_status hush__filter_import_albedo_demodulated(struct hush_filter_t *f, int albedo_image,
                                                    int color_image, hush_planar *albedo,
                                                    hush_planar *dst) {
-  const hush_nonfinite_policy policy =
-      hush__param_i(f, 0) ? HUSH_NONFINITE_REPLACE : HUSH_NONFINITE_ERROR;
-  const char *name = f->cls->info->images[color_image].name;
-  const char *albedo_name = f->cls->info->images[albedo_image].name;
   size_t replaced = 0, replaced_albedo = 0;
   const hush_status s = hush__import_albedo_demodulated(
-      f->device, &f->views[color_image], name, dst, &f->views[albedo_image], albedo_name, albedo,
-      policy, &replaced, &replaced_albedo, hush__filter_threads(f));
-  if (!s && replaced_albedo)
-    hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
-              f->cls->info->name, replaced_albedo, albedo_name);
-  if (!s && replaced)
-    hush__log(f->device, 1, "%s: replaced %zu NaN/Inf value(s) in '%s' with 0",
-              f->cls->info->name, replaced, name);
+      f->device, &f->views[color_image], f->cls->info->images[color_image].name, dst,
+      &f->views[albedo_image], f->cls->info->images[albedo_image].name, albedo,
+      nonfinite_policy(f), &replaced, &replaced_albedo, hush__filter_threads(f));
+  if (!s) {
+    log_replaced(f, replaced_albedo, albedo_image);
+    log_replaced(f, replaced, color_image);
+  }
   return s;
 }
 

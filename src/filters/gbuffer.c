@@ -29,7 +29,6 @@ static void constant_normal(hush_planar *n) {
  * from 1 is rescaled to unit length. The dot product of two normals then
  * exceeds 1 by at most 1e-3: svgf's normal weight by at most 2^(sigma_n
  * 1e-3 log2 e), 1.14 at sigma_n 128. */
-#define UNIT_TOLERANCE HUSH_UNIT_TOLERANCE
 
 /* Squared lengths outside this range (|n| below 1e-15 or above 1e15) are
  * rescaled in double: their float squares may have underflowed or lost
@@ -46,7 +45,7 @@ static int unit_row(float *restrict a, float *restrict b, float *restrict c, siz
 #pragma omp simd reduction(| : extreme)
   for (size_t x = 0; x < w; x++) {
     const float d = a[x] * a[x] + b[x] * b[x] + c[x] * c[x];
-    const int rescale = !(fabsf(d - 1.0f) <= UNIT_TOLERANCE) & (d >= UNIT_FLOAT_MIN) &
+    const int rescale = !(fabsf(d - 1.0f) <= HUSH_UNIT_TOLERANCE) & (d >= UNIT_FLOAT_MIN) &
                         (d <= UNIT_FLOAT_MAX);
     const float s = hush__rsqrt_vec(rescale ? d : 1.0f);
     a[x] = rescale ? a[x] * s : a[x];
@@ -63,7 +62,7 @@ static void unit_row_double(float *a, float *b, float *c, size_t w) {
   for (size_t x = 0; x < w; x++) {
     const double p = a[x], q = b[x], r = c[x];
     const double len2 = p * p + q * q + r * r;
-    if (len2 == 0.0 || fabs(len2 - 1.0) <= UNIT_TOLERANCE) continue;
+    if (len2 == 0.0 || fabs(len2 - 1.0) <= HUSH_UNIT_TOLERANCE) continue;
     const double s = 1.0 / sqrt(len2);
     a[x] = (float)(p * s);
     b[x] = (float)(q * s);

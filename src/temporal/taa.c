@@ -339,18 +339,68 @@ static void ycocg_row(const float *const *color, const float *const *albedo, siz
  * not depend on the thread count.
  */
 #define TAA_BANDS 8
+
+/* What every row of hush__taa_resolve_modulated reads and writes. */
+typedef struct taa_pass {
+  const float *const *color, *const *albedo, *const *prev;
+  const hush_reproject_plan *plan; /* NULL: no history */
+  const hush_taa_params *params;
+  hush_planar *out;
+  int W, H;
+} taa_pass;
+
+/* Rows y0..y1-1, the thread's ring in slot (its held rows start over). */
+static void resolve_band(const taa_pass *p, float *slot[3][3], int y0, int y1) {
+  const int W = p->W, H = p->H, tonemap = p->params->tonemap;
+  const hush_reproject_plan *plan = p->plan;
+  int held[3] = {-1, -1, -1}; /* the source row in each slot */
+  for (int y = y0; y < y1; y++) {
+    const int yu = y > 0 ? y - 1 : 0, yd = y + 1 < H ? y + 1 : y;
+    const int need[3] = {yu, y, yd};
+    for (int q = 0; q < 3; q++)
+      if (held[need[q] % 3] != need[q]) {
+        ycocg_row(p->color, p->albedo, (size_t)need[q] * W, W, tonemap, slot[need[q] % 3]);
+        held[need[q] % 3] = need[q];
+      }
+    const size_t row = (size_t)y * W;
+    taa_row t;
+    for (int k = 0; k < 3; k++) {
+      t.up[k] = slot[yu % 3][k];
+      t.mid[k] = slot[y % 3][k];
+      t.dn[k] = slot[yd % 3][k];
+      t.out[k] = p->out->plane[k] + row;
+    }
+    t.alpha = p->params->alpha;
+    t.tonemap = tonemap;
+    t.clip = p->params->box == HUSH_TAA_CLIP;
+    if (!plan || !plan->blocks) {
+      for (int x = 0; x < W; x++) resolve_taps(&t, plan, p->prev, x, y, W);
+    } else {
+      interior_row(&t, plan, p->prev, row, W);
+      /* the border columns and the 3X3 footprints, through the taps */
+      resolve_taps(&t, plan, p->prev, 0, y, W);
+      if (W > 1) resolve_taps(&t, plan, p->prev, W - 1, y, W);
+      const size_t last = row + (size_t)W - 1;
+      for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
+           i = hush__reproject_next_3x3(plan, i + 1, last))
+        resolve_taps(&t, plan, p->prev, (int)(i - row), y, W);
+    }
+    if (p->params->out_view)
+      hush__view_export_span((const float *const *)t.out, 3, p->params->out_view, (uint32_t)y, 0,
+                             (uint32_t)W);
+  }
+}
+
 void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
                                  const float *const *color, const float *const *albedo,
                                  const hush_taa_params *params, int threads) {
   hush_planar *cur = &taa->current;
   const int W = (int)cur->width, H = (int)cur->height;
-  const int tonemap = params->tonemap;
-  const int use_history = taa->has_history && plan;
-  const float *const *prev = (const float *const *)taa->history[taa->latest].plane;
-  hush_planar *out = &taa->history[1 - taa->latest];
+  const taa_pass p = {color,  albedo, (const float *const *)taa->history[taa->latest].plane,
+                      taa->has_history ? plan : NULL, params, &taa->history[1 - taa->latest],
+                      W,      H};
   if (threads > H / 3) threads = H / 3;
   if (threads < 1) threads = 1;
-
   /* bands of at least 8 rows (each converts its two edge rows again) */
   int bands = threads * TAA_BANDS;
   if (bands > H / 8) bands = H / 8;
@@ -363,45 +413,9 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
       for (int k = 0; k < 3; k++)
         slot[s][k] = cur->plane[k] + (size_t)(3 * me + (s < H ? s : 0)) * W;
 #pragma omp for schedule(dynamic, 1)
-    for (int band = 0; band < bands; band++) {
-      const int y0 = (int)((long)H * band / bands), y1 = (int)((long)H * (band + 1) / bands);
-      int held[3] = {-1, -1, -1}; /* the source row in each slot */
-      for (int y = y0; y < y1; y++) {
-        const int yu = y > 0 ? y - 1 : 0, yd = y + 1 < H ? y + 1 : y;
-        const int need[3] = {yu, y, yd};
-        for (int q = 0; q < 3; q++)
-          if (held[need[q] % 3] != need[q]) {
-            ycocg_row(color, albedo, (size_t)need[q] * W, W, tonemap, slot[need[q] % 3]);
-            held[need[q] % 3] = need[q];
-          }
-        const size_t row = (size_t)y * W;
-        taa_row t;
-        for (int k = 0; k < 3; k++) {
-          t.up[k] = slot[yu % 3][k];
-          t.mid[k] = slot[y % 3][k];
-          t.dn[k] = slot[yd % 3][k];
-          t.out[k] = out->plane[k] + row;
-        }
-        t.alpha = params->alpha;
-        t.tonemap = tonemap;
-        t.clip = params->box == HUSH_TAA_CLIP;
-        if (!use_history || !plan->blocks) {
-          for (int x = 0; x < W; x++) resolve_taps(&t, use_history ? plan : NULL, prev, x, y, W);
-        } else {
-          interior_row(&t, plan, prev, row, W);
-          /* the border columns and the 3X3 footprints, through the taps */
-          resolve_taps(&t, plan, prev, 0, y, W);
-          if (W > 1) resolve_taps(&t, plan, prev, W - 1, y, W);
-          const size_t last = row + (size_t)W - 1;
-          for (size_t i = hush__reproject_next_3x3(plan, row + 1, last); i < last;
-               i = hush__reproject_next_3x3(plan, i + 1, last))
-            resolve_taps(&t, plan, prev, (int)(i - row), y, W);
-        }
-        if (params->out_view)
-          hush__view_export_span((const float *const *)t.out, 3, params->out_view, (uint32_t)y, 0,
-                                 (uint32_t)W);
-      }
-    }
+    for (int band = 0; band < bands; band++)
+      resolve_band(&p, slot, (int)((long)H * band / bands),
+                   (int)((long)H * (band + 1) / bands));
   }
   taa->latest = 1 - taa->latest;
   taa->has_history = 1;
