@@ -589,18 +589,32 @@ void hush__filter_timing_begin(struct hush_filter_t *f) {
   f->stage_start = hush__now_ms();
 }
 
-void hush__filter_timing_stage(struct hush_filter_t *f, const char *name) {
-  const double now = hush__now_ms();
+/* Adds ms to stage `name` (a new stage at the end). */
+static void timing_add(struct hush_filter_t *f, const char *name, double ms) {
   for (uint32_t i = 0; i < f->stage_count; i++)
     if (f->stage_names[i] == name || strcmp(f->stage_names[i], name) == 0) {
-      f->stage_ms[i] += now - f->stage_start;
-      f->stage_start = now;
+      f->stage_ms[i] += ms;
       return;
     }
   if (f->stage_count < HUSH_MAX_STAGES) {
     f->stage_names[f->stage_count] = name;
-    f->stage_ms[f->stage_count] = now - f->stage_start;
+    f->stage_ms[f->stage_count] = ms;
     f->stage_count++;
   }
+}
+
+void hush__filter_timing_stage(struct hush_filter_t *f, const char *name) {
+  const double now = hush__now_ms();
+  timing_add(f, name, now - f->stage_start);
+  f->stage_start = now;
+}
+
+void hush__filter_timing_split(struct hush_filter_t *f, const char *const *names,
+                               const double *weight, int n) {
+  const double now = hush__now_ms(), span = now - f->stage_start;
+  double total = 0.0;
+  for (int k = 0; k < n; k++) total += weight[k];
+  for (int k = 0; k < n; k++)
+    timing_add(f, names[k], total > 0.0 ? span * weight[k] / total : span / n);
   f->stage_start = now;
 }

@@ -146,6 +146,11 @@ hush_status hush__filter_scratch(struct hush_filter_t *f, hush_planar *img, int 
  * end of each stage; the time since the previous mark goes to that name. */
 void hush__filter_timing_begin(struct hush_filter_t *f);
 void hush__filter_timing_stage(struct hush_filter_t *f, const char *name);
+/* For stages run interleaved (block row by block row in the threads'
+ * loop): the time since the previous mark, shared among the n names in
+ * proportion to weight[k] (the threads' time in each; all 0: equally). */
+void hush__filter_timing_split(struct hush_filter_t *f, const char *const *names,
+                               const double *weight, int n);
 
 /* The registry (registry.c): every class this build has. */
 extern const hush_filter_class *const hush__filter_classes[];

@@ -162,6 +162,17 @@ hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
       in->use_motion ? (const float *const *)in->motion.plane : NULL, info, params, threads);
 }
 
+hush_status hush__gbuffer_reproject_begin(hush_filter f, hush_reprojector *rp,
+                                          const hush_gbuffer_inputs *in,
+                                          const hush_frame_info *info,
+                                          const hush_reproject_params *params,
+                                          hush_reproject_job *job) {
+  const int position = in->has_position && !in->has_holes;
+  return hush__reprojector_begin(
+      f->device, rp, position ? (const float *const *)in->position.plane : NULL,
+      in->use_motion ? (const float *const *)in->motion.plane : NULL, info, params, job);
+}
+
 /*
  * A surface hole's normal: the previous frame's at the pixel its centre
  * back-projects to (as reproject.h: motion vectors, or the filled depth on

@@ -52,6 +52,12 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *image
 hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,
                                     const hush_gbuffer_inputs *in, const hush_frame_info *info,
                                     const hush_reproject_params *params, int threads);
+/* The same, its rows left to the caller (hush__reprojector_begin). */
+hush_status hush__gbuffer_reproject_begin(hush_filter f, hush_reprojector *rp,
+                                          const hush_gbuffer_inputs *in,
+                                          const hush_frame_info *info,
+                                          const hush_reproject_params *params,
+                                          hush_reproject_job *job);
 
 /*
  * Holes (docs/holes.md): imports image spp_image (-1 or unbound: no holes)

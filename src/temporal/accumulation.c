@@ -62,6 +62,7 @@ typedef struct blend_ctx {
   float *oc[4], *om1, *om2, *oa;       /* this frame's set */
   float *variance;                     /* may be NULL; NULL without moments */
   int mom;                             /* the moments are kept (else pm*, om* NULL) */
+  int stream;                          /* outputs streamed past the caches */
   float alpha_min, alpha_mom_min, max_age;
 } blend_ctx;
 
@@ -183,10 +184,16 @@ static HUSH_ALWAYS_INLINE int chunk_diagonals(const hush_reproject_plan *plan, s
  * after the whole frame's blend, so reading its lines for ownership first
  * would only cost bandwidth. out[t] NULL: not written. */
 static HUSH_ALWAYS_INLINE void stream_staged(float *const out[8], const float *st, size_t stride,
-                                             int x, int len) {
-  for (int t = 0; t < 8; t++)
-    if (out[t])
+                                             int x, int len, int stream) {
+  for (int t = 0; t < 8; t++) {
+    if (!out[t]) continue;
+    if (stream)
       hush__stream_copy(out[t] + x, st + (size_t)t * stride, (size_t)len * sizeof(float));
+    else if (len == CHUNK) /* a copy of known size, inlined */
+      memcpy(out[t] + x, st + (size_t)t * stride, CHUNK * sizeof(float));
+    else
+      memcpy(out[t] + x, st + (size_t)t * stride, (size_t)len * sizeof(float));
+  }
 }
 
 /*
@@ -231,11 +238,18 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
   float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
   float st[8][CHUNK] __attribute__((aligned(64)));
+  /* the plan's kinds and masks widened first: with byte and 16-bit arrays
+   * in the loop below, gcc gave it 16- and 32-byte vectors (a chunk of 16
+   * of its smallest type), two to four registers for every float
+   * operation (as tblend_pixels) */
+  int32_t bils[CHUNK], hass[CHUNK];
+  for (int k = 0; k < len; k++) {
+    bils[k] = kind[x_begin + k] == HUSH_FOOTPRINT_BILINEAR;
+    hass[k] = mask[x_begin + k] != 0;
+  }
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
-    const int32_t o = contiguous | diagonals
-                          ? base + x
-                          : origin[x] & -(int32_t)(kind[x] == HUSH_FOOTPRINT_BILINEAR);
+    const int32_t o = contiguous | diagonals ? base + x : origin[x] & -bils[x - x_begin];
     /* MODE_DIAGONALS: the footprint on the second diagonal */
     const int second = diagonals & (origin[x] == base1 + x);
     const int32_t os = base1 + x;
@@ -264,7 +278,7 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
     q.ha = HUSH_APPLY4(pa, 6);
 #undef HUSH_APPLY4
 #undef HUSH_TAP
-    blend_compute(&p, &q, mask[x] != 0, nc);
+    blend_compute(&p, &q, hass[k], nc);
     st[0][k] = q.c0;
     if (nc > 1) st[1][k] = q.c1;
     if (nc > 2) st[2][k] = q.c2;
@@ -278,7 +292,7 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   }
   float *const outs[8] = {o0, nc > 1 ? o1 : NULL, nc > 2 ? o2 : NULL,
                           nc > 3 ? o3 : NULL, om1, om2, var, oa}; /* NULL: not written */
-  stream_staged(outs, st[0], CHUNK, x_begin, len);
+  stream_staged(outs, st[0], CHUNK, x_begin, len, b->stream);
 }
 
 /* Rows per chunk of the parallel blend (see hush__accum_blend). */
@@ -377,6 +391,7 @@ static void blend_setup(blend_ctx *b, const hush_accum *acc, const hush_reprojec
   b->pa = acc->age[src].plane[0];
   b->oa = acc->age[dst].plane[0];
   b->variance = b->mom ? variance : NULL;
+  b->stream = 1;
   b->alpha_min = params->alpha_min;
   b->alpha_mom_min = params->alpha_moments_min;
   b->max_age = (float)(params->max_age < 1 ? 1 : params->max_age);
@@ -420,6 +435,37 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
   else
     blend_all_color(&b, acc->channels, (int)acc->height, threads);
   acc->latest = dst;
+  acc->has_history = 1;
+  acc->empty = 0;
+}
+
+void hush__accum_blend_rows(const hush_accum *acc, const hush_reproject_plan *plan,
+                            const float *const *sample, const hush_accum_params *params, int y0,
+                            int y1, int stream) {
+  blend_ctx b;
+  blend_setup(&b, acc, plan, sample, params, NULL);
+  b.stream = stream;
+  for (int y = y0; y < y1; y++) {
+    if (b.mom) {
+      switch (acc->channels) {
+      case 1: blend_rows(&b, y, 1, 1); break;
+      case 2: blend_rows(&b, y, 2, 1); break;
+      case 3: blend_rows(&b, y, 3, 1); break;
+      default: blend_rows(&b, y, 4, 1); break;
+      }
+    } else {
+      switch (acc->channels) {
+      case 1: blend_rows(&b, y, 1, 0); break;
+      case 2: blend_rows(&b, y, 2, 0); break;
+      case 3: blend_rows(&b, y, 3, 0); break;
+      default: blend_rows(&b, y, 4, 0); break;
+      }
+    }
+  }
+}
+
+void hush__accum_blend_done(hush_accum *acc) {
+  acc->latest = 1 - acc->latest;
   acc->has_history = 1;
   acc->empty = 0;
 }
@@ -566,7 +612,7 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
       st[7][k] = age;
       empty |= !(age > 0.0f) & (kind[x] != HUSH_FOOTPRINT_3X3);
     }
-    stream_staged(outs, st[0], PIECE, x0, x1 - x0);
+    stream_staged(outs, st[0], PIECE, x0, x1 - x0, b->stream);
   }
   return empty;
 }
@@ -637,6 +683,7 @@ typedef struct tblend_ctx {
   size_t W, size;
   const float *age;
   float alpha_min;
+  int stream; /* outputs streamed past the caches */
 } tblend_ctx;
 
 /*
@@ -675,9 +722,14 @@ static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *c
   float *o0 = out[0] + row, *o1 = out[nc > 1] + row;
   float *o2 = out[nc > 2 ? 2 : 0] + row, *o3 = out[nc > 3 ? 3 : 0] + row;
   float st[4][CHUNK] __attribute__((aligned(64)));
+  /* the footprint kinds widened first: with a byte array in the loop
+   * below, gcc gave it 16-byte vectors (a chunk of 16 bytes), four xmm
+   * registers for every float operation */
+  int32_t bils[CHUNK];
+  for (int k = 0; k < len; k++) bils[k] = kind[x_begin + k] == HUSH_FOOTPRINT_BILINEAR;
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
-    const int bil = kind[x] == HUSH_FOOTPRINT_BILINEAR;
+    const int bil = bils[x - x_begin];
     const int32_t o = contiguous | diagonals ? base + x : origin[x] & -(int32_t)bil;
     const int second = diagonals & (origin[x] == base1 + x); /* as blend_pixels */
     const int32_t os = base1 + x;
@@ -708,7 +760,7 @@ static HUSH_ALWAYS_INLINE void tblend_pixels(const tblend_ctx *t, const float *c
   }
   float *const outs[8] = {o0, nc > 1 ? o1 : NULL, nc > 2 ? o2 : NULL, nc > 3 ? o3 : NULL,
                           NULL, NULL, NULL, NULL};
-  stream_staged(outs, st[0], CHUNK, x_begin, len);
+  stream_staged(outs, st[0], CHUNK, x_begin, len, t->stream);
 }
 
 /* One row of hush__temporal_blend for nc (1..4) channels, chunk by chunk
@@ -773,6 +825,45 @@ void hush__temporal_blend(const hush_reproject_plan *plan, const float *const *p
   hush__temporal_blend_rows(plan, prev, sample, channels, age, alpha_min, out, NULL, threads);
 }
 
+/* Row y of hush__temporal_blend. */
+static void tblend_one_row(const tblend_ctx *t, const float *const *prev,
+                           const float *const *sample, int channels, float *const *out, int y) {
+  const hush_reproject_plan *plan = t->plan;
+  const size_t W = t->W;
+  const size_t row = (size_t)y * W;
+  if (!prev) {
+    for (int c = 0; c < channels; c++)
+      for (size_t i = row; i < row + W; i++) out[c][i] = sample[c][i];
+    return;
+  }
+  if (!plan->blocks) {
+    /* per pixel through the taps */
+    for (size_t i = row; i < row + W; i++) {
+      const float a = blend_alpha(t->age[i], t->alpha_min);
+      int32_t idx[9];
+      float w[9];
+      const int n = hush__reproject_taps(plan, i, idx, w);
+      for (int c = 0; c < channels; c++)
+        out[c][i] = n ? (1.0f - a) * hush__reproject_apply(prev[c], idx, w, n) + a * sample[c][i]
+                      : sample[c][i];
+    }
+    return;
+  }
+  /* blocks (NONE pixels: the sample), then the 3X3 pixels; channels in
+   * groups of up to 4 per pass */
+  for (int c0 = 0; c0 < channels; c0 += 4) {
+    const float *const *p = prev + c0, *const *s = sample + c0;
+    float *const *o = out + c0;
+    switch (channels - c0) {
+    case 1: tblend_row(t, p, s, o, row, 1); break;
+    case 2: tblend_row(t, p, s, o, row, 2); break;
+    case 3: tblend_row(t, p, s, o, row, 3); break;
+    default: tblend_row(t, p, s, o, row, 4); break;
+    }
+  }
+  if (t->stream) hush__stream_fence();
+}
+
 void hush__temporal_blend_rows(const hush_reproject_plan *plan, const float *const *prev,
                                const float *const *sample, int channels, const float *age,
                                float alpha_min, float *const *out, const float *rows,
@@ -781,43 +872,22 @@ void hush__temporal_blend_rows(const hush_reproject_plan *plan, const float *con
   if (channels > BLEND_MAX) channels = BLEND_MAX;
   const int H = (int)plan->height;
   const size_t W = plan->width;
-  const tblend_ctx t = {plan, W, W * plan->height, age, alpha_min};
+  const tblend_ctx t = {plan, W, W * plan->height, age, alpha_min, 1};
   /* rows in small dynamic chunks, as hush__accum_blend: gathered chunks
    * cost ~3x contiguous ones and cluster in bands */
 #pragma omp parallel for schedule(dynamic, BLEND_ROWS) num_threads(threads)
   for (int y = 0; y < H; y++) {
     if (rows && rows[y] == 0.0f) continue;
-    const size_t row = (size_t)y * W;
-    if (!prev) {
-      for (int c = 0; c < channels; c++)
-        for (size_t i = row; i < row + W; i++) out[c][i] = sample[c][i];
-      continue;
-    }
-    if (!plan->blocks) {
-      /* per pixel through the taps */
-      for (size_t i = row; i < row + W; i++) {
-        const float a = blend_alpha(age[i], alpha_min);
-        int32_t idx[9];
-        float w[9];
-        const int n = hush__reproject_taps(plan, i, idx, w);
-        for (int c = 0; c < channels; c++)
-          out[c][i] = n ? (1.0f - a) * hush__reproject_apply(prev[c], idx, w, n) + a * sample[c][i]
-                        : sample[c][i];
-      }
-      continue;
-    }
-    /* blocks (NONE pixels: the sample), then the 3X3 pixels; channels in
-     * groups of up to 4 per pass */
-    for (int c0 = 0; c0 < channels; c0 += 4) {
-      const float *const *p = prev + c0, *const *s = sample + c0;
-      float *const *o = out + c0;
-      switch (channels - c0) {
-      case 1: tblend_row(&t, p, s, o, row, 1); break;
-      case 2: tblend_row(&t, p, s, o, row, 2); break;
-      case 3: tblend_row(&t, p, s, o, row, 3); break;
-      default: tblend_row(&t, p, s, o, row, 4); break;
-      }
-    }
-    hush__stream_fence();
+    tblend_one_row(&t, prev, sample, channels, out, y);
   }
+}
+
+void hush__temporal_blend_range(const hush_reproject_plan *plan, const float *const *prev,
+                                const float *const *sample, int channels, const float *age,
+                                float alpha_min, float *const *out, int y0, int y1,
+                                int stream) {
+  if (channels > BLEND_MAX) channels = BLEND_MAX;
+  const size_t W = plan->width;
+  const tblend_ctx t = {plan, W, W * plan->height, age, alpha_min, stream};
+  for (int y = y0; y < y1; y++) tblend_one_row(&t, prev, sample, channels, out, y);
 }

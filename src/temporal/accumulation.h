@@ -93,6 +93,20 @@ void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
                              const float *const *sample, const float *spp,
                              const hush_accum_params *params, float *variance, int threads);
 
+/*
+ * hush__accum_blend in pieces, for a caller that interleaves it with other
+ * work: rows y0..y1-1 (any order, any thread; each pixel is blended on its
+ * own), then hush__accum_blend_done once all rows are done, which makes the
+ * result the latest. For frames without holes (where hush__accum_blend_holes
+ * would call hush__accum_blend); no variance. stream 1: the outputs bypass
+ * the caches (hush__accum_blend's choice: nothing reads them before the
+ * frame is done); 0: cached, for a caller that reads the rows right away.
+ */
+void hush__accum_blend_rows(const hush_accum *acc, const hush_reproject_plan *plan,
+                            const float *const *sample, const hush_accum_params *params, int y0,
+                            int y1, int stream);
+void hush__accum_blend_done(hush_accum *acc);
+
 static inline hush_planar *hush__accum_color(hush_accum *acc) { return &acc->color[acc->latest]; }
 static inline hush_planar *hush__accum_moments(hush_accum *acc) {
   return &acc->moments[acc->latest];
@@ -123,5 +137,12 @@ void hush__temporal_blend_rows(const hush_reproject_plan *plan, const float *con
                                const float *const *sample, int channels, const float *age,
                                float alpha_min, float *const *out, const float *rows,
                                int threads);
+/* hush__temporal_blend on rows y0..y1-1, on the calling thread (for a
+ * caller that shares the rows among its own threads); stream as
+ * hush__accum_blend_rows. */
+void hush__temporal_blend_range(const hush_reproject_plan *plan, const float *const *prev,
+                                const float *const *sample, int channels, const float *age,
+                                float alpha_min, float *const *out, int y0, int y1,
+                                int stream);
 
 #endif

@@ -74,12 +74,10 @@ void hush__reproject_plan_free(hush_reproject_plan *plan) {
   memset(plan, 0, sizeof *plan);
 }
 
-void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads) {
-  const int H = (int)plan->height;
+/* Rows y0..y1-1 of the plan: NONE. */
+static void clear_rows(hush_reproject_plan *plan, int y0, int y1) {
   const size_t W = plan->width;
-  if (threads < 1) threads = 1;
-#pragma omp parallel for schedule(static) num_threads(threads)
-  for (int y = 0; y < H; y++) {
+  for (int y = y0; y < y1; y++) {
     const size_t row = (size_t)y * W;
     memset(plan->origin + row, 0, W * sizeof *plan->origin);
     memset(plan->mask + row, 0, W * sizeof *plan->mask);
@@ -88,30 +86,18 @@ void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads) {
   }
 }
 
+void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads) {
+  const int H = (int)plan->height;
+  if (threads < 1) threads = 1;
+#pragma omp parallel for schedule(static) num_threads(threads)
+  for (int y = 0; y < H; y++) clear_rows(plan, y, y + 1);
+}
+
 /* ---- building ------------------------------------------------------------ */
 
-/* Everything the per-pixel loop needs, resolved once per frame. */
-typedef struct build_ctx {
-  const hush_reproject_input *in;
-  const hush_gbuffer *prev;
-  int W, H;
-  int vectors;      /* HUSH_MOTION_VECTORS */
-  int has_position; /* in->position usable */
-  int inv_ok;       /* the current camera can be inverted */
-  int std_proj;     /* view_to_clip's z and w rows depend on view z only */
-  int use_id;       /* both frames have ids and the test is on */
-  int fallback;
-  float tol, grad, cos_min;
-  float jx, jy;
-  /* std_proj: clip = (nx w, ny w, p10 (-z) + p14, w), w = p11 (-z) + p15 */
-  float p10, p11, p14, p15;
-  float cur_to_prev[16]; /* prev_vp * inverse(view_to_clip * world_to_view) */
-  float cur_to_prev_view_z[4]; /* row 2 of prev_world_to_view * that inverse */
-  /* generic projections */
-  float inv_v2c[16], inv_w2v[16];
-  float prev_vp[16];  /* prev_view_to_clip * prev_world_to_view */
-  float prev_w2v[16]; /* for the expected depth */
-} build_ctx;
+/* Everything the per-pixel loop needs, resolved once per frame
+ * (reproject.h). */
+typedef hush_reproject_job build_ctx;
 
 /* The point at view depth z (w = 1) or, for background, the direction
  * (w = 0) on the ray through the CENTRE of pixel (x, y), in world space, for
@@ -163,7 +149,7 @@ typedef struct span_out {
 static HUSH_ALWAYS_INLINE void span_vectors(const build_ctx *c, int y, int x_begin, int n,
                                             float *restrict pxo, float *restrict pyo,
                                             float *restrict zeo, const int use_pos) {
-  const hush_reproject_input *in = c->in;
+  const hush_reproject_input *in = &c->in;
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   const float *zr = in->cur.depth + row;
   const float *mx = in->motion[0] + row, *my = in->motion[1] + row;
@@ -209,7 +195,7 @@ enum { POS_NONE = 0, POS_SURFACES = 1, POS_ALL = 2 };
 static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begin, int n,
                                            float *restrict pxo, float *restrict pyo,
                                            float *restrict zeo, const int use_pos) {
-  const hush_reproject_input *in = c->in;
+  const hush_reproject_input *in = &c->in;
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   const float *zr = in->cur.depth + row;
   /* unread without use_pos: any valid pointer (no arithmetic on NULL) */
@@ -281,7 +267,7 @@ static HUSH_ALWAYS_INLINE void span_camera(const build_ctx *c, int y, int x_begi
 
 /* Whether pixels x_begin .. x_begin + n - 1 of row y are all surfaces. */
 static int span_all_surface(const build_ctx *c, int y, int x_begin, int n) {
-  const float *z = c->in->cur.depth + (size_t)y * (size_t)c->W + (size_t)x_begin;
+  const float *z = c->in.cur.depth + (size_t)y * (size_t)c->W + (size_t)x_begin;
   int bg = 0;
   for (int k = 0; k < n; k++) bg |= !(z[k] > 0.0f);
   return !bg;
@@ -321,7 +307,7 @@ static void back_project_span(const build_ctx *c, int y, int x_begin, int n, spa
 /* One pixel, any invertible projection (or none, with position/motion). */
 static void back_project_general(const build_ctx *c, int x, int y, size_t i, float *pxo,
                                  float *pyo, float *zeo) {
-  const hush_reproject_input *in = c->in;
+  const hush_reproject_input *in = &c->in;
   const float z = in->cur.depth[i];
   const int bg = !(z > 0.0f);
   const float nx = 2.0f * ((float)x + 0.5f) / (float)c->W - 1.0f;
@@ -387,7 +373,7 @@ static inline int same_surface_v(float zj, float ni0, float ni1, float ni2, floa
 }
 
 static inline int same_surface(const build_ctx *c, size_t i, size_t j) {
-  const hush_gbuffer *g = &c->in->cur;
+  const hush_gbuffer *g = &c->in.cur;
   const float idi = c->use_id ? g->id[i] : 0.0f, idj = c->use_id ? g->id[j] : 0.0f;
   return same_surface_v(g->depth[j], g->normal[0][i], g->normal[1][i], g->normal[2][i],
                         g->normal[0][j], g->normal[1][j], g->normal[2][j], idi, idj, c->cos_min,
@@ -407,7 +393,7 @@ static inline float min_slope(float z, float za, float zb, int a_ok, int b_ok) {
  * (when has_a) and i + step (when has_b) on the same surface: the smaller
  * one-sided difference; 0 without such a neighbour. */
 static float depth_slope(const build_ctx *c, size_t i, size_t step, int has_a, int has_b) {
-  const float *z = c->in->cur.depth;
+  const float *z = c->in.cur.depth;
   const int a_ok = has_a && same_surface(c, i, i - step);
   const int b_ok = has_b && same_surface(c, i, i + step);
   return min_slope(z[i], a_ok ? z[i - step] : 0.0f, b_ok ? z[i + step] : 0.0f, a_ok, b_ok);
@@ -416,7 +402,7 @@ static float depth_slope(const build_ctx *c, size_t i, size_t step, int has_a, i
 /* Tap j of the previous frame, at offset (ox, oy) pixels from the
  * back-projected point. */
 static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, float oy) {
-  const hush_gbuffer *p = c->prev;
+  const hush_gbuffer *p = &c->prev;
   const float zt = p->depth[j];
   if (r->bg) {
     if (zt > 0.0f) return 0;
@@ -454,7 +440,7 @@ static inline int tap_ok(const build_ctx *c, pixel_ref *r, int32_t j, float ox, 
  */
 static unsigned fallback_depths(const build_ctx *c, const pixel_ref *r, int cx, int cy, float sx,
                                 float sy) {
-  const float *pz = c->prev->depth;
+  const float *pz = c->prev.depth;
   const int W = c->W, H = c->H;
   const float gx = r->slopes ? r->gx : 0.0f, gy = r->slopes ? r->gy : 0.0f;
   unsigned pass = 0;
@@ -496,7 +482,7 @@ typedef struct footprint {
 static footprint plan_pixel(const build_ctx *c, int blocks, int x, int y, float px, float py,
                             float ze, int have_slopes, float gx, float gy,
                             int bilinear_empty) {
-  const hush_gbuffer *cur = &c->in->cur;
+  const hush_gbuffer *cur = &c->in.cur;
   const int W = c->W, H = c->H;
   const size_t i = (size_t)y * (size_t)W + (size_t)x;
   unsigned mask = 0;
@@ -658,7 +644,7 @@ static HUSH_ALWAYS_INLINE unsigned span_tap(const prev_view *p, float zt, float 
 static HUSH_ALWAYS_INLINE void span_slopes(const build_ctx *c, int y, int x_begin, int n,
                                            const float *restrict sze, float *restrict gx,
                                            float *restrict gy, const int use_id) {
-  const hush_gbuffer *g = &c->in->cur;
+  const hush_gbuffer *g = &c->in.cur;
   const int W = c->W, H = c->H;
   const size_t row = (size_t)y * (size_t)W + (size_t)x_begin;
   const int has_up = y > 0, has_down = y + 1 < H;
@@ -768,7 +754,7 @@ static HUSH_ALWAYS_INLINE void test_pixels(const build_ctx *c, size_t row, int k
   const int contiguous = mode == TAPS_CONTIGUOUS, window = mode == TAPS_WINDOW;
   const int diagonals = mode == TAPS_DIAGONALS;
   const int k_end = k_begin + len;
-  const hush_gbuffer *cur = &c->in->cur, *pg = c->prev;
+  const hush_gbuffer *cur = &c->in.cur, *pg = &c->prev;
   const int W = c->W;
   const float *zr = cur->depth + row;
   const float *n0 = cur->normal[0] + row, *n1 = cur->normal[1] + row, *n2 = cur->normal[2] + row;
@@ -898,7 +884,7 @@ static int chunk_mode(const build_ctx *c, const span_taps *o, int k0, int contig
   _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
   uint8_t use[CHUNK];
   for (int k = 0; k < CHUNK; k++) use[k] = o->inside[k0 + k] != 0;
-  const hush_gbuffer *pg = c->prev;
+  const hush_gbuffer *pg = &c->prev;
   const float *const planes[WINDOW_PLANES] = {pg->depth, pg->normal[0], pg->normal[1],
                                               pg->normal[2], use_id ? pg->id : NULL};
   return window_read(o->origin + k0, use, c->W, (size_t)c->W * (size_t)c->H, planes,
@@ -948,12 +934,12 @@ static HUSH_ALWAYS_INLINE int span_diagonals(const build_ctx *c, const span_taps
  */
 static HUSH_ALWAYS_INLINE void prefetch_inputs(const build_ctx *c, size_t ahead, size_t i,
                                                const int use_id) {
-  const hush_gbuffer *g = &c->in->cur;
+  const hush_gbuffer *g = &c->in.cur;
   /* the first five: what span_slopes reads */
   const float *const planes[10] = {g->depth,          g->normal[0],       g->normal[1],
                                    g->normal[2],      use_id ? g->id : NULL,
-                                   c->in->motion[0],  c->in->motion[1],   c->in->position[0],
-                                   c->in->position[1], c->in->position[2]};
+                                   c->in.motion[0],  c->in.motion[1],   c->in.position[0],
+                                   c->in.position[1], c->in.position[2]};
   hush__prefetch_planes(planes, 10, (ptrdiff_t)ahead * (ptrdiff_t)sizeof(float));
   hush__prefetch_planes(planes, 5,
                         (ptrdiff_t)(i + (size_t)c->W + BELOW_AHEAD) * (ptrdiff_t)sizeof(float));
@@ -967,7 +953,7 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
                                          const int use_id, const int grad_test) {
   const size_t row = (size_t)y * (size_t)c->W + (size_t)x_begin;
   span_footprints(c->W, c->H, spx, spy, o, n);
-  const hush_gbuffer *pg = c->prev;
+  const hush_gbuffer *pg = &c->prev;
   const float *const prev_planes[WINDOW_PLANES] = {pg->depth, pg->normal[0], pg->normal[1],
                                                    pg->normal[2], use_id ? pg->id : NULL};
   for (int k0 = 0; k0 < n; k0 += CHUNK) {
@@ -1026,7 +1012,8 @@ static HUSH_ALWAYS_INLINE void test_span(const build_ctx *c, int y, int x_begin,
  * pass over the row. */
 static void store_span(const span_taps *restrict st, int32_t *restrict origin,
                        uint16_t *restrict mask, uint8_t *restrict kind, float *restrict w0,
-                       float *restrict w1, float *restrict w2, float *restrict w3, int n) {
+                       float *restrict w1, float *restrict w2, float *restrict w3, int n,
+                       int stream) {
   /* staged in L1, then streamed to the plan (core/stream.h): the plan is
    * read only after the whole frame's build */
   int32_t so[SPAN];
@@ -1044,6 +1031,26 @@ static void store_span(const span_taps *restrict st, int32_t *restrict origin,
     sw[1][k] = bil ? w[1] : 0.0f;
     sw[2][k] = bil ? w[2] : 0.0f;
     sw[3][k] = bil ? w[3] : 0.0f;
+  }
+  if (!stream && n == SPAN) { /* copies of known size, inlined */
+    memcpy(origin, so, SPAN * sizeof *origin);
+    memcpy(mask, sm, SPAN * sizeof *mask);
+    memcpy(kind, sk, SPAN * sizeof *kind);
+    memcpy(w0, sw[0], SPAN * sizeof *w0);
+    memcpy(w1, sw[1], SPAN * sizeof *w1);
+    memcpy(w2, sw[2], SPAN * sizeof *w2);
+    memcpy(w3, sw[3], SPAN * sizeof *w3);
+    return;
+  }
+  if (!stream) {
+    memcpy(origin, so, (size_t)n * sizeof *origin);
+    memcpy(mask, sm, (size_t)n * sizeof *mask);
+    memcpy(kind, sk, (size_t)n * sizeof *kind);
+    memcpy(w0, sw[0], (size_t)n * sizeof *w0);
+    memcpy(w1, sw[1], (size_t)n * sizeof *w1);
+    memcpy(w2, sw[2], (size_t)n * sizeof *w2);
+    memcpy(w3, sw[3], (size_t)n * sizeof *w3);
+    return;
   }
   hush__stream_copy(origin, so, (size_t)n * sizeof *origin);
   hush__stream_copy(mask, sm, (size_t)n * sizeof *mask);
@@ -1123,29 +1130,28 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
     }
     const size_t i = row + (size_t)x0;
     store_span(&st, plan->origin + i, plan->mask + i, plan->kind + i, plan->w[0] + i,
-               plan->w[1] + i, plan->w[2] + i, plan->w[3] + i, n);
+               plan->w[1] + i, plan->w[2] + i, plan->w[3] + i, n, c->stream);
   }
 }
 
 /* Rows per chunk of the parallel build (see hush__reproject_build). */
 #define BUILD_ROWS 4
 
-hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
+hush_status hush__reproject_begin(hush_device device, const hush_reproject_plan *plan,
                                   const hush_reproject_input *in, const hush_gbuffer *prev,
                                   const hush_frame_info *info, const hush_reproject_params *params,
-                                  int threads) {
-  if (threads < 1) threads = 1;
+                                  hush_reproject_job *job) {
   const int vectors = info->motion == HUSH_MOTION_VECTORS;
   if (vectors && (!in->motion[0] || !in->motion[1]))
     return hush__fail(device, HUSH_ERROR_INVALID_OPERATION,
                       "motion source is HUSH_MOTION_VECTORS but no motion image is bound");
   build_ctx c;
   memset(&c, 0, sizeof c);
-  c.in = in;
-  c.prev = prev;
+  c.in = *in;
   c.W = (int)plan->width;
   c.H = (int)plan->height;
   c.vectors = vectors;
+  c.stream = 1;
   c.has_position = in->position[0] && in->position[1] && in->position[2];
   const float *v2c = info->view_to_clip;
   float vp[16], inv_vp[16];
@@ -1157,9 +1163,11 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
                       "camera reprojection without 'position' needs invertible world_to_view "
                       "and view_to_clip matrices");
   if (!prev || info->history == HUSH_HISTORY_RESET) {
-    hush__reproject_plan_clear(plan, threads);
+    c.clear = 1;
+    *job = c;
     return HUSH_OK;
   }
+  c.prev = *prev;
   c.use_id = params->use_id && in->cur.id && prev->id;
   c.fallback = params->fallback_3x3;
   c.tol = params->depth_tolerance;
@@ -1183,8 +1191,33 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
     hush_m4_mul(m, info->prev_world_to_view, inv_vp);
     for (int k = 0; k < 4; k++) c.cur_to_prev_view_z[k] = m[k * 4 + 2];
   }
+  *job = c;
+  return HUSH_OK;
+}
 
-  const int H = c.H;
+void hush__reproject_rows(const hush_reproject_job *job, hush_reproject_plan *plan, int y0,
+                          int y1) {
+  if (job->clear) {
+    clear_rows(plan, y0, y1);
+    return;
+  }
+  for (int y = y0; y < y1; y++) build_row(job, plan, y);
+  if (job->stream) hush__stream_fence();
+}
+
+hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
+                                  const hush_reproject_input *in, const hush_gbuffer *prev,
+                                  const hush_frame_info *info, const hush_reproject_params *params,
+                                  int threads) {
+  if (threads < 1) threads = 1;
+  hush_reproject_job job;
+  hush_status s = hush__reproject_begin(device, plan, in, prev, info, params, &job);
+  if (s) return s;
+  if (job.clear) {
+    hush__reproject_plan_clear(plan, threads);
+    return HUSH_OK;
+  }
+  const int H = job.H;
   /* Rows cost very different amounts (a disocclusion or a border runs
    * plan_pixel's scalar path; a row whose footprints do not follow each
    * other gathers its taps), and they cluster in bands: a static split in
@@ -1192,10 +1225,7 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
    * handed out in small chunks instead; each row is computed on its own,
    * so the plan does not depend on which thread builds it. */
 #pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
-  for (int y = 0; y < H; y++) {
-    build_row(&c, plan, y);
-    hush__stream_fence();
-  }
+  for (int y = 0; y < H; y++) hush__reproject_rows(&job, plan, y, y + 1);
   return HUSH_OK;
 }
 
@@ -1294,10 +1324,10 @@ static void gbuffer_of(const hush_gbuffer_store *st, hush_gbuffer *g) {
   g->id = st->has_id ? st->id.plane[0] : NULL;
 }
 
-hush_status hush__reprojector_build(hush_device device, hush_reprojector *r,
+hush_status hush__reprojector_begin(hush_device device, hush_reprojector *r,
                                     const float *const *position, const float *const *motion,
                                     const hush_frame_info *info,
-                                    const hush_reproject_params *params, int threads) {
+                                    const hush_reproject_params *params, hush_reproject_job *job) {
   hush_reproject_input in;
   memset(&in, 0, sizeof in);
   gbuffer_of(hush__reprojector_next(r), &in.cur);
@@ -1307,10 +1337,34 @@ hush_status hush__reprojector_build(hush_device device, hush_reprojector *r,
     for (int k = 0; k < 2; k++) in.motion[k] = motion[k];
   hush_gbuffer prev;
   gbuffer_of(&r->store[r->latest], &prev);
-  hush_status s = hush__reproject_build(device, &r->plan, &in, r->has_history ? &prev : NULL,
-                                        info, params, threads);
+  hush_status s = hush__reproject_begin(device, &r->plan, &in, r->has_history ? &prev : NULL,
+                                        info, params, job);
   if (s) return s;
   r->latest = 1 - r->latest;
   r->has_history = 1;
+  return HUSH_OK;
+}
+
+hush_status hush__reprojector_build(hush_device device, hush_reprojector *r,
+                                    const float *const *position, const float *const *motion,
+                                    const hush_frame_info *info,
+                                    const hush_reproject_params *params, int threads) {
+  hush_reproject_job job;
+  hush_status s = hush__reprojector_begin(device, r, position, motion, info, params, &job);
+  if (s) return s;
+  if (threads < 1) threads = 1;
+  if (job.clear) {
+    hush__reproject_plan_clear(&r->plan, threads);
+    return HUSH_OK;
+  }
+  const int H = job.H;
+  /* Rows cost very different amounts (a disocclusion or a border runs
+   * plan_pixel's scalar path; a row whose footprints do not follow each
+   * other gathers its taps), and they cluster in bands: a static split in
+   * halves left one thread with ~1.4x the work of the other. Rows are
+   * handed out in small chunks instead; each row is computed on its own,
+   * so the plan does not depend on which thread builds it. */
+#pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
+  for (int y = 0; y < H; y++) hush__reproject_rows(&job, &r->plan, y, y + 1);
   return HUSH_OK;
 }

@@ -164,6 +164,46 @@ void hush__reproject_plan_free(hush_reproject_plan *plan);
 void hush__reproject_plan_clear(hush_reproject_plan *plan, int threads);
 
 /*
+ * A plan built in pieces: hush__reproject_begin resolves the frame's
+ * constants (and fails as hush__reproject_build does), hush__reproject_rows
+ * builds rows y0..y1-1 (rows in any order, from any thread: each row is
+ * computed on its own). Together they give hush__reproject_build's plan.
+ * The job copies in and prev (their planes are only pointed to).
+ */
+typedef struct hush_reproject_job {
+  hush_reproject_input in;
+  hush_gbuffer prev;
+  int clear;        /* no history: the rows are cleared */
+  int stream;       /* the plan's stores bypass the caches (1, the default: it
+                     * is read after the whole frame's build); 0 for a caller
+                     * that reads each piece right after building it */
+  int W, H;
+  int vectors;      /* HUSH_MOTION_VECTORS */
+  int has_position; /* in.position usable */
+  int inv_ok;       /* the current camera can be inverted */
+  int std_proj;     /* view_to_clip's z and w rows depend on view z only */
+  int use_id;       /* both frames have ids and the test is on */
+  int fallback;
+  float tol, grad, cos_min;
+  float jx, jy;
+  /* std_proj: clip = (nx w, ny w, p10 (-z) + p14, w), w = p11 (-z) + p15 */
+  float p10, p11, p14, p15;
+  float cur_to_prev[16]; /* prev_vp * inverse(view_to_clip * world_to_view) */
+  float cur_to_prev_view_z[4]; /* row 2 of prev_world_to_view * that inverse */
+  /* generic projections */
+  float inv_v2c[16], inv_w2v[16];
+  float prev_vp[16];  /* prev_view_to_clip * prev_world_to_view */
+  float prev_w2v[16]; /* for the expected depth */
+} hush_reproject_job;
+
+hush_status hush__reproject_begin(hush_device device, const hush_reproject_plan *plan,
+                                  const hush_reproject_input *in, const hush_gbuffer *prev,
+                                  const hush_frame_info *info, const hush_reproject_params *params,
+                                  hush_reproject_job *job);
+void hush__reproject_rows(const hush_reproject_job *job, hush_reproject_plan *plan, int y0,
+                          int y1);
+
+/*
  * Builds the plan of this frame against the previous frame's G-buffer prev.
  * With prev == NULL or info->history == HUSH_HISTORY_RESET the plan is
  * cleared. Fails (and leaves the plan untouched) with
@@ -745,5 +785,12 @@ hush_status hush__reprojector_build(hush_device device, hush_reprojector *r,
                                     const float *const *position, const float *const *motion,
                                     const hush_frame_info *info,
                                     const hush_reproject_params *params, int threads);
+/* As hush__reprojector_build, the plan's rows left to the caller: after
+ * it, hush__reproject_rows(job, &r->plan, ...) over all rows gives the same
+ * plan (the frame has already become the previous one). */
+hush_status hush__reprojector_begin(hush_device device, hush_reprojector *r,
+                                    const float *const *position, const float *const *motion,
+                                    const hush_frame_info *info,
+                                    const hush_reproject_params *params, hush_reproject_job *job);
 
 #endif

@@ -340,14 +340,9 @@ static void ycocg_row(const float *const *color, const float *const *albedo, siz
  */
 #define TAA_BANDS 8
 
-/* What every row of hush__taa_resolve_modulated reads and writes. */
-typedef struct taa_pass {
-  const float *const *color, *const *albedo, *const *prev;
-  const hush_reproject_plan *plan; /* NULL: no history */
-  const hush_taa_params *params;
-  hush_planar *out;
-  int W, H;
-} taa_pass;
+/* What every row of hush__taa_resolve_modulated reads and writes
+ * (taa.h). */
+typedef hush_taa_job taa_pass;
 
 /* Rows y0..y1-1, the thread's ring in slot (its held rows start over). */
 static void resolve_band(const taa_pass *p, float *slot[3][3], int y0, int y1) {
@@ -391,14 +386,46 @@ static void resolve_band(const taa_pass *p, float *slot[3][3], int y0, int y1) {
   }
 }
 
+void hush__taa_begin(const hush_taa *taa, const hush_reproject_plan *plan,
+                     const float *const *color, const float *const *albedo,
+                     const hush_taa_params *params, hush_taa_job *job) {
+  const hush_planar *cur = &taa->current;
+  const taa_pass p = {color,
+                      albedo,
+                      (const float *const *)taa->history[taa->latest].plane,
+                      taa->has_history ? plan : NULL,
+                      params,
+                      (hush_planar *)&taa->history[1 - taa->latest],
+                      cur->plane,
+                      (int)cur->width,
+                      (int)cur->height};
+  *job = p;
+}
+
+/* Thread me's ring: rows 3 me .. 3 me + 2 of the current planes. */
+static void ring_of(const taa_pass *p, int me, float *slot[3][3]) {
+  for (int s = 0; s < 3; s++) /* a frame of fewer than 3 rows uses slots 0..H-1 only */
+    for (int k = 0; k < 3; k++)
+      slot[s][k] = p->ring[k] + (size_t)(3 * me + (s < p->H ? s : 0)) * p->W;
+}
+
+void hush__taa_rows(const hush_taa_job *job, int me, int y0, int y1) {
+  float *slot[3][3];
+  ring_of(job, me, slot);
+  resolve_band(job, slot, y0, y1);
+}
+
+void hush__taa_done(hush_taa *taa) {
+  taa->latest = 1 - taa->latest;
+  taa->has_history = 1;
+}
+
 void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
                                  const float *const *color, const float *const *albedo,
                                  const hush_taa_params *params, int threads) {
-  hush_planar *cur = &taa->current;
-  const int W = (int)cur->width, H = (int)cur->height;
-  const taa_pass p = {color,  albedo, (const float *const *)taa->history[taa->latest].plane,
-                      taa->has_history ? plan : NULL, params, &taa->history[1 - taa->latest],
-                      W,      H};
+  taa_pass p;
+  hush__taa_begin(taa, plan, color, albedo, params, &p);
+  const int H = p.H;
   if (threads > H / 3) threads = H / 3;
   if (threads < 1) threads = 1;
   /* bands of at least 8 rows (each converts its two edge rows again) */
@@ -407,18 +434,14 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
   if (bands < threads) bands = threads;
 #pragma omp parallel num_threads(threads)
   {
-    const int me = omp_get_thread_num();
     float *slot[3][3]; /* [row mod 3][component] */
-    for (int s = 0; s < 3; s++) /* a frame of fewer than 3 rows uses slots 0..H-1 only */
-      for (int k = 0; k < 3; k++)
-        slot[s][k] = cur->plane[k] + (size_t)(3 * me + (s < H ? s : 0)) * W;
+    ring_of(&p, omp_get_thread_num(), slot);
 #pragma omp for schedule(dynamic, 1)
     for (int band = 0; band < bands; band++)
       resolve_band(&p, slot, (int)((long)H * band / bands),
                    (int)((long)H * (band + 1) / bands));
   }
-  taa->latest = 1 - taa->latest;
-  taa->has_history = 1;
+  hush__taa_done(taa);
 }
 
 void hush__taa_resolve(hush_taa *taa, const hush_reproject_plan *plan, const float *const *color,

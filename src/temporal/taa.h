@@ -60,6 +60,29 @@ void hush__taa_resolve_modulated(hush_taa *taa, const hush_reproject_plan *plan,
                                  const hush_taa_params *params, int threads);
 
 /*
+ * hush__taa_resolve_modulated in pieces, for a caller that interleaves it
+ * with other work in its own threads: hush__taa_begin, then
+ * hush__taa_rows for bands of rows (any order; rows y - 1 .. y + 1 of
+ * color must be final for row y; thread `me` of at most H / 3 uses its own
+ * ring of rows in taa->current), then hush__taa_done once all rows are
+ * resolved. The same bits as the whole resolve.
+ */
+typedef struct hush_taa_job {
+  const float *const *color, *const *albedo, *const *prev;
+  const hush_reproject_plan *plan; /* NULL: no history */
+  const hush_taa_params *params;
+  hush_planar *out;
+  float *const *ring; /* taa->current's planes */
+  int W, H;
+} hush_taa_job;
+
+void hush__taa_begin(const hush_taa *taa, const hush_reproject_plan *plan,
+                     const float *const *color, const float *const *albedo,
+                     const hush_taa_params *params, hush_taa_job *job);
+void hush__taa_rows(const hush_taa_job *job, int me, int y0, int y1);
+void hush__taa_done(hush_taa *taa);
+
+/*
  * A frame with holes (spp not > 0; docs/holes.md), as Dundr 2018 §4.2.6
  * asks ("an additional buffer for blending: only new samples would get
  * updated there"): a traced pixel blends as usual; a hole keeps its

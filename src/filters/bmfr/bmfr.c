@@ -32,6 +32,7 @@
  * on its own and the noise depends on the frame index only.
  */
 #include "core/stream.h" /* hush__prefetch */
+#include "core/timer.h"   /* hush__now_ms */
 #include "filters/albedo.h"
 #include "filters/bmfr/adaptive.h"
 #include "filters/emission.h"
@@ -243,6 +244,11 @@ static const hush_filter_class_info bmfr_info = {
    1 + BMFR_CHANNELS + 3)
 #define MAX_LD (64 * 64 + 64) /* four blocks of 32x32 with their ld (1040), one of 64x64 */
 
+/* The phases fused_frame runs block row by block row, timed per thread
+ * (FUSED_STRIDE doubles apart: a cache line each). */
+enum { FUSED_ACCUMULATE, FUSED_FIT, FUSED_ACCUMULATE_FITTED, FUSED_TAA, FUSED_PHASES };
+#define FUSED_STRIDE 8
+
 typedef struct bmfr_state {
   hush_reprojector rp;
   hush_accum acc;      /* phase I */
@@ -260,6 +266,8 @@ typedef struct bmfr_state {
   hush_gbuffer_inputs gin;
   hush_taa taa;
   bmfr_adaptive ad;    /* temporal_gradients */
+  int *unit_end, *unit_first, *unit_done, *unit_done3; /* fused_frame's, per block row */
+  double *phase_ms; /* fused_frame's, per thread */
 } bmfr_state;
 
 static void bmfr_destroy(void *state) {
@@ -279,6 +287,11 @@ static void bmfr_destroy(void *state) {
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   bmfr_adaptive_free(&st->ad);
+  free(st->unit_end);
+  free(st->unit_first);
+  free(st->unit_done);
+  free(st->unit_done3);
+  free(st->phase_ms);
   free(st);
 }
 
@@ -296,7 +309,15 @@ static hush_status bmfr_create(hush_filter f, void **state) {
   if (!s) {
     st->noise = hush__alloc_floats((size_t)BMFR_MAX_FEATURES * MAX_LD);
     st->scratch = hush__alloc_floats((size_t)st->threads * SCRATCH_COLUMNS * MAX_LD);
-    if (!st->noise || !st->scratch)
+    /* block rows: at most H / 16 + 1 (the smallest blocks, displaced) */
+    const size_t units = (size_t)H / 16 + 2;
+    st->unit_end = malloc(units * sizeof *st->unit_end);
+    st->unit_first = malloc(units * sizeof *st->unit_first);
+    st->unit_done = malloc(units * sizeof *st->unit_done);
+    st->unit_done3 = malloc(units * sizeof *st->unit_done3);
+    st->phase_ms = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->phase_ms);
+    if (!st->noise || !st->scratch || !st->unit_end || !st->unit_first || !st->unit_done ||
+        !st->unit_done3 || !st->phase_ms)
       s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
   }
   if (s) {
@@ -600,6 +621,133 @@ static void fit_frame_blocks(const fit_frame *fr, float *scratch, int threads) {
   }
 }
 
+/* ---- phases I and II together, block row by block row --------------------------- */
+
+/*
+ * Phase I's plan and blend for a block row's image rows, then the row's
+ * fit while they are still in the caches (the fit's gather read them back
+ * from memory: the plan's current depth and normals, the accumulated
+ * radiance). Unit u builds rows row_end[u - 1] .. row_end[u] - 1 and fits
+ * block row u; the rows a block row reads (its own and, at the image's
+ * top and bottom, the mirrored ones) all belong to units <= u, and each
+ * unit waits only for the earlier units it reads, which the threads took
+ * before it: no order of threads can deadlock. Every row and block is
+ * computed on its own: the same bits as the phases one after the other.
+ */
+/* A waiting thread's busy loop: the pause keeps it from flooding the core
+ * with speculative loads of the flag. */
+static inline void spin_pause(void) {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#endif
+}
+
+typedef struct fused_frame {
+  const fit_frame *fr;
+  const hush_reproject_job *job;
+  hush_reproject_plan *plan;
+  const hush_accum *acc;
+  const float *const *sample;
+  const hush_accum_params *ap;
+  const int *row_end;  /* per unit: its last row + 1 */
+  const int *first;    /* per unit: the first unit whose rows it reads */
+  int *done;           /* per unit: its rows are built and blended */
+  int units;
+  /* phase III, per block row after its fit (NULL prev3: no history) */
+  const float *const *prev3;
+  float *const *out3;
+  const float *age;
+  float alpha3;
+  /* TAA (NULL: none), per block row after phase III's rows around it */
+  const hush_taa_job *taa;
+  int *done3; /* per unit: phase III's rows are done */
+  /* per thread (FUSED_STRIDE apart: a cache line each), the milliseconds
+   * spent in each phase (FUSED_PHASES), for the stage table */
+  double *phase_ms;
+} fused_frame;
+
+static const char *const fused_stage_names[FUSED_PHASES] = {"accumulate", "fit",
+                                                            "accumulate_fitted", "taa"};
+
+/* The units' rows (row_end) and the first unit each one reads (first). */
+static void fused_units(const bmfr_grid *grid, int *row_end, int *first) {
+  const int B = grid->block, H = grid->height;
+  int end = 0;
+  for (int u = 0; u < grid->ny; u++) {
+    int lo = H, hi = 0;
+    for (int r = 0; r < B; r++) {
+      const int y = hush__bmfr_mirror(grid->y0 + u * B + r, H);
+      lo = y < lo ? y : lo;
+      hi = y + 1 > hi ? y + 1 : hi;
+    }
+    int natural = grid->y0 + (u + 1) * B;
+    natural = natural > H ? H : natural;
+    end = end > natural ? end : natural;
+    end = end > hi ? end : hi;
+    row_end[u] = u == grid->ny - 1 ? H : end;
+    int v = 0;
+    while (v < u && row_end[v] <= lo) v++;
+    first[u] = v;
+  }
+}
+
+/* Unit u on thread me (its scratch and TAA ring); each phase's time (the
+ * waits included in the phase that waits) into its phase_ms. */
+static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
+  const fit_frame *fr = ff->fr;
+  double *ms = ff->phase_ms + (size_t)me * FUSED_STRIDE;
+  double t0 = hush__now_ms();
+  const int y0 = u ? ff->row_end[u - 1] : 0, y1 = ff->row_end[u];
+  hush__reproject_rows(ff->job, ff->plan, y0, y1);
+  hush__accum_blend_rows(ff->acc, ff->plan, ff->sample, ff->ap, y0, y1, 0);
+  __atomic_store_n(&ff->done[u], 1, __ATOMIC_RELEASE);
+  double t1 = hush__now_ms();
+  ms[FUSED_ACCUMULATE] += t1 - t0;
+  for (int v = ff->first[u]; v < u; v++)
+    while (!__atomic_load_n(&ff->done[v], __ATOMIC_ACQUIRE)) spin_pause();
+  int per = (int)(MAX_LD / fr->ld);
+  per = per < 1 ? 1 : per > STRIP_MAX ? STRIP_MAX : per;
+  const int nx = fr->grid.nx;
+  for (int bx0 = 0; bx0 < nx; bx0 += per)
+    fit_strip(fr, bx0, nx - bx0 < per ? nx - bx0 : per, u, scratch);
+  t0 = hush__now_ms();
+  ms[FUSED_FIT] += t0 - t1;
+  const int B = fr->grid.block, H = fr->grid.height;
+  int r0 = fr->grid.y0 + u * B, r1 = r0 + B;
+  r0 = r0 < 0 ? 0 : r0;
+  r1 = r1 > H ? H : r1;
+  /* with TAA next, phase III's rows stay in the caches for it */
+  hush__temporal_blend_range(ff->plan, ff->prev3, (const float *const *)fr->out, BMFR_CHANNELS,
+                             ff->age, ff->alpha3, ff->out3, r0, r1, ff->taa == NULL);
+  t1 = hush__now_ms();
+  ms[FUSED_ACCUMULATE_FITTED] += t1 - t0;
+  if (!ff->taa) return;
+  /* TAA's rows r0 - 1 .. r1 - 2: its 3x3 box reads phase III's rows r0 - 2
+   * .. r1 - 1, the first two of the block row above (at least two rows) */
+  __atomic_store_n(&ff->done3[u], 1, __ATOMIC_RELEASE);
+  if (u > 0)
+    while (!__atomic_load_n(&ff->done3[u - 1], __ATOMIC_ACQUIRE)) spin_pause();
+  hush__taa_rows(ff->taa, me, u > 0 ? r0 - 1 : 0, u == ff->units - 1 ? H : r1 - 1);
+  ms[FUSED_TAA] += hush__now_ms() - t1;
+}
+
+static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
+  const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
+  int next = 0;
+  for (int u = 0; u < ff->units; u++) ff->done[u] = ff->done3[u] = 0;
+  for (int k = 0; k < threads * FUSED_STRIDE; k++) ff->phase_ms[k] = 0.0;
+#pragma omp parallel num_threads(threads)
+  {
+    const int me = omp_get_thread_num();
+    float *mine = scratch + (size_t)me * per_thread;
+    for (;;) {
+      const int u = __atomic_fetch_add(&next, 1, __ATOMIC_RELAXED);
+      if (u >= ff->units) break;
+      fused_unit(ff, u, me, mine);
+    }
+  }
+}
+
 /* ---- execute ------------------------------------------------------------------ */
 
 static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_info *info) {
@@ -670,21 +818,32 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   rp.normal_threshold = hush__param_f(f, P_NORMAL_THRESHOLD);
   rp.use_id = hush__param_i(f, P_USE_ID);
   rp.fallback_3x3 = hush__param_i(f, P_FALLBACK_3X3);
-  if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
-  if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-  if (emis)
-    hush__emission_subtract_demodulate(&st->color, &st->emission, demod ? &st->albedo : NULL,
-                                       &st->eh, threads);
-  else if (demod && !demod_fused)
-    hush__demodulate(&st->color, &st->albedo, threads);
   hush_accum_params ap;
   ap.alpha_min = hush__param_f(f, P_ALPHA);
   ap.alpha_moments_min = ap.alpha_min;
   ap.max_age = hush__param_i(f, P_MAX_AGE);
+  /* phases I and II block row by block row (fused_frame) where phase I is
+   * the plan and the blend alone: no emission or demodulation pass between
+   * them, no holes, no gradients (whose pass reads the whole blend) */
+  const int fused = !emis && !(demod && !demod_fused) && !adaptive &&
+                    !hush__gbuffer_holes_spp(&st->gin) && !(st->acc.has_history && st->acc.empty);
   const int had_history = st->acc.has_history;
-  hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
-                          hush__gbuffer_holes_spp(&st->gin), &ap, NULL, threads);
-  hush__filter_timing_stage(f, "accumulate");
+  hush_reproject_job job;
+  if (fused) {
+    if ((s = hush__gbuffer_reproject_begin(f, &st->rp, &st->gin, info, &rp, &job))) return s;
+    job.stream = 0; /* each piece is read right after it is built */
+  } else {
+    if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
+    if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
+    if (emis)
+      hush__emission_subtract_demodulate(&st->color, &st->emission, demod ? &st->albedo : NULL,
+                                         &st->eh, threads);
+    else if (demod && !demod_fused)
+      hush__demodulate(&st->color, &st->albedo, threads);
+    hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
+                            hush__gbuffer_holes_spp(&st->gin), &ap, NULL, threads);
+    hush__filter_timing_stage(f, "accumulate");
+  }
   if (adaptive) {
     st->ad.params.iterations = hush__param_i(f, P_GRADIENT_ITERATIONS);
     st->ad.params.sigma_z = GRADIENT_SIGMA_Z;
@@ -718,9 +877,11 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
    * (4K aliasing) */
   if (fr.ld % 256 == 0) fr.ld += 16;
   const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
-  fr.depth = hush__gbuffer_depth_with_data(
-      &st->gin, gb->depth.plane[0], st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,
-      threads); /* never-sampled holes: out of the fit */
+  fr.depth = fused ? gb->depth.plane[0]
+                   : hush__gbuffer_depth_with_data(
+                         &st->gin, gb->depth.plane[0],
+                         st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,
+                         threads); /* never-sampled holes: out of the fit */
   for (int c = 0; c < 3; c++) {
     if (set.needs & (1u << BMFR_SRC_NORMAL)) fr.base[BMFR_BASE_NORMAL + c] = gb->normal.plane[c];
     if (set.needs & (1u << BMFR_SRC_POSITION))
@@ -728,7 +889,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
     if (set.needs & (1u << BMFR_SRC_ALBEDO)) fr.base[BMFR_BASE_ALBEDO + c] = st->albedo.plane[c];
   }
   if (set.needs & (1u << BMFR_SRC_DEPTH)) fr.base[BMFR_BASE_DEPTH] = gb->depth.plane[0];
-  const hush_planar *z = hush__accum_color(&st->acc);
+  /* fused: the set the blend writes, which becomes the latest after it */
+  const hush_planar *z = fused ? &st->acc.color[1 - st->acc.latest] : hush__accum_color(&st->acc);
   for (int c = 0; c < BMFR_CHANNELS; c++) {
     fr.z[c] = z->plane[c];
     fr.out[c] = st->fitted.plane[c];
@@ -736,20 +898,67 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   hush__bmfr_noise_table(st->noise, set.count, fr.n, fr.ld, info->frame_index,
                          hush__param_f(f, P_NOISE));
   fr.noise = st->noise;
-  fit_frame_blocks(&fr, st->scratch, threads);
-  hush__filter_timing_stage(f, "fit");
+  hush_taa_params tp;
+  tp.alpha = hush__param_f(f, P_TAA_ALPHA);
+  tp.box = HUSH_TAA_CLAMP;
+  tp.tonemap = 1;
+  /* without the emission to add, the output is written as TAA resolves
+   * each row */
+  tp.out_view = emis ? NULL : hush__filter_view(f, I_OUTPUT);
+  /* TAA's rings: 3 rows a thread */
+  const int fused_taa = fused && with_taa && (int)f->height >= 3 * threads;
+  if (fused) {
+    fused_frame ff;
+    hush_taa_job tj;
+    if (fused_taa)
+      hush__taa_begin(&st->taa, &st->rp.plan,
+                      (const float *const *)st->fhist[1 - st->flatest].plane,
+                      demod ? (const float *const *)st->albedo.plane : NULL, &tp, &tj);
+    ff.taa = fused_taa ? &tj : NULL;
+    ff.done3 = st->unit_done3;
+    ff.phase_ms = st->phase_ms;
+    ff.fr = &fr;
+    ff.job = &job;
+    ff.plan = &st->rp.plan;
+    ff.acc = &st->acc;
+    ff.sample = (const float *const *)st->color.plane;
+    ff.ap = &ap;
+    ff.units = fr.grid.ny;
+    fused_units(&fr.grid, st->unit_end, st->unit_first);
+    ff.row_end = st->unit_end;
+    ff.first = st->unit_first;
+    ff.done = st->unit_done;
+    ff.prev3 = (const float *const *)st->fhist[st->flatest].plane;
+    ff.out3 = st->fhist[1 - st->flatest].plane;
+    ff.age = st->acc.age[1 - st->acc.latest].plane[0];
+    ff.alpha3 = hush__param_f(f, P_ALPHA_FITTED);
+    fused_frame_run(&ff, st->scratch, threads);
+    hush__accum_blend_done(&st->acc);
+    st->flatest = 1 - st->flatest;
+    if (fused_taa) hush__taa_done(&st->taa);
+    /* the stage table as the passes one after the other would give it:
+     * the loop's time shared in proportion to the threads' time in each */
+    double weight[FUSED_PHASES] = {0};
+    for (int t = 0; t < threads; t++)
+      for (int k = 0; k < FUSED_PHASES; k++) weight[k] += st->phase_ms[t * FUSED_STRIDE + k];
+    hush__filter_timing_split(f, fused_stage_names, weight, fused_taa ? 4 : 3);
+  } else {
+    fit_frame_blocks(&fr, st->scratch, threads);
+    hush__filter_timing_stage(f, "fit");
 
-  /* ---- phase III: accumulate the fit with phase I's plan and counts */
-  const int prev = st->flatest, cur = 1 - prev;
-  hush__temporal_blend(&st->rp.plan, (const float *const *)st->fhist[prev].plane,
-                       (const float *const *)st->fitted.plane, BMFR_CHANNELS,
-                       hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
-                       st->fhist[cur].plane, threads);
-  st->flatest = cur;
-  if (st->acc.empty) /* never-sampled holes: filled from around */
-    hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
-                     hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
-  hush__filter_timing_stage(f, "accumulate_fitted");
+    /* ---- phase III: accumulate the fit with phase I's plan and counts */
+    const int prev = st->flatest, cur = 1 - prev;
+    hush__temporal_blend(&st->rp.plan, (const float *const *)st->fhist[prev].plane,
+                         (const float *const *)st->fitted.plane, BMFR_CHANNELS,
+                         hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
+                         st->fhist[cur].plane, threads);
+    st->flatest = cur;
+    if (st->acc.empty) /* never-sampled holes: filled from around */
+      hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
+                       hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
+    hush__filter_timing_stage(f, "accumulate_fitted");
+  }
+  const int cur = st->flatest;
 
   /* ---- remodulate, TAA, emission, export: with TAA, the remodulation is
    * fused into its first pass (one read of the fit and the albedo); without
@@ -759,17 +968,11 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                      f->height};
   int exported = 0;
   if (with_taa) {
-    hush_taa_params tp;
-    tp.alpha = hush__param_f(f, P_TAA_ALPHA);
-    tp.box = HUSH_TAA_CLAMP;
-    tp.tonemap = 1;
-    /* without the emission to add, the output is written as TAA resolves
-     * each row */
-    tp.out_view = emis ? NULL : hush__filter_view(f, I_OUTPUT);
     exported = tp.out_view != NULL;
-    hush__taa_resolve_modulated(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
-                                demod ? (const float *const *)st->albedo.plane : NULL, &tp,
-                                threads);
+    if (!fused_taa)
+      hush__taa_resolve_modulated(&st->taa, &st->rp.plan, (const float *const *)rgb.plane,
+                                  demod ? (const float *const *)st->albedo.plane : NULL, &tp,
+                                  threads);
     rgb = *hush__taa_output(&st->taa);
   }
   /* the emission after TAA: its history has already averaged the lights'
