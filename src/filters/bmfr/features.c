@@ -4,6 +4,8 @@
  */
 #include "filters/bmfr/features.h"
 
+#include "filters/bmfr/simd.h"
+
 #include <float.h>
 #include <math.h>
 #include <string.h>
@@ -37,19 +39,63 @@ void hush__bmfr_features_build(bmfr_feature_set *set, const float exponents[BMFR
     }
 }
 
-/* Min and max of x over the valid rows; lo > hi when there is none. */
-static void valid_range(const float *restrict x, const float *restrict mask, int n, float *lo,
-                        float *hi) {
-  float l = FLT_MAX, h = -FLT_MAX;
-#pragma omp simd reduction(min : l) reduction(max : h)
-  for (int i = 0; i < n; i++) {
+/* Running minima and maxima of whole vectors over the valid rows (mask >
+ * 0.5): with AVX-512 a compare into a mask register and a masked min and
+ * max (gcc's reduction made each a compare and a select, in one chain). */
+typedef struct vrange {
+  vf l[4], h[4];
+} vrange;
+
+static inline void vrange_init(vrange *r) {
+  for (int k = 0; k < 4; k++) {
+    r->l[k] = vf_set1(FLT_MAX);
+    r->h[k] = vf_set1(-FLT_MAX);
+  }
+}
+
+static inline void vrange_add(vrange *r, int k, vf v, vf m) {
+#if defined(__AVX512F__)
+  const __mmask16 ok = _mm512_cmp_ps_mask(m, _mm512_set1_ps(0.5f), _CMP_GT_OQ);
+  r->l[k] = _mm512_mask_min_ps(r->l[k], ok, v, r->l[k]);
+  r->h[k] = _mm512_mask_max_ps(r->h[k], ok, v, r->h[k]);
+#else
+  const vi ok = m > vf_set1(0.5f);
+  r->l[k] = vf_min(r->l[k], vf_select(ok, v, vf_set1(FLT_MAX)));
+  r->h[k] = vf_max(r->h[k], vf_select(ok, v, vf_set1(-FLT_MAX)));
+#endif
+}
+
+/* The scalar rows left over, then the lanes: a minimum is exact in any
+ * order. */
+static void vrange_result(const vrange *r, const float *restrict x, const float *restrict mask,
+                          int i, int n, float *lo, float *hi) {
+  float lmin = FLT_MAX, hmax = -FLT_MAX;
+  for (int k = 0; k < 4; k++)
+    for (int j = 0; j < VF_LANES; j++) {
+      lmin = r->l[k][j] < lmin ? r->l[k][j] : lmin;
+      hmax = r->h[k][j] > hmax ? r->h[k][j] : hmax;
+    }
+  for (; i < n; i++) {
     const int v = mask[i] > 0.5f;
     const float a = v ? x[i] : FLT_MAX, b = v ? x[i] : -FLT_MAX;
-    l = a < l ? a : l;
-    h = b > h ? b : h;
+    lmin = a < lmin ? a : lmin;
+    hmax = b > hmax ? b : hmax;
   }
-  *lo = l;
-  *hi = h;
+  *lo = lmin;
+  *hi = hmax;
+}
+
+/* Min and max of x over the valid rows; lo > hi when there is none. Four
+ * running minima and maxima, so that no vector waits on the last one. */
+static void valid_range(const float *restrict x, const float *restrict mask, int n, float *lo,
+                        float *hi) {
+  vrange r;
+  vrange_init(&r);
+  int i = 0;
+  for (; i + 4 * VF_LANES <= n; i += 4 * VF_LANES)
+    for (int k = 0; k < 4; k++)
+      vrange_add(&r, k, vf_load(x + i + k * VF_LANES), vf_load(mask + i + k * VF_LANES));
+  vrange_result(&r, x, mask, i, n, lo, hi);
 }
 
 /* out = x scaled from [lo, hi] to [-1, 1], clamped there, 0 on holes. A
@@ -62,8 +108,15 @@ static void scale_range(const float *x, const float *restrict mask, int n, float
   const int flat = !(half > 1e-5f * fabsf(mid)) || !(half > 1e-30f);
   const float inv = flat ? 0.0f : 1.0f / half;
   const float centre = flat ? 0.0f : mid;
-#pragma omp simd
-  for (int i = 0; i < n; i++) {
+  /* whole vectors with the clamps as min and max instructions (gcc made
+   * each a compare and a masked select), then the rest */
+  const vf cv = vf_set1(centre), iv = vf_set1(inv), lo1 = vf_set1(-1.0f), hi1 = vf_set1(1.0f);
+  int i = 0;
+  for (; i + VF_LANES <= n; i += VF_LANES) {
+    const vf v = (vf_load(x + i) - cv) * iv;
+    vf_store(out + i, vf_min(vf_max(v, lo1), hi1) * vf_load(mask + i));
+  }
+  for (; i < n; i++) {
     float s = (x[i] - centre) * inv;
     s = s < -1.0f ? -1.0f : s;
     s = s > 1.0f ? 1.0f : s;

@@ -68,9 +68,28 @@ typedef int vi __attribute__((vector_size(VF_LANES * 4)));
 static inline vf vf_select(vi m, vf a, vf b) { return (vf)(((vi)a & m) | ((vi)b & ~m)); }
 
 /* b < a ? b : a and b > a ? b : a per lane (as the scalar code's minf and
- * maxf, so the same value for the same inputs) */
-static inline vf vf_min(vf a, vf b) { return vf_select(b < a, b, a); }
-static inline vf vf_max(vf a, vf b) { return vf_select(b > a, b, a); }
+ * maxf, so the same value for the same inputs): exactly the min and max
+ * instructions with b first (x < y ? x : y, NaN and equal giving y), one
+ * operation where gcc made the compare and select two, through a mask
+ * register */
+static inline vf vf_min(vf a, vf b) {
+#if defined(__AVX512F__)
+  return _mm512_min_ps(b, a);
+#elif defined(__AVX__) && VF_LANES == 8
+  return _mm256_min_ps(b, a);
+#else
+  return vf_select(b < a, b, a);
+#endif
+}
+static inline vf vf_max(vf a, vf b) {
+#if defined(__AVX512F__)
+  return _mm512_max_ps(b, a);
+#elif defined(__AVX__) && VF_LANES == 8
+  return _mm256_max_ps(b, a);
+#else
+  return vf_select(b > a, b, a);
+#endif
+}
 
 /* 1 in the lanes whose index i0 + l is at least k, else 0. */
 static inline vf vf_from(int i0, int k) {
