@@ -39,6 +39,7 @@
 #include "filters/bmfr/blocks.h"
 #include "filters/bmfr/features.h"
 #include "filters/bmfr/regression.h"
+#include "filters/bmfr/simd.h"
 #include "filters/filter.h"
 #include "filters/gbuffer.h"
 #include "filters/holes.h"
@@ -423,28 +424,58 @@ static int exclude_outliers(float *const z[BMFR_CHANNELS], float *restrict mask,
                             float ratio, int nvalid, float *restrict lum, float *restrict pad) {
   const int n = B * B, P = B + 2;
   const float *restrict r = z[0], *restrict g = z[1], *restrict b = z[2];
-  /* the luminances with their brightest: a block with none above the
-   * limit (the usual one) leaves after this pass and the sums */
+  /* lane sums in a fixed order (16 lanes, each summing rows l, l + 16, ..
+   * in turn): vectorised and deterministic */
+  enum { LANES = 16, SUMS = LANES / VF_LANES };
+  float sum[LANES] = {0}, cnt[LANES] = {0};
+  /* the luminances, their brightest and the sums in one pass (vectors: a
+   * block with none above the limit, the usual one, leaves after it) */
   float brightest = -FLT_MAX;
-#pragma omp simd reduction(max : brightest)
-  for (int i = 0; i < n; i++) {
-    const float l = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
-    lum[i] = l;
-    brightest = l > brightest ? l : brightest;
-  }
-  for (int pass = 0; pass < 2; pass++) {
-    /* lane sums in a fixed order: vectorised and deterministic */
-    enum { LANES = 16 };
-    float sum[LANES] = {0}, cnt[LANES] = {0};
+  {
+    const vf c0 = vf_set1(0.2126f), c1 = vf_set1(0.7152f), c2 = vf_set1(0.0722f);
+    vf vs[SUMS], vc[SUMS], vb[SUMS];
+    for (int k = 0; k < SUMS; k++) {
+      vs[k] = vc[k] = (vf){0};
+      vb[k] = vf_set1(-FLT_MAX);
+    }
     int i = 0;
     for (; i + LANES <= n; i += LANES)
-      for (int l = 0; l < LANES; l++) {
-        sum[l] += lum[i + l];
-        cnt[l] += mask[i + l];
+      for (int k = 0; k < SUMS; k++) {
+        const int j = i + k * VF_LANES;
+        const vf mk = vf_load(mask + j);
+        const vf l = mk * (c0 * vf_load(r + j) + c1 * vf_load(g + j) + c2 * vf_load(b + j));
+        vf_store(lum + j, l);
+        vs[k] += l;
+        vc[k] += mk;
+        vb[k] = vf_max(vb[k], l);
+      }
+    for (int k = 0; k < SUMS; k++)
+      for (int l = 0; l < VF_LANES; l++) {
+        sum[k * VF_LANES + l] = vs[k][l];
+        cnt[k * VF_LANES + l] = vc[k][l];
+        brightest = vb[k][l] > brightest ? vb[k][l] : brightest;
       }
     for (; i < n; i++) {
-      sum[0] += lum[i];
+      const float l = mask[i] * (0.2126f * r[i] + 0.7152f * g[i] + 0.0722f * b[i]);
+      lum[i] = l;
+      brightest = l > brightest ? l : brightest;
+      sum[0] += l;
       cnt[0] += mask[i];
+    }
+  }
+  for (int pass = 0; pass < 2; pass++) {
+    if (pass > 0) { /* the sums again, of the pixels left */
+      for (int l = 0; l < LANES; l++) sum[l] = cnt[l] = 0.0f;
+      int i = 0;
+      for (; i + LANES <= n; i += LANES)
+        for (int l = 0; l < LANES; l++) {
+          sum[l] += lum[i + l];
+          cnt[l] += mask[i + l];
+        }
+      for (; i < n; i++) {
+        sum[0] += lum[i];
+        cnt[0] += mask[i];
+      }
     }
     float total = 0.0f, count = 0.0f;
     for (int l = 0; l < LANES; l++) {
