@@ -1038,15 +1038,10 @@ static HUSH_ALWAYS_INLINE void span_codes(const span_taps *restrict st, int32_t 
 
 static void store_span(const span_taps *restrict st, int32_t *restrict origin,
                        uint16_t *restrict mask, uint8_t *restrict kind, float *restrict w0,
-                       float *restrict w1, float *restrict w2, float *restrict w3, int n,
-                       int stream) {
-  if (!stream) { /* read right after: straight into the plan */
-    span_weights(st, w0, w1, w2, w3, n);
-    span_codes(st, origin, mask, kind, n);
-    return;
-  }
+                       float *restrict w1, float *restrict w2, float *restrict w3, int n) {
   /* staged in L1, then streamed to the plan (core/stream.h): the plan is
-   * read only after the whole frame's build */
+   * read only after the whole frame's build, or after a block row's
+   * (bmfr.c's fused_frame, where streaming it is still faster) */
   int32_t so[SPAN];
   uint16_t sm[SPAN];
   uint8_t sk[SPAN];
@@ -1131,7 +1126,7 @@ static void build_row(const build_ctx *c, hush_reproject_plan *plan, int y) {
     }
     const size_t i = row + (size_t)x0;
     store_span(&st, plan->origin + i, plan->mask + i, plan->kind + i, plan->w[0] + i,
-               plan->w[1] + i, plan->w[2] + i, plan->w[3] + i, n, c->stream);
+               plan->w[1] + i, plan->w[2] + i, plan->w[3] + i, n);
   }
 }
 
@@ -1152,7 +1147,6 @@ hush_status hush__reproject_begin(hush_device device, const hush_reproject_plan 
   c.W = (int)plan->width;
   c.H = (int)plan->height;
   c.vectors = vectors;
-  c.stream = 1;
   c.has_position = in->position[0] && in->position[1] && in->position[2];
   const float *v2c = info->view_to_clip;
   float vp[16], inv_vp[16];
@@ -1203,7 +1197,7 @@ void hush__reproject_rows(const hush_reproject_job *job, hush_reproject_plan *pl
     return;
   }
   for (int y = y0; y < y1; y++) build_row(job, plan, y);
-  if (job->stream) hush__stream_fence();
+  hush__stream_fence();
 }
 
 hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,

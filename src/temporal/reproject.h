@@ -174,9 +174,6 @@ typedef struct hush_reproject_job {
   hush_reproject_input in;
   hush_gbuffer prev;
   int clear;        /* no history: the rows are cleared */
-  int stream;       /* the plan's stores bypass the caches (1, the default: it
-                     * is read after the whole frame's build); 0 for a caller
-                     * that reads each piece right after building it */
   int W, H;
   int vectors;      /* HUSH_MOTION_VECTORS */
   int has_position; /* in.position usable */
