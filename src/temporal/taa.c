@@ -57,7 +57,10 @@ static inline float ycocg_cg(float r, float g, float b) { return -0.25f * r + 0.
 
 static inline float minf(float a, float b) { return b < a ? b : a; }
 static inline float maxf(float a, float b) { return b > a ? b : a; }
-static inline float clampf(float v, float lo, float hi) { return v < lo ? lo : v > hi ? hi : v; }
+/* v < lo ? lo : v > hi ? hi : v for lo <= hi (the box's), signed zeros
+ * included, as a min and a max: gcc made the nested selects compares and
+ * masked moves */
+static inline float clampf(float v, float lo, float hi) { return maxf(minf(v, hi), lo); }
 
 /* What the per-pixel resolve of one row reads: the YCoCg planes' rows
  * above, at and below (clamped at the image border), the output rows. */
