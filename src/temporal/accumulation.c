@@ -159,7 +159,7 @@ _Static_assert(CHUNK == HUSH_WINDOW_MAX, "a window is one chunk");
  * picked per pixel (hush__reproject_diagonals; the others). */
 enum { MODE_GATHER, MODE_CONTIGUOUS, MODE_WINDOW, MODE_DIAGONALS };
 
-#ifdef HUSH_HAVE_DIAGONALS
+#ifdef HUSH_HAVE_DIAGONAL_READS
 /* How a full chunk from pixel x0 of a row that is not contiguous reads
  * its taps (x86-64-v3 builds): from two diagonals (reproject.h; base[0],
  * base[1] relative to the row) when its BILINEAR footprints lie on them,
@@ -325,6 +325,13 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
+    {
+      int32_t base[2];
+      if (chunk_diagonals(b->plan, row, x0, base) == MODE_DIAGONALS) {
+        blend_pixels(b, row, x0, CHUNK, base[0], base[1], MODE_DIAGONALS, NULL, nc, mom);
+        continue;
+      }
+    }
     /* the taps of the 7 history planes (colour, moments, age; NULL: unused) */
     float tb[7][4][CHUNK] __attribute__((aligned(64)));
     const float *planes[7] = {b->pc[0],           nc > 1 ? b->pc[1] : NULL,
@@ -786,6 +793,14 @@ static HUSH_ALWAYS_INLINE void tblend_row(const tblend_ctx *t, const float *cons
       continue;
     }
 #ifdef HUSH_HAVE_WINDOW
+    {
+      int32_t base[2];
+      if (chunk_diagonals(plan, row, x0, base) == MODE_DIAGONALS) {
+        tblend_pixels(t, prev, sample, out, row, x0, CHUNK, base[0], base[1], MODE_DIAGONALS, NULL,
+                      nc);
+        continue;
+      }
+    }
     float tb[4][4][CHUNK] __attribute__((aligned(64)));
     if (hush__window_read(plan, row + (size_t)x0, prev, nc, tb)) {
       tblend_pixels(t, prev, sample, out, row, x0, CHUNK, 0, 0, MODE_WINDOW,

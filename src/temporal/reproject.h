@@ -716,13 +716,15 @@ int hush__window_read(const hush_reproject_plan *plan, size_t i, const float *co
 #if !defined(HUSH_HAVE_WINDOW) && defined(__AVX2__)
 #  define HUSH_HAVE_DIAGONALS 1
 #endif
-/* TAA's resolve takes a chunk on two diagonals as such in every AVX2
- * build, the AVX-512 ones before trying a window: for its three planes two
- * loads and a blend a tap cost less than the window's extent reductions,
- * loads and permutes (TAA 2.83-2.87 -> 2.71-2.76 ms, bmfr on the bench
- * frames, 2 threads; docs/svgf-speed.md, twenty-ninth round). The blends,
- * with four planes and more, keep the window first: no gain for bmfr's,
- * svgf's seven planes slower. */
+/* TAA's resolve and the blends (accumulation.c) take a chunk on two
+ * diagonals as such in every AVX2 build, the AVX-512 ones before trying a
+ * window: for its three planes two loads and a blend a tap cost less than
+ * the window's extent reductions, loads and permutes (TAA 2.83-2.87 ->
+ * 2.71-2.76 ms, bmfr on the bench frames, 2 threads; docs/svgf-speed.md,
+ * twenty-ninth round). The blends followed once their loops ran at 512
+ * bits: bmfr's phase I 4.09 -> 4.00 ms, phase III 0.98 -> 0.94, svgf 23.86
+ * -> 23.59 (alternated runs; with 256-bit halves it had been no gain for
+ * bmfr's, svgf's seven planes slower). */
 #if defined(__AVX2__)
 #  define HUSH_HAVE_DIAGONAL_READS 1
 #endif
