@@ -69,6 +69,24 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
   return HUSH_OK;
 }
 
+size_t hush__import_albedo_demodulated_rows(const hush_image_view *view, hush_planar *dst,
+                                            const hush_image_view *albedo_view,
+                                            hush_planar *albedo, int y0, int y1) {
+  size_t bad = 0;
+  for (int y = y0; y < y1; y++) {
+    size_t row_bad = 0, row_bad_albedo = 0;
+    if (hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
+                                           HUSH_ALBEDO_EPS, &row_bad, &row_bad_albedo)) {
+      bad += row_bad + row_bad_albedo;
+      continue;
+    }
+    /* the albedo's row kept in the cache for the division */
+    bad += hush__view_import_row_cached(albedo_view, (uint32_t)y, albedo);
+    bad += import_row_demodulated(view, (uint32_t)y, dst, albedo);
+  }
+  return bad;
+}
+
 hush_status hush__import_albedo_demodulated(hush_device device, const hush_image_view *view,
                                             const char *what, hush_planar *dst,
                                             const hush_image_view *albedo_view,

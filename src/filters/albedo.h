@@ -53,6 +53,16 @@ hush_status hush__import_albedo_demodulated(hush_device device, const hush_image
                                             hush_nonfinite_policy policy, size_t *replaced,
                                             size_t *replaced_albedo, int threads);
 
+/* hush__import_albedo_demodulated's work on rows y0..y1-1, on the calling
+ * thread, for a caller that imports the rows where it uses them: returns
+ * the count of NaN/Inf values in both views. Those rows are final only
+ * when the whole frame's count is 0; otherwise the caller imports the
+ * frame again with hush__import_albedo_demodulated (which applies the
+ * policy and replaces them as the separate passes do). */
+size_t hush__import_albedo_demodulated_rows(const hush_image_view *view, hush_planar *dst,
+                                            const hush_image_view *albedo_view,
+                                            hush_planar *albedo, int y0, int y1);
+
 /*
  * The remodulation fused with the export: view <- filtered * max(albedo,
  * eps) + add (3 channels), bit for bit hush__remodulate, then

@@ -269,6 +269,7 @@ typedef struct bmfr_state {
   bmfr_adaptive ad;    /* temporal_gradients */
   int *unit_end, *unit_first, *unit_done, *unit_done3; /* fused_frame's, per block row */
   double *phase_ms; /* fused_frame's, per thread */
+  size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
 
 static void bmfr_destroy(void *state) {
@@ -293,6 +294,7 @@ static void bmfr_destroy(void *state) {
   free(st->unit_done);
   free(st->unit_done3);
   free(st->phase_ms);
+  free(st->unit_bad);
   free(st);
 }
 
@@ -317,8 +319,9 @@ static hush_status bmfr_create(hush_filter f, void **state) {
     st->unit_done = malloc(units * sizeof *st->unit_done);
     st->unit_done3 = malloc(units * sizeof *st->unit_done3);
     st->phase_ms = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->phase_ms);
+    st->unit_bad = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->unit_bad);
     if (!st->noise || !st->scratch || !st->unit_end || !st->unit_first || !st->unit_done ||
-        !st->unit_done3 || !st->phase_ms)
+        !st->unit_done3 || !st->phase_ms || !st->unit_bad)
       s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
   }
   if (s) {
@@ -695,6 +698,12 @@ typedef struct fused_frame {
   /* per thread (FUSED_STRIDE apart: a cache line each), the milliseconds
    * spent in each phase (FUSED_PHASES), for the stage table */
   double *phase_ms;
+  /* the demodulated colour and the albedo imported by each unit for its
+   * rows (colour NULL: imported before), their NaN/Inf counts per thread
+   * (FUSED_STRIDE apart) */
+  const hush_image_view *colour, *albedo_view;
+  hush_planar *colour_dst, *albedo_dst;
+  size_t *bad;
 } fused_frame;
 
 static const char *const fused_stage_names[FUSED_PHASES] = {"accumulate", "fit",
@@ -729,6 +738,12 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   double *ms = ff->phase_ms + (size_t)me * FUSED_STRIDE;
   double t0 = hush__now_ms();
   const int y0 = u ? ff->row_end[u - 1] : 0, y1 = ff->row_end[u];
+  /* the unit's rows of the colour and the albedo: read while the other
+   * thread computes (the pass over the frame before was bound by memory
+   * alone; import 1.94 -> 1.02 ms, the loop 0.6 ms longer) */
+  if (ff->colour)
+    ff->bad[(size_t)me * FUSED_STRIDE] += hush__import_albedo_demodulated_rows(
+        ff->colour, ff->colour_dst, ff->albedo_view, ff->albedo_dst, y0, y1);
   hush__reproject_rows(ff->job, ff->plan, y0, y1);
   hush__accum_blend_rows(ff->acc, ff->plan, ff->sample, ff->ap, y0, y1, 0);
   __atomic_store_n(&ff->done[u], 1, __ATOMIC_RELEASE);
@@ -766,7 +781,10 @@ static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
   const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
   int next = 0;
   for (int u = 0; u < ff->units; u++) ff->done[u] = ff->done3[u] = 0;
-  for (int k = 0; k < threads * FUSED_STRIDE; k++) ff->phase_ms[k] = 0.0;
+  for (int k = 0; k < threads * FUSED_STRIDE; k++) {
+    ff->phase_ms[k] = 0.0;
+    ff->bad[k] = 0;
+  }
 #pragma omp parallel num_threads(threads)
   {
     const int me = omp_get_thread_num();
@@ -829,14 +847,21 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   if (!demod_fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
   if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
     return s;
-  if (demod_fused) {
+  const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
+  /* phases I and II block row by block row (fused_frame) where phase I is
+   * the plan and the blend alone: no emission or demodulation pass between
+   * them, no holes (demod_fused: no 'spp' bound), no gradients (whose pass
+   * reads the whole blend); then each block row imports its colour and
+   * albedo itself */
+  const int defer_colour =
+      demod_fused && !adaptive && !(st->acc.has_history && st->acc.empty);
+  if (demod_fused && !defer_colour) {
     if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo, &st->color)))
       return s;
-  } else if (need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) {
+  } else if (!demod_fused && need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) {
     return s;
   }
   if (emis && (s = hush__filter_import(f, I_EMISSION, &st->emission))) return s;
-  const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
   if (adaptive && (s = bmfr_adaptive_import(f, &st->ad, I_GRADIENT))) return s;
   hush_planar *const fill[2] = {need_albedo ? &st->albedo : NULL, emis ? &st->emission : NULL};
   if ((s = hush__gbuffer_fill_holes(f, I_SPP, &st->rp, &st->gin, fill, 2, info, threads))) return s;
@@ -853,86 +878,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   ap.alpha_min = hush__param_f(f, P_ALPHA);
   ap.alpha_moments_min = ap.alpha_min;
   ap.max_age = hush__param_i(f, P_MAX_AGE);
-  /* phases I and II block row by block row (fused_frame) where phase I is
-   * the plan and the blend alone: no emission or demodulation pass between
-   * them, no holes, no gradients (whose pass reads the whole blend) */
-  const int fused = !emis && !(demod && !demod_fused) && !adaptive &&
-                    !hush__gbuffer_holes_spp(&st->gin) && !(st->acc.has_history && st->acc.empty);
+  int fused = !emis && !(demod && !demod_fused) && !adaptive &&
+              !hush__gbuffer_holes_spp(&st->gin) && !(st->acc.has_history && st->acc.empty);
   const int had_history = st->acc.has_history;
-  hush_reproject_job job;
-  if (fused) {
-    /* the plan streamed past the caches even so: its stores' reads for
-     * ownership cost phase I more than the blend's reads of it back from
-     * memory (accumulate 4.30 -> 4.05 ms, three alternated runs); the
-     * blend's and phase III's results stay cached for the fit and TAA,
-     * which read them right after (streamed, both were slower) */
-    if ((s = hush__gbuffer_reproject_begin(f, &st->rp, &st->gin, info, &rp, &job))) return s;
-  } else {
-    if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
-    if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
-    if (emis)
-      hush__emission_subtract_demodulate(&st->color, &st->emission, demod ? &st->albedo : NULL,
-                                         &st->eh, threads);
-    else if (demod && !demod_fused)
-      hush__demodulate(&st->color, &st->albedo, threads);
-    hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
-                            hush__gbuffer_holes_spp(&st->gin), &ap, NULL, threads);
-    hush__filter_timing_stage(f, "accumulate");
-  }
-  if (adaptive) {
-    st->ad.params.iterations = hush__param_i(f, P_GRADIENT_ITERATIONS);
-    st->ad.params.sigma_z = GRADIENT_SIGMA_Z;
-    st->ad.params.sigma_n = GRADIENT_SIGMA_N;
-    st->ad.params.sigma_l = hush__param_f(f, P_GRADIENT_SIGMA_L);
-    st->ad.params.exponent = hush__param_f(f, P_GRADIENT_EXPONENT);
-    st->ad.params.threshold = hush__param_f(f, P_GRADIENT_THRESHOLD);
-    st->ad.rule = hush__param_i(f, P_HISTORY_RULE) ? HUSH_HISTORY_HIGGINSON : HUSH_HISTORY_SCHIED;
-    const hush_gbuffer_store *cur = hush__reprojector_latest(&st->rp);
-    bmfr_adaptive_history(&st->ad, &st->acc, had_history, &st->rp.plan,
-                          (const float *const *)st->color.plane, &ap, cur->depth.plane[0],
-                          (const float *const *)cur->normal.plane, threads);
-    hush__filter_timing_stage(f, "gradient");
-  }
-
-  /* ---- phase II: features, fit, weighted sum, per block */
-  const int B = hush__param_i(f, P_BLOCK_SIZE);
-  fit_frame fr;
-  memset(&fr, 0, sizeof fr);
-  int ox, oy;
-  hush__bmfr_block_offset(info->frame_index, B, hush__param_i(f, P_DISPLACE), &ox, &oy);
-  hush__bmfr_grid(&fr.grid, (int)f->width, (int)f->height, B, ox, oy);
-  fr.set = &set;
-  fr.refine = hush__param_i(f, P_REFINE);
-  fr.outlier = hush__param_f(f, P_OUTLIER);
-  fr.n = B * B;
-  fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
-  /* columns a multiple of 1 KiB apart (B = 16, 32, 64) put the same
-   * rows of several columns at the same address bits 0-11, and a load
-   * after a store to another column then waits on a false dependency
-   * (4K aliasing) */
-  if (fr.ld % 256 == 0) fr.ld += 16;
-  const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
-  fr.depth = fused ? gb->depth.plane[0]
-                   : hush__gbuffer_depth_with_data(
-                         &st->gin, gb->depth.plane[0],
-                         st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,
-                         threads); /* never-sampled holes: out of the fit */
-  for (int c = 0; c < 3; c++) {
-    if (set.needs & (1u << BMFR_SRC_NORMAL)) fr.base[BMFR_BASE_NORMAL + c] = gb->normal.plane[c];
-    if (set.needs & (1u << BMFR_SRC_POSITION))
-      fr.base[BMFR_BASE_POSITION + c] = st->gin.position.plane[c];
-    if (set.needs & (1u << BMFR_SRC_ALBEDO)) fr.base[BMFR_BASE_ALBEDO + c] = st->albedo.plane[c];
-  }
-  if (set.needs & (1u << BMFR_SRC_DEPTH)) fr.base[BMFR_BASE_DEPTH] = gb->depth.plane[0];
-  /* fused: the set the blend writes, which becomes the latest after it */
-  const hush_planar *z = fused ? &st->acc.color[1 - st->acc.latest] : hush__accum_color(&st->acc);
-  for (int c = 0; c < BMFR_CHANNELS; c++) {
-    fr.z[c] = z->plane[c];
-    fr.out[c] = st->fitted.plane[c];
-  }
-  hush__bmfr_noise_table(st->noise, set.count, fr.n, fr.ld, info->frame_index,
-                         hush__param_f(f, P_NOISE));
-  fr.noise = st->noise;
   hush_taa_params tp;
   tp.alpha = hush__param_f(f, P_TAA_ALPHA);
   tp.box = HUSH_TAA_CLAMP;
@@ -940,58 +888,158 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   /* without the emission to add, the output is written as TAA resolves
    * each row */
   tp.out_view = emis ? NULL : hush__filter_view(f, I_OUTPUT);
-  /* TAA's rings: 3 rows a thread */
-  const int fused_taa = fused && with_taa && (int)f->height >= 3 * threads;
-  if (fused) {
-    fused_frame ff;
-    hush_taa_job tj;
-    if (fused_taa)
-      hush__taa_begin(&st->taa, &st->rp.plan,
-                      (const float *const *)st->fhist[1 - st->flatest].plane,
-                      demod ? (const float *const *)st->albedo.plane : NULL, &tp, &tj);
-    ff.taa = fused_taa ? &tj : NULL;
-    ff.done3 = st->unit_done3;
-    ff.phase_ms = st->phase_ms;
-    ff.fr = &fr;
-    ff.job = &job;
-    ff.plan = &st->rp.plan;
-    ff.acc = &st->acc;
-    ff.sample = (const float *const *)st->color.plane;
-    ff.ap = &ap;
-    ff.units = fr.grid.ny;
-    fused_units(&fr.grid, st->unit_end, st->unit_first);
-    ff.row_end = st->unit_end;
-    ff.first = st->unit_first;
-    ff.done = st->unit_done;
-    ff.prev3 = (const float *const *)st->fhist[st->flatest].plane;
-    ff.out3 = st->fhist[1 - st->flatest].plane;
-    ff.age = st->acc.age[1 - st->acc.latest].plane[0];
-    ff.alpha3 = hush__param_f(f, P_ALPHA_FITTED);
-    fused_frame_run(&ff, st->scratch, threads);
-    hush__accum_blend_done(&st->acc);
-    st->flatest = 1 - st->flatest;
-    if (fused_taa) hush__taa_done(&st->taa);
-    /* the stage table as the passes one after the other would give it:
-     * the loop's time shared in proportion to the threads' time in each */
-    double weight[FUSED_PHASES] = {0};
-    for (int t = 0; t < threads; t++)
-      for (int k = 0; k < FUSED_PHASES; k++) weight[k] += st->phase_ms[t * FUSED_STRIDE + k];
-    hush__filter_timing_split(f, fused_stage_names, weight, fused_taa ? 4 : 3);
-  } else {
-    fit_frame_blocks(&fr, st->scratch, threads);
-    hush__filter_timing_stage(f, "fit");
+  int fused_taa = 0;
+  /* the reprojector as it was, should the fused frame have to be redone */
+  const int rp_latest = st->rp.latest, rp_had_history = st->rp.has_history;
+  /* a second pass only when the fused one met NaN/Inf in the colour or the
+   * albedo: redone pass by pass, after the import that applies the policy */
+  for (int pass = 0;; pass++) {
+    const int deferred = fused && defer_colour && pass == 0;
+    hush_reproject_job job;
+    if (fused) {
+      /* the plan streamed past the caches even so: its stores' reads for
+       * ownership cost phase I more than the blend's reads of it back from
+       * memory (accumulate 4.30 -> 4.05 ms, three alternated runs); the
+       * blend's and phase III's results stay cached for the fit and TAA,
+       * which read them right after (streamed, both were slower) */
+      if ((s = hush__gbuffer_reproject_begin(f, &st->rp, &st->gin, info, &rp, &job))) return s;
+    } else {
+      if (emis) hush__emission_wildcard_ids(&st->rp, &st->emission, threads);
+      if ((s = hush__gbuffer_reproject(f, &st->rp, &st->gin, info, &rp, threads))) return s;
+      if (emis)
+        hush__emission_subtract_demodulate(&st->color, &st->emission, demod ? &st->albedo : NULL,
+                                           &st->eh, threads);
+      else if (demod && !demod_fused)
+        hush__demodulate(&st->color, &st->albedo, threads);
+      hush__accum_blend_holes(&st->acc, &st->rp.plan, (const float *const *)st->color.plane,
+                              hush__gbuffer_holes_spp(&st->gin), &ap, NULL, threads);
+      hush__filter_timing_stage(f, "accumulate");
+    }
+    if (adaptive) {
+      st->ad.params.iterations = hush__param_i(f, P_GRADIENT_ITERATIONS);
+      st->ad.params.sigma_z = GRADIENT_SIGMA_Z;
+      st->ad.params.sigma_n = GRADIENT_SIGMA_N;
+      st->ad.params.sigma_l = hush__param_f(f, P_GRADIENT_SIGMA_L);
+      st->ad.params.exponent = hush__param_f(f, P_GRADIENT_EXPONENT);
+      st->ad.params.threshold = hush__param_f(f, P_GRADIENT_THRESHOLD);
+      st->ad.rule = hush__param_i(f, P_HISTORY_RULE) ? HUSH_HISTORY_HIGGINSON : HUSH_HISTORY_SCHIED;
+      const hush_gbuffer_store *cur = hush__reprojector_latest(&st->rp);
+      bmfr_adaptive_history(&st->ad, &st->acc, had_history, &st->rp.plan,
+                            (const float *const *)st->color.plane, &ap, cur->depth.plane[0],
+                            (const float *const *)cur->normal.plane, threads);
+      hush__filter_timing_stage(f, "gradient");
+    }
 
-    /* ---- phase III: accumulate the fit with phase I's plan and counts */
-    const int prev = st->flatest, cur = 1 - prev;
-    hush__temporal_blend(&st->rp.plan, (const float *const *)st->fhist[prev].plane,
-                         (const float *const *)st->fitted.plane, BMFR_CHANNELS,
-                         hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
-                         st->fhist[cur].plane, threads);
-    st->flatest = cur;
-    if (st->acc.empty) /* never-sampled holes: filled from around */
-      hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
-                       hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
-    hush__filter_timing_stage(f, "accumulate_fitted");
+    /* ---- phase II: features, fit, weighted sum, per block */
+    const int B = hush__param_i(f, P_BLOCK_SIZE);
+    fit_frame fr;
+    memset(&fr, 0, sizeof fr);
+    int ox, oy;
+    hush__bmfr_block_offset(info->frame_index, B, hush__param_i(f, P_DISPLACE), &ox, &oy);
+    hush__bmfr_grid(&fr.grid, (int)f->width, (int)f->height, B, ox, oy);
+    fr.set = &set;
+    fr.refine = hush__param_i(f, P_REFINE);
+    fr.outlier = hush__param_f(f, P_OUTLIER);
+    fr.n = B * B;
+    fr.ld = ((size_t)fr.n + 15) & ~(size_t)15;
+    /* columns a multiple of 1 KiB apart (B = 16, 32, 64) put the same
+     * rows of several columns at the same address bits 0-11, and a load
+     * after a store to another column then waits on a false dependency
+     * (4K aliasing) */
+    if (fr.ld % 256 == 0) fr.ld += 16;
+    const hush_gbuffer_store *gb = hush__reprojector_latest(&st->rp);
+    fr.depth = fused ? gb->depth.plane[0]
+                     : hush__gbuffer_depth_with_data(
+                           &st->gin, gb->depth.plane[0],
+                           st->acc.empty ? hush__accum_age(&st->acc)->plane[0] : NULL,
+                           threads); /* never-sampled holes: out of the fit */
+    for (int c = 0; c < 3; c++) {
+      if (set.needs & (1u << BMFR_SRC_NORMAL)) fr.base[BMFR_BASE_NORMAL + c] = gb->normal.plane[c];
+      if (set.needs & (1u << BMFR_SRC_POSITION))
+        fr.base[BMFR_BASE_POSITION + c] = st->gin.position.plane[c];
+      if (set.needs & (1u << BMFR_SRC_ALBEDO)) fr.base[BMFR_BASE_ALBEDO + c] = st->albedo.plane[c];
+    }
+    if (set.needs & (1u << BMFR_SRC_DEPTH)) fr.base[BMFR_BASE_DEPTH] = gb->depth.plane[0];
+    /* fused: the set the blend writes, which becomes the latest after it */
+    const hush_planar *z = fused ? &st->acc.color[1 - st->acc.latest] : hush__accum_color(&st->acc);
+    for (int c = 0; c < BMFR_CHANNELS; c++) {
+      fr.z[c] = z->plane[c];
+      fr.out[c] = st->fitted.plane[c];
+    }
+    hush__bmfr_noise_table(st->noise, set.count, fr.n, fr.ld, info->frame_index,
+                           hush__param_f(f, P_NOISE));
+    fr.noise = st->noise;
+    /* TAA's rings: 3 rows a thread */
+    fused_taa = fused && with_taa && (int)f->height >= 3 * threads;
+    if (fused) {
+      fused_frame ff;
+      hush_taa_job tj;
+      if (fused_taa)
+        hush__taa_begin(&st->taa, &st->rp.plan,
+                        (const float *const *)st->fhist[1 - st->flatest].plane,
+                        demod ? (const float *const *)st->albedo.plane : NULL, &tp, &tj);
+      ff.taa = fused_taa ? &tj : NULL;
+      ff.done3 = st->unit_done3;
+      ff.phase_ms = st->phase_ms;
+      ff.fr = &fr;
+      ff.job = &job;
+      ff.plan = &st->rp.plan;
+      ff.acc = &st->acc;
+      ff.sample = (const float *const *)st->color.plane;
+      ff.ap = &ap;
+      ff.units = fr.grid.ny;
+      fused_units(&fr.grid, st->unit_end, st->unit_first);
+      ff.row_end = st->unit_end;
+      ff.first = st->unit_first;
+      ff.done = st->unit_done;
+      ff.prev3 = (const float *const *)st->fhist[st->flatest].plane;
+      ff.out3 = st->fhist[1 - st->flatest].plane;
+      ff.age = st->acc.age[1 - st->acc.latest].plane[0];
+      ff.alpha3 = hush__param_f(f, P_ALPHA_FITTED);
+      ff.colour = deferred ? hush__filter_view(f, I_COLOR) : NULL;
+      ff.albedo_view = hush__filter_view(f, I_ALBEDO);
+      ff.colour_dst = &st->color;
+      ff.albedo_dst = &st->albedo;
+      ff.bad = st->unit_bad;
+      fused_frame_run(&ff, st->scratch, threads);
+      size_t bad = 0;
+      for (int t = 0; t < threads; t++) bad += st->unit_bad[t * FUSED_STRIDE];
+      if (bad) {
+        /* nothing of the history has changed but the reprojector's turn */
+        st->rp.latest = rp_latest;
+        st->rp.has_history = rp_had_history;
+        if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo,
+                                                        &st->color)))
+          return s;
+        fused = 0;
+        continue;
+      }
+      hush__accum_blend_done(&st->acc);
+      st->flatest = 1 - st->flatest;
+      if (fused_taa) hush__taa_done(&st->taa);
+      /* the stage table as the passes one after the other would give it:
+       * the loop's time shared in proportion to the threads' time in each */
+      double weight[FUSED_PHASES] = {0};
+      for (int t = 0; t < threads; t++)
+        for (int k = 0; k < FUSED_PHASES; k++) weight[k] += st->phase_ms[t * FUSED_STRIDE + k];
+      hush__filter_timing_split(f, fused_stage_names, weight, fused_taa ? 4 : 3);
+    } else {
+      fit_frame_blocks(&fr, st->scratch, threads);
+      hush__filter_timing_stage(f, "fit");
+
+      /* ---- phase III: accumulate the fit with phase I's plan and counts */
+      const int prev = st->flatest, cur = 1 - prev;
+      hush__temporal_blend(&st->rp.plan, (const float *const *)st->fhist[prev].plane,
+                           (const float *const *)st->fitted.plane, BMFR_CHANNELS,
+                           hush__accum_age(&st->acc)->plane[0], hush__param_f(f, P_ALPHA_FITTED),
+                           st->fhist[cur].plane, threads);
+      st->flatest = cur;
+      if (st->acc.empty) /* never-sampled holes: filled from around */
+        hush__holes_fill(st->gin.holes.pyramid, f->width, f->height,
+                         hush__accum_age(&st->acc)->plane[0], st->fhist[cur].plane, 3, threads);
+      hush__filter_timing_stage(f, "accumulate_fitted");
+    }
+    break;
   }
   const int cur = st->flatest;
 
