@@ -66,10 +66,15 @@ static HUSH_ALWAYS_INLINE float hush__pow2_squarings(float d, int n) {
   return d;
 }
 
-/* floorf(s), bit for bit (also -0, infinities and NaN): a truncating
- * conversion of s where |s| < 2^23 (else s is an integer, inf or NaN), one
- * less when that rounded up, and the sign of s kept on a zero. */
+/* floorf(s), bit for bit (also -0, infinities and NaN). With SSE4.1 one
+ * rounding instruction (roundps/vrndscaleps, exact), which gcc vectorises
+ * given -fno-trapping-math; else a truncating conversion of s where |s| <
+ * 2^23 (else s is an integer, inf or NaN), one less when that rounded up,
+ * and the sign of s kept on a zero. */
 static inline float hush__floorf_vec(float s) {
+#if defined(__SSE4_1__)
+  return __builtin_floorf(s);
+#else
   const int small = fabsf(s) < 8388608.0f; /* 2^23 */
   const float c = hush__select_bits(small, s, 0.0f);
   const float t = (float)(int32_t)c;
@@ -77,6 +82,7 @@ static inline float hush__floorf_vec(float s) {
   float f = hush__select_bits(t > c, t - 1.0f, t);
   f = hush__select_bits(f == 0.0f, s * 0.0f, f); /* floorf(-0) = -0 */
   return hush__select_bits(small, f, s);
+#endif
 }
 
 /* ln(d) for d > 0 (d <= 1e-30 is taken as 1e-30): d = m 2^e with m in
