@@ -631,6 +631,15 @@ static void fit_strip(const fit_frame *fr, int bx0, int count, int by, float *sc
         const float *restrict src = b[k].y + (size_t)c * ld + i0,
                               *restrict zz = b[k].zb + (size_t)c * ld + i0,
                               *restrict mk = b[k].mask + i0;
+        if (B == 2 * VF_LANES && g[k].c0 == 0 && g[k].c1 == B) {
+          /* the default block inside the image: two vectors, no checks */
+          for (int v = 0; v < 2; v++) {
+            const vf m = vf_load(mk + v * VF_LANES);
+            vf_store(dst + v * VF_LANES, vf_select(m > (vf){0}, vf_load(src + v * VF_LANES),
+                                                   vf_load(zz + v * VF_LANES)));
+          }
+          continue;
+        }
         for (int x = g[k].c0; x < g[k].c1; x++) dst[x] = mk[x] > 0.0f ? src[x] : zz[x];
       }
   }
