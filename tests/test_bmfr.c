@@ -757,15 +757,15 @@ static void frame_info_moving(hush_frame_info *fi, uint64_t index) {
 
 /*
  * Where nothing needs a whole-frame pass between them, the import of the
- * colour and the albedo, phase I's plan and blend, the fit, phase III and
- * TAA run block row by block row (bmfr.c, fused_frame); an 'spp' image
+ * inputs, phase I's plan and blend, the fit, phase III and TAA run block
+ * row by block row (bmfr.c, fused_frame); an 'spp' image
  * bound without holes takes the pass-by-pass path (its demodulation is a
  * pass of its own). Both give the same bits, under a moving camera, over
  * all 16 grid offsets, for blocks of 16 and 32 and 1 to 3 threads (the
  * block rows wait for each other's rows); also for frames with NaN/Inf in
- * the colour or the albedo, which the fused frame hands back to the
- * pass-by-pass path: replaced (nonfinite=replace), or failing the frame
- * with the history kept (nonfinite=error, frame 13).
+ * the colour, the albedo, the normal or the position, which the fused
+ * frame hands back to the pass-by-pass path: replaced (nonfinite=replace),
+ * or failing the frame with the history kept (nonfinite=error, frame 13).
  */
 static void test_fused_path(void) {
   static scene a, b;
@@ -794,6 +794,8 @@ static void test_fused_path(void) {
         REQUIRE(hush_filter_set_string(fb, "nonfinite", policy) == HUSH_OK);
         if (k == 7 || k == 13) a.color[3 * (N / 2) + 1] = b.color[3 * (N / 2) + 1] = NAN;
         if (k == 9) a.albedo[3 * (N - 5)] = b.albedo[3 * (N - 5)] = INFINITY;
+        if (k == 11) a.normal[3 * 7 + 2] = b.normal[3 * 7 + 2] = NAN;
+        if (k == 15) a.position[3 * (N - 1)] = b.position[3 * (N - 1)] = -INFINITY;
         hush_frame_info fi;
         frame_info_moving(&fi, (uint64_t)k);
         if (k == 13) {

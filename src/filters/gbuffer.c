@@ -95,9 +95,16 @@ static void unit_rows(hush_planar *n, const uint8_t *odd, int threads) {
 
 void hush__unit_normals(hush_planar *n, int threads) { unit_rows(n, NULL, threads); }
 
-hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, int use_id,
-                                 const hush_frame_info *info, hush_reprojector *rp,
-                                 hush_gbuffer_inputs *in) {
+/* Row y of the normals, known to hold one to rescale. */
+static void unit_one_row(hush_planar *n, int y) {
+  const size_t i0 = (size_t)y * n->width;
+  float *a = n->plane[0] + i0, *b = n->plane[1] + i0, *c = n->plane[2] + i0;
+  if (unit_row(a, b, c, n->width)) unit_row_double(a, b, c, n->width);
+}
+
+hush_status hush__gbuffer_import_begin(hush_filter f, const hush_gbuffer_images *im, int use_id,
+                                       const hush_frame_info *info, hush_reprojector *rp,
+                                       hush_gbuffer_inputs *in, hush_gbuffer_import_job *job) {
   const int has_motion = bound(f, im->motion) != NULL;
   if (info->motion == HUSH_MOTION_VECTORS && !has_motion)
     return hush__fail(f->device, HUSH_ERROR_INVALID_OPERATION,
@@ -115,41 +122,66 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, i
   if (with_id && (s = hush__reprojector_want_id(f->device, rp))) return s;
 
   hush_gbuffer_store *g = hush__reprojector_next(rp);
-  int images[5], count = 0;
-  hush_planar *dst[5];
-  images[count] = im->depth;
-  dst[count++] = &g->depth;
+  memset(job, 0, sizeof *job);
+  job->normals = -1;
+  job->images[job->count] = im->depth;
+  job->dst[job->count++] = &g->depth;
   if (has_normal) {
-    images[count] = im->normal;
-    dst[count++] = &g->normal;
+    job->normals = job->count;
+    job->images[job->count] = im->normal;
+    job->dst[job->count++] = &g->normal;
   }
   if (with_id) {
-    images[count] = im->id;
-    dst[count++] = &g->id;
+    job->images[job->count] = im->id;
+    job->dst[job->count++] = &g->id;
   }
   if (in->has_position) {
-    images[count] = im->position;
-    dst[count++] = &in->position;
+    job->images[job->count] = im->position;
+    job->dst[job->count++] = &in->position;
   }
   if (in->use_motion) {
-    images[count] = im->motion;
-    dst[count++] = &in->motion;
+    job->images[job->count] = im->motion;
+    job->dst[job->count++] = &in->motion;
   }
+  for (int j = 0; j < job->count; j++) job->views[j] = bound(f, job->images[j]);
   if (has_normal && !in->odd_normals &&
       !(in->odd_normals = hush__alloc_counted(f->height, sizeof *in->odd_normals)))
     return hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "out of memory for %u row flags",
                       f->height);
+  if (!has_normal) constant_normal(&g->normal);
+  g->has_id = with_id;
+  return HUSH_OK;
+}
+
+size_t hush__gbuffer_import_rows(const hush_gbuffer_import_job *job, int y0, int y1) {
+  size_t bad = 0;
+  for (int y = y0; y < y1; y++)
+    for (int j = 0; j < job->count; j++) {
+      if (j != job->normals) {
+        bad += hush__view_import_row(job->views[j], (uint32_t)y, job->dst[j]);
+        continue;
+      }
+      int odd = 0;
+      bad += hush__view_import_row_normals(job->views[j], (uint32_t)y, job->dst[j], &odd);
+      if (odd) unit_one_row(job->dst[j], y);
+    }
+  return bad;
+}
+
+hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *im, int use_id,
+                                 const hush_frame_info *info, hush_reprojector *rp,
+                                 hush_gbuffer_inputs *in) {
+  hush_gbuffer_import_job job;
+  hush_status s = hush__gbuffer_import_begin(f, im, use_id, info, rp, in, &job);
+  if (s) return s;
   /* the normals' rows to rescale are found as they are imported (a
    * separate pass read the three planes back: import 1.57 -> 1.40 ms,
    * 1280x720, 2 threads) */
-  if ((s = hush__filter_import_many(f, count, images, dst, has_normal ? 1 : -1,
+  if ((s = hush__filter_import_many(f, job.count, job.images, job.dst, job.normals,
                                     in->odd_normals)))
     return s;
-  if (has_normal)
-    unit_rows(&g->normal, in->odd_normals, hush__filter_threads(f));
-  else
-    constant_normal(&g->normal);
-  g->has_id = with_id;
+  if (job.normals >= 0)
+    unit_rows(&hush__reprojector_next(rp)->normal, in->odd_normals, hush__filter_threads(f));
   return HUSH_OK;
 }
 

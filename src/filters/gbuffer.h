@@ -47,6 +47,29 @@ hush_status hush__gbuffer_import(hush_filter f, const hush_gbuffer_images *image
                                  const hush_frame_info *info, hush_reprojector *rp,
                                  hush_gbuffer_inputs *in);
 
+/*
+ * hush__gbuffer_import in pieces, for a caller that imports the rows where
+ * it uses them: _begin checks and allocates (failing as hush__gbuffer_import
+ * does, before anything is read) and fills the job; _rows imports rows
+ * y0..y1-1 on the calling thread, the normals of each row made unit at
+ * once, and returns the count of NaN/Inf values. The rows are final only
+ * when the whole frame's count is 0; otherwise the caller imports the frame
+ * again with hush__gbuffer_import, which applies the policy.
+ */
+typedef struct hush_gbuffer_import_job {
+  int count;   /* images imported, up to 5 */
+  int normals; /* the normals' index among them, or -1 */
+  int images[5];
+  const hush_image_view *views[5];
+  hush_planar *dst[5];
+} hush_gbuffer_import_job;
+
+hush_status hush__gbuffer_import_begin(hush_filter f, const hush_gbuffer_images *images,
+                                       int use_id, const hush_frame_info *info,
+                                       hush_reprojector *rp, hush_gbuffer_inputs *in,
+                                       hush_gbuffer_import_job *job);
+size_t hush__gbuffer_import_rows(const hush_gbuffer_import_job *job, int y0, int y1);
+
 /* Builds the plan from what hush__gbuffer_import read; this frame becomes the
  * previous one of the next. */
 hush_status hush__gbuffer_reproject(hush_filter f, hush_reprojector *rp,

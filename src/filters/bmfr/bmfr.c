@@ -267,7 +267,8 @@ typedef struct bmfr_state {
   hush_gbuffer_inputs gin;
   hush_taa taa;
   bmfr_adaptive ad;    /* temporal_gradients */
-  int *unit_end, *unit_first, *unit_done, *unit_done3; /* fused_frame's, per block row */
+  /* fused_frame's, per block row */
+  int *unit_end, *unit_first, *unit_done, *unit_done3, *unit_done_import;
   double *phase_ms; /* fused_frame's, per thread */
   size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
@@ -293,6 +294,7 @@ static void bmfr_destroy(void *state) {
   free(st->unit_first);
   free(st->unit_done);
   free(st->unit_done3);
+  free(st->unit_done_import);
   free(st->phase_ms);
   free(st->unit_bad);
   free(st);
@@ -318,10 +320,11 @@ static hush_status bmfr_create(hush_filter f, void **state) {
     st->unit_first = malloc(units * sizeof *st->unit_first);
     st->unit_done = malloc(units * sizeof *st->unit_done);
     st->unit_done3 = malloc(units * sizeof *st->unit_done3);
+    st->unit_done_import = malloc(units * sizeof *st->unit_done_import);
     st->phase_ms = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->phase_ms);
     st->unit_bad = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->unit_bad);
     if (!st->noise || !st->scratch || !st->unit_end || !st->unit_first || !st->unit_done ||
-        !st->unit_done3 || !st->phase_ms || !st->unit_bad)
+        !st->unit_done3 || !st->unit_done_import || !st->phase_ms || !st->unit_bad)
       s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
   }
   if (s) {
@@ -712,6 +715,11 @@ typedef struct fused_frame {
    * (FUSED_STRIDE apart) */
   const hush_image_view *colour, *albedo_view;
   hush_planar *colour_dst, *albedo_dst;
+  /* the G-buffer imported by each unit (NULL: imported before): rows
+   * row_end[u - 1] + 1 .. row_end[u], one below its own (the plan's depth
+   * slopes read the rows above and below), done_import[u] once they are */
+  const hush_gbuffer_import_job *gbuffer;
+  int *done_import;
   size_t *bad;
 } fused_frame;
 
@@ -750,9 +758,17 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   /* the unit's rows of the colour and the albedo: read while the other
    * thread computes (the pass over the frame before was bound by memory
    * alone; import 1.94 -> 1.02 ms, the loop 0.6 ms longer) */
+  if (ff->gbuffer) {
+    const int H = fr->grid.height;
+    const int g0 = u ? y0 + 1 : 0, g1 = u == ff->units - 1 ? H : y1 + 1;
+    ff->bad[(size_t)me * FUSED_STRIDE] += hush__gbuffer_import_rows(ff->gbuffer, g0, g1);
+    __atomic_store_n(&ff->done_import[u], 1, __ATOMIC_RELEASE);
+  }
   if (ff->colour)
     ff->bad[(size_t)me * FUSED_STRIDE] += hush__import_albedo_demodulated_rows(
         ff->colour, ff->colour_dst, ff->albedo_view, ff->albedo_dst, y0, y1);
+  if (ff->gbuffer && u > 0) /* rows y0 - 1 and y0 */
+    while (!__atomic_load_n(&ff->done_import[u - 1], __ATOMIC_ACQUIRE)) spin_pause();
   hush__reproject_rows(ff->job, ff->plan, y0, y1);
   hush__accum_blend_rows(ff->acc, ff->plan, ff->sample, ff->ap, y0, y1, 0);
   __atomic_store_n(&ff->done[u], 1, __ATOMIC_RELEASE);
@@ -789,7 +805,7 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
 static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
   const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
   int next = 0;
-  for (int u = 0; u < ff->units; u++) ff->done[u] = ff->done3[u] = 0;
+  for (int u = 0; u < ff->units; u++) ff->done[u] = ff->done3[u] = ff->done_import[u] = 0;
   for (int k = 0; k < threads * FUSED_STRIDE; k++) {
     ff->phase_ms[k] = 0.0;
     ff->bad[k] = 0;
@@ -853,18 +869,23 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   /* the colour demodulated as it is imported (one pass less), unless the
    * emission comes off first or holes may change the albedo (as svgf) */
   const int demod_fused = demod && !emis && !hush__filter_view(f, I_SPP);
-  if (!demod_fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
-  if ((s = hush__gbuffer_import(f, &gimages, hush__param_i(f, P_USE_ID), info, &st->rp, &st->gin)))
-    return s;
   const int adaptive = hush__param_i(f, P_TEMPORAL_GRADIENTS);
   /* phases I and II block row by block row (fused_frame) where phase I is
    * the plan and the blend alone: no emission or demodulation pass between
    * them, no holes (demod_fused: no 'spp' bound), no gradients (whose pass
-   * reads the whole blend); then each block row imports its colour and
-   * albedo itself */
-  const int defer_colour =
-      demod_fused && !adaptive && !(st->acc.has_history && st->acc.empty);
-  if (demod_fused && !defer_colour) {
+   * reads the whole blend); then each block row imports its inputs itself
+   * (defer) */
+  const int defer = demod_fused && !adaptive && !(st->acc.has_history && st->acc.empty);
+  if (!demod_fused && (s = hush__filter_import(f, I_COLOR, &st->color))) return s;
+  const int use_id = hush__param_i(f, P_USE_ID);
+  hush_gbuffer_import_job gjob;
+  if (defer) {
+    if ((s = hush__gbuffer_import_begin(f, &gimages, use_id, info, &st->rp, &st->gin, &gjob)))
+      return s;
+  } else if ((s = hush__gbuffer_import(f, &gimages, use_id, info, &st->rp, &st->gin))) {
+    return s;
+  }
+  if (demod_fused && !defer) {
     if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo, &st->color)))
       return s;
   } else if (!demod_fused && need_albedo && (s = hush__filter_import(f, I_ALBEDO, &st->albedo))) {
@@ -903,7 +924,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   /* a second pass only when the fused one met NaN/Inf in the colour or the
    * albedo: redone pass by pass, after the import that applies the policy */
   for (int pass = 0;; pass++) {
-    const int deferred = fused && defer_colour && pass == 0;
+    const int deferred = fused && defer && pass == 0;
     hush_reproject_job job;
     if (fused) {
       /* the plan streamed past the caches even so: its stores' reads for
@@ -1005,11 +1026,13 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.out3 = st->fhist[1 - st->flatest].plane;
       ff.age = st->acc.age[1 - st->acc.latest].plane[0];
       ff.alpha3 = hush__param_f(f, P_ALPHA_FITTED);
+      ff.gbuffer = deferred ? &gjob : NULL;
       ff.colour = deferred ? hush__filter_view(f, I_COLOR) : NULL;
       ff.albedo_view = hush__filter_view(f, I_ALBEDO);
       ff.colour_dst = &st->color;
       ff.albedo_dst = &st->albedo;
       ff.bad = st->unit_bad;
+      ff.done_import = st->unit_done_import;
       fused_frame_run(&ff, st->scratch, threads);
       size_t bad = 0;
       for (int t = 0; t < threads; t++) bad += st->unit_bad[t * FUSED_STRIDE];
@@ -1017,7 +1040,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
         /* nothing of the history has changed but the reprojector's turn */
         st->rp.latest = rp_latest;
         st->rp.has_history = rp_had_history;
-        if ((s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo,
+        if ((s = hush__gbuffer_import(f, &gimages, use_id, info, &st->rp, &st->gin)) ||
+            (s = hush__filter_import_albedo_demodulated(f, I_ALBEDO, I_COLOR, &st->albedo,
                                                         &st->color)))
           return s;
         fused = 0;
