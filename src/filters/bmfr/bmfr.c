@@ -269,6 +269,7 @@ typedef struct bmfr_state {
   bmfr_adaptive ad;    /* temporal_gradients */
   /* fused_frame's, per block row */
   int *unit_end, *unit_first, *unit_done, *unit_done3, *unit_done_import;
+  int *unit_fit_open, *unit_strip_next, *unit_strip_done;
   double *phase_ms; /* fused_frame's, per thread */
   size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
@@ -295,6 +296,9 @@ static void bmfr_destroy(void *state) {
   free(st->unit_done);
   free(st->unit_done3);
   free(st->unit_done_import);
+  free(st->unit_fit_open);
+  free(st->unit_strip_next);
+  free(st->unit_strip_done);
   free(st->phase_ms);
   free(st->unit_bad);
   free(st);
@@ -321,10 +325,14 @@ static hush_status bmfr_create(hush_filter f, void **state) {
     st->unit_done = malloc(units * sizeof *st->unit_done);
     st->unit_done3 = malloc(units * sizeof *st->unit_done3);
     st->unit_done_import = malloc(units * sizeof *st->unit_done_import);
+    st->unit_fit_open = malloc(units * sizeof *st->unit_fit_open);
+    st->unit_strip_next = malloc(units * sizeof *st->unit_strip_next);
+    st->unit_strip_done = malloc(units * sizeof *st->unit_strip_done);
     st->phase_ms = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->phase_ms);
     st->unit_bad = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->unit_bad);
     if (!st->noise || !st->scratch || !st->unit_end || !st->unit_first || !st->unit_done ||
-        !st->unit_done3 || !st->unit_done_import || !st->phase_ms || !st->unit_bad)
+        !st->unit_done3 || !st->unit_done_import || !st->unit_fit_open ||
+        !st->unit_strip_next || !st->unit_strip_done || !st->phase_ms || !st->unit_bad)
       s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
   }
   if (s) {
@@ -721,6 +729,11 @@ typedef struct fused_frame {
   const hush_gbuffer_import_job *gbuffer;
   int *done_import;
   size_t *bad;
+  /* per unit: its fit's strips may be taken (its rows and those it reads
+   * are done), the next strip to take, the strips fitted; strips of per
+   * blocks a unit */
+  int *fit_open, *strip_next, *strip_done;
+  int strips, per;
 } fused_frame;
 
 static const char *const fused_stage_names[FUSED_PHASES] = {"accumulate", "fit",
@@ -748,6 +761,20 @@ static void fused_units(const bmfr_grid *grid, int *row_end, int *first) {
   }
 }
 
+/* Fits the next unclaimed strip of unit u's block row, if any (returns 0
+ * when none is left). Strips are claimed one at a time, so a thread with no
+ * block row left can take some of the last rows' (fused_frame_run): without
+ * it, one thread waited 0.13-0.33 ms a frame for the other's last row. */
+static int fused_fit_strip(const fused_frame *ff, int u, float *scratch) {
+  const int s = __atomic_fetch_add(&ff->strip_next[u], 1, __ATOMIC_RELAXED);
+  if (s >= ff->strips) return 0;
+  const fit_frame *fr = ff->fr;
+  const int bx0 = s * ff->per, nx = fr->grid.nx;
+  fit_strip(fr, bx0, nx - bx0 < ff->per ? nx - bx0 : ff->per, u, scratch);
+  __atomic_fetch_add(&ff->strip_done[u], 1, __ATOMIC_RELEASE);
+  return 1;
+}
+
 /* Unit u on thread me (its scratch and TAA ring); each phase's time (the
  * waits included in the phase that waits) into its phase_ms. */
 static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
@@ -755,12 +782,13 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   double *ms = ff->phase_ms + (size_t)me * FUSED_STRIDE;
   double t0 = hush__now_ms();
   const int y0 = u ? ff->row_end[u - 1] : 0, y1 = ff->row_end[u];
-  /* the unit's rows of the colour and the albedo: read while the other
-   * thread computes (the pass over the frame before was bound by memory
-   * alone; import 1.94 -> 1.02 ms, the loop 0.6 ms longer) */
+  /* the unit's rows of the inputs: read while the other thread computes
+   * (the passes over the frame before were bound by memory alone) */
   if (ff->gbuffer) {
     const int H = fr->grid.height;
-    const int g0 = u ? y0 + 1 : 0, g1 = u == ff->units - 1 ? H : y1 + 1;
+    /* (a block row may already end at the image's last row: mirroring
+     * extends the first rows' units, and small images have few rows) */
+    const int g0 = u ? y0 + 1 : 0, g1 = u == ff->units - 1 || y1 + 1 > H ? H : y1 + 1;
     ff->bad[(size_t)me * FUSED_STRIDE] += hush__gbuffer_import_rows(ff->gbuffer, g0, g1);
     __atomic_store_n(&ff->done_import[u], 1, __ATOMIC_RELEASE);
   }
@@ -776,11 +804,11 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   ms[FUSED_ACCUMULATE] += t1 - t0;
   for (int v = ff->first[u]; v < u; v++)
     while (!__atomic_load_n(&ff->done[v], __ATOMIC_ACQUIRE)) spin_pause();
-  int per = (int)(MAX_LD / fr->ld);
-  per = per < 1 ? 1 : per > STRIP_MAX ? STRIP_MAX : per;
-  const int nx = fr->grid.nx;
-  for (int bx0 = 0; bx0 < nx; bx0 += per)
-    fit_strip(fr, bx0, nx - bx0 < per ? nx - bx0 : per, u, scratch);
+  /* the fit's strips, shared with a thread that has no block row left */
+  __atomic_store_n(&ff->fit_open[u], 1, __ATOMIC_RELEASE);
+  while (fused_fit_strip(ff, u, scratch)) {
+  }
+  while (__atomic_load_n(&ff->strip_done[u], __ATOMIC_ACQUIRE) < ff->strips) spin_pause();
   t0 = hush__now_ms();
   ms[FUSED_FIT] += t0 - t1;
   const int B = fr->grid.block, H = fr->grid.height;
@@ -805,7 +833,9 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
 static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
   const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
   int next = 0;
-  for (int u = 0; u < ff->units; u++) ff->done[u] = ff->done3[u] = ff->done_import[u] = 0;
+  for (int u = 0; u < ff->units; u++)
+    ff->done[u] = ff->done3[u] = ff->done_import[u] = ff->fit_open[u] = ff->strip_next[u] =
+        ff->strip_done[u] = 0;
   for (int k = 0; k < threads * FUSED_STRIDE; k++) {
     ff->phase_ms[k] = 0.0;
     ff->bad[k] = 0;
@@ -819,6 +849,22 @@ static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
       if (u >= ff->units) break;
       fused_unit(ff, u, me, mine);
     }
+    /* no block row left: fit strips of the rows still running, until every
+     * row's fit has been opened and no strip is left to take */
+    double t0 = hush__now_ms();
+    for (int busy = 1; busy;) {
+      busy = 0;
+      for (int u = 0; u < ff->units; u++) {
+        if (!__atomic_load_n(&ff->fit_open[u], __ATOMIC_ACQUIRE)) {
+          busy = 1; /* not yet: look again */
+          continue;
+        }
+        while (fused_fit_strip(ff, u, mine)) {
+        }
+      }
+      if (busy) spin_pause();
+    }
+    ff->phase_ms[(size_t)me * FUSED_STRIDE + FUSED_FIT] += hush__now_ms() - t0;
   }
 }
 
@@ -1033,6 +1079,12 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.albedo_dst = &st->albedo;
       ff.bad = st->unit_bad;
       ff.done_import = st->unit_done_import;
+      ff.fit_open = st->unit_fit_open;
+      ff.strip_next = st->unit_strip_next;
+      ff.strip_done = st->unit_strip_done;
+      ff.per = (int)(MAX_LD / fr.ld);
+      ff.per = ff.per < 1 ? 1 : ff.per > STRIP_MAX ? STRIP_MAX : ff.per;
+      ff.strips = (fr.grid.nx + ff.per - 1) / ff.per;
       fused_frame_run(&ff, st->scratch, threads);
       size_t bad = 0;
       for (int t = 0; t < threads; t++) bad += st->unit_bad[t * FUSED_STRIDE];
