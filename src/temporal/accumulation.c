@@ -220,7 +220,6 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
   const blend_params p = {b->alpha_min, b->alpha_mom_min, b->max_age};
   const int W = (int)b->W;
   const int32_t *origin = plan->origin + row;
-  const uint16_t *mask = plan->mask + row;
   const uint8_t *kind = plan->kind + row;
   const float *w0 = plan->w[0] + row, *w1 = plan->w[1] + row;
   const float *w2 = plan->w[2] + row, *w3 = plan->w[3] + row;
@@ -242,11 +241,11 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
    * in the loop below, gcc gave it 16- and 32-byte vectors (a chunk of 16
    * of its smallest type), two to four registers for every float
    * operation (as tblend_pixels) */
-  int32_t bils[CHUNK], hass[CHUNK];
-  for (int k = 0; k < len; k++) {
-    bils[k] = kind[x_begin + k] == HUSH_FOOTPRINT_BILINEAR;
-    hass[k] = mask[x_begin + k] != 0;
-  }
+  /* (a pixel has history where its footprint is BILINEAR: its mask is not
+   * 0 then, and a 3X3 pixel, whose mask is not 0 either, is blended again
+   * by blend_pixel after the chunk) */
+  int32_t bils[CHUNK];
+  for (int k = 0; k < len; k++) bils[k] = kind[x_begin + k] == HUSH_FOOTPRINT_BILINEAR;
 #pragma omp simd
   for (int x = x_begin; x < x_end; x++) {
     const int32_t o = contiguous | diagonals ? base + x : origin[x] & -bils[x - x_begin];
@@ -278,7 +277,7 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
     q.ha = HUSH_APPLY4(pa, 6);
 #undef HUSH_APPLY4
 #undef HUSH_TAP
-    blend_compute(&p, &q, hass[k], nc);
+    blend_compute(&p, &q, bils[k], nc);
     st[0][k] = q.c0;
     if (nc > 1) st[1][k] = q.c1;
     if (nc > 2) st[2][k] = q.c2;
