@@ -1200,19 +1200,14 @@ void hush__reproject_rows(const hush_reproject_job *job, hush_reproject_plan *pl
   hush__stream_fence();
 }
 
-hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
-                                  const hush_reproject_input *in, const hush_gbuffer *prev,
-                                  const hush_frame_info *info, const hush_reproject_params *params,
-                                  int threads) {
+/* The whole plan of a begun job, the rows shared among the threads. */
+static void build_all(const hush_reproject_job *job, hush_reproject_plan *plan, int threads) {
   if (threads < 1) threads = 1;
-  hush_reproject_job job;
-  hush_status s = hush__reproject_begin(device, plan, in, prev, info, params, &job);
-  if (s) return s;
-  if (job.clear) {
+  if (job->clear) {
     hush__reproject_plan_clear(plan, threads);
-    return HUSH_OK;
+    return;
   }
-  const int H = job.H;
+  const int H = job->H;
   /* Rows cost very different amounts (a disocclusion or a border runs
    * plan_pixel's scalar path; a row whose footprints do not follow each
    * other gathers its taps), and they cluster in bands: a static split in
@@ -1220,7 +1215,17 @@ hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
    * handed out in small chunks instead; each row is computed on its own,
    * so the plan does not depend on which thread builds it. */
 #pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
-  for (int y = 0; y < H; y++) hush__reproject_rows(&job, plan, y, y + 1);
+  for (int y = 0; y < H; y++) hush__reproject_rows(job, plan, y, y + 1);
+}
+
+hush_status hush__reproject_build(hush_device device, hush_reproject_plan *plan,
+                                  const hush_reproject_input *in, const hush_gbuffer *prev,
+                                  const hush_frame_info *info, const hush_reproject_params *params,
+                                  int threads) {
+  hush_reproject_job job;
+  hush_status s = hush__reproject_begin(device, plan, in, prev, info, params, &job);
+  if (s) return s;
+  build_all(&job, plan, threads);
   return HUSH_OK;
 }
 
@@ -1347,19 +1352,6 @@ hush_status hush__reprojector_build(hush_device device, hush_reprojector *r,
   hush_reproject_job job;
   hush_status s = hush__reprojector_begin(device, r, position, motion, info, params, &job);
   if (s) return s;
-  if (threads < 1) threads = 1;
-  if (job.clear) {
-    hush__reproject_plan_clear(&r->plan, threads);
-    return HUSH_OK;
-  }
-  const int H = job.H;
-  /* Rows cost very different amounts (a disocclusion or a border runs
-   * plan_pixel's scalar path; a row whose footprints do not follow each
-   * other gathers its taps), and they cluster in bands: a static split in
-   * halves left one thread with ~1.4x the work of the other. Rows are
-   * handed out in small chunks instead; each row is computed on its own,
-   * so the plan does not depend on which thread builds it. */
-#pragma omp parallel for schedule(dynamic, BUILD_ROWS) num_threads(threads)
-  for (int y = 0; y < H; y++) hush__reproject_rows(&job, &r->plan, y, y + 1);
+  build_all(&job, &r->plan, threads);
   return HUSH_OK;
 }

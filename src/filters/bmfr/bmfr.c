@@ -250,6 +250,16 @@ static const hush_filter_class_info bmfr_info = {
 enum { FUSED_ACCUMULATE, FUSED_FIT, FUSED_ACCUMULATE_FITTED, FUSED_TAA, FUSED_PHASES };
 #define FUSED_STRIDE 8
 
+/* One block row of the fused frame (a unit): its image rows end at end
+ * (they start at the previous unit's), it reads rows of units first ..
+ * itself, and its flags (set once a frame, read by the other threads):
+ * rows imported, rows built and blended, fit open to other threads,
+ * strips taken and fitted, phase III done. */
+typedef struct fused_row {
+  int end, first;
+  int done_import, done, fit_open, strip_next, strip_done, done3;
+} fused_row;
+
 typedef struct bmfr_state {
   hush_reprojector rp;
   hush_accum acc;      /* phase I */
@@ -267,9 +277,7 @@ typedef struct bmfr_state {
   hush_gbuffer_inputs gin;
   hush_taa taa;
   bmfr_adaptive ad;    /* temporal_gradients */
-  /* fused_frame's, per block row */
-  int *unit_end, *unit_first, *unit_done, *unit_done3, *unit_done_import;
-  int *unit_fit_open, *unit_strip_next, *unit_strip_done;
+  fused_row *rows;  /* fused_frame's, per block row */
   double *phase_ms; /* fused_frame's, per thread */
   size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
@@ -291,14 +299,7 @@ static void bmfr_destroy(void *state) {
   hush__gbuffer_inputs_free(&st->gin);
   hush__taa_free(&st->taa);
   bmfr_adaptive_free(&st->ad);
-  free(st->unit_end);
-  free(st->unit_first);
-  free(st->unit_done);
-  free(st->unit_done3);
-  free(st->unit_done_import);
-  free(st->unit_fit_open);
-  free(st->unit_strip_next);
-  free(st->unit_strip_done);
+  free(st->rows);
   free(st->phase_ms);
   free(st->unit_bad);
   free(st);
@@ -320,19 +321,10 @@ static hush_status bmfr_create(hush_filter f, void **state) {
     st->scratch = hush__alloc_floats((size_t)st->threads * SCRATCH_COLUMNS * MAX_LD);
     /* block rows: at most H / 16 + 1 (the smallest blocks, displaced) */
     const size_t units = (size_t)H / 16 + 2;
-    st->unit_end = malloc(units * sizeof *st->unit_end);
-    st->unit_first = malloc(units * sizeof *st->unit_first);
-    st->unit_done = malloc(units * sizeof *st->unit_done);
-    st->unit_done3 = malloc(units * sizeof *st->unit_done3);
-    st->unit_done_import = malloc(units * sizeof *st->unit_done_import);
-    st->unit_fit_open = malloc(units * sizeof *st->unit_fit_open);
-    st->unit_strip_next = malloc(units * sizeof *st->unit_strip_next);
-    st->unit_strip_done = malloc(units * sizeof *st->unit_strip_done);
+    st->rows = malloc(units * sizeof *st->rows);
     st->phase_ms = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->phase_ms);
     st->unit_bad = calloc((size_t)st->threads * FUSED_STRIDE, sizeof *st->unit_bad);
-    if (!st->noise || !st->scratch || !st->unit_end || !st->unit_first || !st->unit_done ||
-        !st->unit_done3 || !st->unit_done_import || !st->unit_fit_open ||
-        !st->unit_strip_next || !st->unit_strip_done || !st->phase_ms || !st->unit_bad)
+    if (!st->noise || !st->scratch || !st->rows || !st->phase_ms || !st->unit_bad)
       s = hush__fail(f->device, HUSH_ERROR_OUT_OF_MEMORY, "bmfr: out of memory");
   }
   if (s) {
@@ -656,12 +648,18 @@ static void fit_strip(const fit_frame *fr, int bx0, int count, int by, float *sc
   }
 }
 
+/* Blocks per strip: as many as the per-thread scratch holds (MAX_LD rows a
+ * column: 4 blocks of 32x32), at most STRIP_MAX. */
+static int strip_blocks(const fit_frame *fr) {
+  const int per = (int)(MAX_LD / fr->ld);
+  return per < 1 ? 1 : per > STRIP_MAX ? STRIP_MAX : per;
+}
+
 static void fit_frame_blocks(const fit_frame *fr, float *scratch, int threads) {
   const int nx = fr->grid.nx, ny = fr->grid.ny;
   /* as many blocks per strip as the per-thread scratch holds (MAX_LD rows
    * per column: 4 blocks of 32x32) */
-  int per = (int)(MAX_LD / fr->ld);
-  per = per < 1 ? 1 : per > STRIP_MAX ? STRIP_MAX : per;
+  const int per = strip_blocks(fr);
   const int strips_x = (nx + per - 1) / per;
   const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
 #pragma omp parallel num_threads(threads)
@@ -677,17 +675,6 @@ static void fit_frame_blocks(const fit_frame *fr, float *scratch, int threads) {
 
 /* ---- phases I and II together, block row by block row --------------------------- */
 
-/*
- * Phase I's plan and blend for a block row's image rows, then the row's
- * fit while they are still in the caches (the fit's gather read them back
- * from memory: the plan's current depth and normals, the accumulated
- * radiance). Unit u builds rows row_end[u - 1] .. row_end[u] - 1 and fits
- * block row u; the rows a block row reads (its own and, at the image's
- * top and bottom, the mirrored ones) all belong to units <= u, and each
- * unit waits only for the earlier units it reads, which the threads took
- * before it: no order of threads can deadlock. Every row and block is
- * computed on its own: the same bits as the phases one after the other.
- */
 /* A waiting thread's busy loop: the pause keeps it from flooding the core
  * with speculative loads of the flag. */
 static inline void spin_pause(void) {
@@ -696,6 +683,16 @@ static inline void spin_pause(void) {
 #endif
 }
 
+/*
+ * Phases I to III and TAA, block row by block row (docs/bmfr.md, "Block
+ * row by block row"): unit u imports its rows of the inputs, builds and
+ * blends phase I for them, fits block row u, then runs phase III and TAA
+ * on its image rows. The rows a block row reads (its own and, at the
+ * image's top and bottom, the mirrored ones) all belong to units <= u, and
+ * each unit waits only for the earlier units it reads, which the threads
+ * took before it: no order of threads can deadlock. Every row and block is
+ * computed on its own: the same bits as the phases one after the other.
+ */
 typedef struct fused_frame {
   const fit_frame *fr;
   const hush_reproject_job *job;
@@ -703,9 +700,7 @@ typedef struct fused_frame {
   const hush_accum *acc;
   const float *const *sample;
   const hush_accum_params *ap;
-  const int *row_end;  /* per unit: its last row + 1 */
-  const int *first;    /* per unit: the first unit whose rows it reads */
-  int *done;           /* per unit: its rows are built and blended */
+  fused_row *rows;     /* per unit */
   int units;
   /* phase III, per block row after its fit (NULL prev3: no history) */
   const float *const *prev3;
@@ -714,7 +709,6 @@ typedef struct fused_frame {
   float alpha3;
   /* TAA (NULL: none), per block row after phase III's rows around it */
   const hush_taa_job *taa;
-  int *done3; /* per unit: phase III's rows are done */
   /* per thread (FUSED_STRIDE apart: a cache line each), the milliseconds
    * spent in each phase (FUSED_PHASES), for the stage table */
   double *phase_ms;
@@ -723,24 +717,19 @@ typedef struct fused_frame {
    * (FUSED_STRIDE apart) */
   const hush_image_view *colour, *albedo_view;
   hush_planar *colour_dst, *albedo_dst;
-  /* the G-buffer imported by each unit (NULL: imported before): rows
-   * row_end[u - 1] + 1 .. row_end[u], one below its own (the plan's depth
-   * slopes read the rows above and below), done_import[u] once they are */
+  /* the G-buffer imported by each unit (NULL: imported before): its rows
+   * moved one down (the plan's depth slopes read the rows above and
+   * below) */
   const hush_gbuffer_import_job *gbuffer;
-  int *done_import;
   size_t *bad;
-  /* per unit: its fit's strips may be taken (its rows and those it reads
-   * are done), the next strip to take, the strips fitted; strips of per
-   * blocks a unit */
-  int *fit_open, *strip_next, *strip_done;
-  int strips, per;
+  int strips, per; /* a unit's fit: strips of per blocks */
 } fused_frame;
 
 static const char *const fused_stage_names[FUSED_PHASES] = {"accumulate", "fit",
                                                             "accumulate_fitted", "taa"};
 
-/* The units' rows (row_end) and the first unit each one reads (first). */
-static void fused_units(const bmfr_grid *grid, int *row_end, int *first) {
+/* The units' rows (end) and the first unit each one reads (first). */
+static void fused_units(const bmfr_grid *grid, fused_row *rows) {
   const int B = grid->block, H = grid->height;
   int end = 0;
   for (int u = 0; u < grid->ny; u++) {
@@ -754,10 +743,10 @@ static void fused_units(const bmfr_grid *grid, int *row_end, int *first) {
     natural = natural > H ? H : natural;
     end = end > natural ? end : natural;
     end = end > hi ? end : hi;
-    row_end[u] = u == grid->ny - 1 ? H : end;
+    rows[u].end = u == grid->ny - 1 ? H : end;
     int v = 0;
-    while (v < u && row_end[v] <= lo) v++;
-    first[u] = v;
+    while (v < u && rows[v].end <= lo) v++;
+    rows[u].first = v;
   }
 }
 
@@ -766,12 +755,12 @@ static void fused_units(const bmfr_grid *grid, int *row_end, int *first) {
  * block row left can take some of the last rows' (fused_frame_run): without
  * it, one thread waited 0.13-0.33 ms a frame for the other's last row. */
 static int fused_fit_strip(const fused_frame *ff, int u, float *scratch) {
-  const int s = __atomic_fetch_add(&ff->strip_next[u], 1, __ATOMIC_RELAXED);
+  const int s = __atomic_fetch_add(&ff->rows[u].strip_next, 1, __ATOMIC_RELAXED);
   if (s >= ff->strips) return 0;
   const fit_frame *fr = ff->fr;
   const int bx0 = s * ff->per, nx = fr->grid.nx;
   fit_strip(fr, bx0, nx - bx0 < ff->per ? nx - bx0 : ff->per, u, scratch);
-  __atomic_fetch_add(&ff->strip_done[u], 1, __ATOMIC_RELEASE);
+  __atomic_fetch_add(&ff->rows[u].strip_done, 1, __ATOMIC_RELEASE);
   return 1;
 }
 
@@ -781,7 +770,8 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   const fit_frame *fr = ff->fr;
   double *ms = ff->phase_ms + (size_t)me * FUSED_STRIDE;
   double t0 = hush__now_ms();
-  const int y0 = u ? ff->row_end[u - 1] : 0, y1 = ff->row_end[u];
+  fused_row *rows = ff->rows;
+  const int y0 = u ? rows[u - 1].end : 0, y1 = rows[u].end;
   /* the unit's rows of the inputs: read while the other thread computes
    * (the passes over the frame before were bound by memory alone) */
   if (ff->gbuffer) {
@@ -790,25 +780,25 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
      * extends the first rows' units, and small images have few rows) */
     const int g0 = u ? y0 + 1 : 0, g1 = u == ff->units - 1 || y1 + 1 > H ? H : y1 + 1;
     ff->bad[(size_t)me * FUSED_STRIDE] += hush__gbuffer_import_rows(ff->gbuffer, g0, g1);
-    __atomic_store_n(&ff->done_import[u], 1, __ATOMIC_RELEASE);
+    __atomic_store_n(&rows[u].done_import, 1, __ATOMIC_RELEASE);
   }
   if (ff->colour)
     ff->bad[(size_t)me * FUSED_STRIDE] += hush__import_albedo_demodulated_rows(
         ff->colour, ff->colour_dst, ff->albedo_view, ff->albedo_dst, y0, y1);
   if (ff->gbuffer && u > 0) /* rows y0 - 1 and y0 */
-    while (!__atomic_load_n(&ff->done_import[u - 1], __ATOMIC_ACQUIRE)) spin_pause();
+    while (!__atomic_load_n(&rows[u - 1].done_import, __ATOMIC_ACQUIRE)) spin_pause();
   hush__reproject_rows(ff->job, ff->plan, y0, y1);
   hush__accum_blend_rows(ff->acc, ff->plan, ff->sample, ff->ap, y0, y1, 0);
-  __atomic_store_n(&ff->done[u], 1, __ATOMIC_RELEASE);
+  __atomic_store_n(&rows[u].done, 1, __ATOMIC_RELEASE);
   double t1 = hush__now_ms();
   ms[FUSED_ACCUMULATE] += t1 - t0;
-  for (int v = ff->first[u]; v < u; v++)
-    while (!__atomic_load_n(&ff->done[v], __ATOMIC_ACQUIRE)) spin_pause();
+  for (int v = rows[u].first; v < u; v++)
+    while (!__atomic_load_n(&rows[v].done, __ATOMIC_ACQUIRE)) spin_pause();
   /* the fit's strips, shared with a thread that has no block row left */
-  __atomic_store_n(&ff->fit_open[u], 1, __ATOMIC_RELEASE);
+  __atomic_store_n(&rows[u].fit_open, 1, __ATOMIC_RELEASE);
   while (fused_fit_strip(ff, u, scratch)) {
   }
-  while (__atomic_load_n(&ff->strip_done[u], __ATOMIC_ACQUIRE) < ff->strips) spin_pause();
+  while (__atomic_load_n(&rows[u].strip_done, __ATOMIC_ACQUIRE) < ff->strips) spin_pause();
   t0 = hush__now_ms();
   ms[FUSED_FIT] += t0 - t1;
   const int B = fr->grid.block, H = fr->grid.height;
@@ -823,9 +813,9 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   if (!ff->taa) return;
   /* TAA's rows r0 - 1 .. r1 - 2: its 3x3 box reads phase III's rows r0 - 2
    * .. r1 - 1, the first two of the block row above (at least two rows) */
-  __atomic_store_n(&ff->done3[u], 1, __ATOMIC_RELEASE);
+  __atomic_store_n(&rows[u].done3, 1, __ATOMIC_RELEASE);
   if (u > 0)
-    while (!__atomic_load_n(&ff->done3[u - 1], __ATOMIC_ACQUIRE)) spin_pause();
+    while (!__atomic_load_n(&rows[u - 1].done3, __ATOMIC_ACQUIRE)) spin_pause();
   hush__taa_rows(ff->taa, me, u > 0 ? r0 - 1 : 0, u == ff->units - 1 ? H : r1 - 1);
   ms[FUSED_TAA] += hush__now_ms() - t1;
 }
@@ -833,9 +823,10 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
 static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
   const size_t per_thread = (size_t)SCRATCH_COLUMNS * MAX_LD;
   int next = 0;
-  for (int u = 0; u < ff->units; u++)
-    ff->done[u] = ff->done3[u] = ff->done_import[u] = ff->fit_open[u] = ff->strip_next[u] =
-        ff->strip_done[u] = 0;
+  for (int u = 0; u < ff->units; u++) {
+    fused_row *r = &ff->rows[u];
+    r->done_import = r->done = r->fit_open = r->strip_next = r->strip_done = r->done3 = 0;
+  }
   for (int k = 0; k < threads * FUSED_STRIDE; k++) {
     ff->phase_ms[k] = 0.0;
     ff->bad[k] = 0;
@@ -855,7 +846,7 @@ static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
     for (int busy = 1; busy;) {
       busy = 0;
       for (int u = 0; u < ff->units; u++) {
-        if (!__atomic_load_n(&ff->fit_open[u], __ATOMIC_ACQUIRE)) {
+        if (!__atomic_load_n(&ff->rows[u].fit_open, __ATOMIC_ACQUIRE)) {
           busy = 1; /* not yet: look again */
           continue;
         }
@@ -967,10 +958,10 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   int fused_taa = 0;
   /* the reprojector as it was, should the fused frame have to be redone */
   const int rp_latest = st->rp.latest, rp_had_history = st->rp.has_history;
-  /* a second pass only when the fused one met NaN/Inf in the colour or the
-   * albedo: redone pass by pass, after the import that applies the policy */
+  /* a second pass only when the fused one met NaN/Inf in the inputs it
+   * imported: redone pass by pass, after the import that applies the policy */
   for (int pass = 0;; pass++) {
-    const int deferred = fused && defer && pass == 0;
+    const int deferred = defer && pass == 0; /* (defer implies fused) */
     hush_reproject_job job;
     if (fused) {
       /* the plan streamed past the caches even so: its stores' reads for
@@ -1055,7 +1046,6 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
                         (const float *const *)st->fhist[1 - st->flatest].plane,
                         demod ? (const float *const *)st->albedo.plane : NULL, &tp, &tj);
       ff.taa = fused_taa ? &tj : NULL;
-      ff.done3 = st->unit_done3;
       ff.phase_ms = st->phase_ms;
       ff.fr = &fr;
       ff.job = &job;
@@ -1064,10 +1054,8 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.sample = (const float *const *)st->color.plane;
       ff.ap = &ap;
       ff.units = fr.grid.ny;
-      fused_units(&fr.grid, st->unit_end, st->unit_first);
-      ff.row_end = st->unit_end;
-      ff.first = st->unit_first;
-      ff.done = st->unit_done;
+      fused_units(&fr.grid, st->rows);
+      ff.rows = st->rows;
       ff.prev3 = (const float *const *)st->fhist[st->flatest].plane;
       ff.out3 = st->fhist[1 - st->flatest].plane;
       ff.age = st->acc.age[1 - st->acc.latest].plane[0];
@@ -1078,12 +1066,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.colour_dst = &st->color;
       ff.albedo_dst = &st->albedo;
       ff.bad = st->unit_bad;
-      ff.done_import = st->unit_done_import;
-      ff.fit_open = st->unit_fit_open;
-      ff.strip_next = st->unit_strip_next;
-      ff.strip_done = st->unit_strip_done;
-      ff.per = (int)(MAX_LD / fr.ld);
-      ff.per = ff.per < 1 ? 1 : ff.per > STRIP_MAX ? STRIP_MAX : ff.per;
+      ff.per = strip_blocks(&fr);
       ff.strips = (fr.grid.nx + ff.per - 1) / ff.per;
       fused_frame_run(&ff, st->scratch, threads);
       size_t bad = 0;
