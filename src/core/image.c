@@ -642,7 +642,8 @@ int hush__view_import_row_divided(const hush_image_view *v, uint32_t y, hush_pla
 
 int hush__view_import_row_pair_divided(const hush_image_view *v, const hush_image_view *dv,
                                        uint32_t y, hush_planar *dst, hush_planar *divisor,
-                                       float floor, size_t *bad, size_t *bad_divisor) {
+                                       float floor, int stream, size_t *bad,
+                                       size_t *bad_divisor) {
 #if defined(__AVX512F__) && defined(__x86_64__)
   const uint32_t w = v->width;
   if (dst->channels != 3 || divisor->channels != 3 || dv->width != w) return 0;
@@ -665,19 +666,26 @@ int hush__view_import_row_pair_divided(const hush_image_view *v, const hush_imag
     nd += count_nonfinite16(d[0]) + count_nonfinite16(d[1]) + count_nonfinite16(d[2]);
     rgb16(rf + 3 * (size_t)x, r);
     n += count_nonfinite16(r[0]) + count_nonfinite16(r[1]) + count_nonfinite16(r[2]);
-    for (int k = 0; k < 3; k++) {
-      _mm512_stream_ps(dout[k] + x, d[k]);
-      /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
-       * hush__view_import_row_divided */
-      _mm512_stream_ps(out[k] + x, _mm512_div_ps(r[k], _mm512_max_ps(d[k], fl)));
-    }
+    /* vmaxps(d, floor) is `d > floor ? d : floor` (NaN gives floor), as
+     * hush__view_import_row_divided */
+    if (stream)
+      for (int k = 0; k < 3; k++) {
+        _mm512_stream_ps(dout[k] + x, d[k]);
+        _mm512_stream_ps(out[k] + x, _mm512_div_ps(r[k], _mm512_max_ps(d[k], fl)));
+      }
+    else
+      for (int k = 0; k < 3; k++) {
+        _mm512_store_ps(dout[k] + x, d[k]);
+        _mm512_store_ps(out[k] + x, _mm512_div_ps(r[k], _mm512_max_ps(d[k], fl)));
+      }
   }
-  _mm_sfence();
+  if (stream) _mm_sfence();
   *bad = n;
   *bad_divisor = nd;
   return 1;
 #else
-  (void)v, (void)dv, (void)y, (void)dst, (void)divisor, (void)floor, (void)bad, (void)bad_divisor;
+  (void)v, (void)dv, (void)y, (void)dst, (void)divisor, (void)floor, (void)stream, (void)bad,
+      (void)bad_divisor;
   return 0;
 #endif
 }

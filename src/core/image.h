@@ -134,14 +134,15 @@ int hush__view_import_row_divided(const hush_image_view *view, uint32_t y, hush_
 /* Row y of two 3-channel views at once: divisor_view into divisor's planes
  * and view into dst's, each channel of the latter divided by max(the
  * former, floor) from the registers (hush__view_import_row_divided's
- * values, without reading the divisor's row back), both streamed; *bad and
- * *bad_divisor the counts of NaN/Inf values read in each. Returns 0
+ * values, without reading the divisor's row back), both streamed past the
+ * caches (stream 1) or stored in them (0: for rows read again soon); *bad
+ * and *bad_divisor the counts of NaN/Inf values read in each. Returns 0
  * (nothing read) where the pair cannot take that path: the callers then
  * import the divisor's row and hush__view_import_row_divided it. */
 int hush__view_import_row_pair_divided(const hush_image_view *view,
                                        const hush_image_view *divisor_view, uint32_t y,
                                        hush_planar *dst, hush_planar *divisor, float floor,
-                                       size_t *bad, size_t *bad_divisor);
+                                       int stream, size_t *bad, size_t *bad_divisor);
 hush_status hush__view_import_nonfinite(hush_device device, const hush_image_view *view,
                                         const char *what, hush_planar *dst,
                                         hush_nonfinite_policy policy, size_t bad);

@@ -71,12 +71,12 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
 
 size_t hush__import_albedo_demodulated_rows(const hush_image_view *view, hush_planar *dst,
                                             const hush_image_view *albedo_view,
-                                            hush_planar *albedo, int y0, int y1) {
+                                            hush_planar *albedo, int y0, int y1, int stream) {
   size_t bad = 0;
   for (int y = y0; y < y1; y++) {
     size_t row_bad = 0, row_bad_albedo = 0;
     if (hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
-                                           HUSH_ALBEDO_EPS, &row_bad, &row_bad_albedo)) {
+                                           HUSH_ALBEDO_EPS, stream, &row_bad, &row_bad_albedo)) {
       bad += row_bad + row_bad_albedo;
       continue;
     }
@@ -99,7 +99,7 @@ hush_status hush__import_albedo_demodulated(hush_device device, const hush_image
   for (int y = 0; y < H; y++) {
     size_t row_bad = 0, row_bad_albedo = 0;
     if (hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
-                                           HUSH_ALBEDO_EPS, &row_bad, &row_bad_albedo)) {
+                                           HUSH_ALBEDO_EPS, 1, &row_bad, &row_bad_albedo)) {
       bad += row_bad;
       bad_albedo += row_bad_albedo;
       continue;

@@ -58,10 +58,12 @@ hush_status hush__import_albedo_demodulated(hush_device device, const hush_image
  * the count of NaN/Inf values in both views. Those rows are final only
  * when the whole frame's count is 0; otherwise the caller imports the
  * frame again with hush__import_albedo_demodulated (which applies the
- * policy and replaces them as the separate passes do). */
+ * policy and replaces them as the separate passes do). stream 0: the rows
+ * stay in the caches (where the AVX-512 path takes them) for a caller that
+ * reads them soon; 1: they bypass them, as the whole import's. */
 size_t hush__import_albedo_demodulated_rows(const hush_image_view *view, hush_planar *dst,
                                             const hush_image_view *albedo_view,
-                                            hush_planar *albedo, int y0, int y1);
+                                            hush_planar *albedo, int y0, int y1, int stream);
 
 /*
  * The remodulation fused with the export: view <- filtered * max(albedo,

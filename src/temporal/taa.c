@@ -313,16 +313,17 @@ static void interior_row(const taa_row *t, const hush_reproject_plan *plan,
   }
 }
 
-/* Row `row` of this frame, modulated by the albedo (NULL: none) and
- * tone-mapped if asked, to YCoCg in v[0..2] (W floats each). */
-static void ycocg_row(const float *const *color, const float *const *albedo, size_t row, int W,
-                      int tonemap, float *const v[3]) {
+/* Row `row` of this frame, modulated by the albedo's row at arow (albedo
+ * NULL: none) and tone-mapped if asked, to YCoCg in v[0..2] (W floats
+ * each). */
+static void ycocg_row(const float *const *color, const float *const *albedo, size_t row,
+                      size_t arow, int W, int tonemap, float *const v[3]) {
   const float *restrict cr = color[0] + row, *restrict cg = color[1] + row,
                         *restrict cb = color[2] + row;
   float *restrict v0 = v[0], *restrict v1 = v[1], *restrict v2 = v[2];
   if (albedo) {
-    const float *restrict ar = albedo[0] + row, *restrict ag = albedo[1] + row,
-                          *restrict ab = albedo[2] + row;
+    const float *restrict ar = albedo[0] + arow, *restrict ag = albedo[1] + arow,
+                          *restrict ab = albedo[2] + arow;
     /* as hush__remodulate: filtered * max(albedo, eps) */
 #pragma omp simd
     for (int x = 0; x < W; x++) {
@@ -374,7 +375,8 @@ static void resolve_band(const taa_pass *p, float *slot[3][3], int y0, int y1) {
     const int need[3] = {yu, y, yd};
     for (int q = 0; q < 3; q++)
       if (held[need[q] % 3] != need[q]) {
-        ycocg_row(p->color, p->albedo, (size_t)need[q] * W, W, tonemap, slot[need[q] % 3]);
+        ycocg_row(p->color, p->albedo, (size_t)need[q] * W,
+                  (size_t)(need[q] - p->albedo_row0) * W, W, tonemap, slot[need[q] % 3]);
         held[need[q] % 3] = need[q];
       }
     const size_t row = (size_t)y * W;
@@ -418,7 +420,8 @@ void hush__taa_begin(const hush_taa *taa, const hush_reproject_plan *plan,
                       (hush_planar *)&taa->history[1 - taa->latest],
                       cur->plane,
                       (int)cur->width,
-                      (int)cur->height};
+                      (int)cur->height,
+                      0};
   *job = p;
 }
 

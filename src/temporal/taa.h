@@ -74,6 +74,7 @@ typedef struct hush_taa_job {
   hush_planar *out;
   float *const *ring; /* taa->current's planes */
   int W, H;
+  int albedo_row0; /* albedo holds the rows from this one on (hush__taa_begin: 0) */
 } hush_taa_job;
 
 void hush__taa_begin(const hush_taa *taa, const hush_reproject_plan *plan,

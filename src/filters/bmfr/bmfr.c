@@ -278,6 +278,10 @@ typedef struct bmfr_state {
   hush_taa taa;
   bmfr_adaptive ad;    /* temporal_gradients */
   fused_row *rows;  /* fused_frame's, per block row */
+  /* fused_frame's unit rows, per thread: the demodulated colour and the
+   * albedo of the unit it runs (unit_rows_cap rows each) */
+  hush_planar *unit_rows;
+  int unit_rows_cap;
   double *phase_ms; /* fused_frame's, per thread */
   size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
@@ -300,6 +304,9 @@ static void bmfr_destroy(void *state) {
   hush__taa_free(&st->taa);
   bmfr_adaptive_free(&st->ad);
   free(st->rows);
+  if (st->unit_rows)
+    for (int k = 0; k < 2 * st->threads; k++) hush__planar_free(&st->unit_rows[k]);
+  free(st->unit_rows);
   free(st->phase_ms);
   free(st->unit_bad);
   free(st);
@@ -717,6 +724,10 @@ typedef struct fused_frame {
    * (FUSED_STRIDE apart) */
   const hush_image_view *colour, *albedo_view;
   hush_planar *colour_dst, *albedo_dst;
+  /* NULL, or per thread (2 me, 2 me + 1) the colour's and albedo's rows
+   * of its unit (unit_first_row's on), which then go there instead, kept
+   * in the caches for the blend and TAA */
+  hush_planar *unit_rows;
   /* the G-buffer imported by each unit (NULL: imported before): its rows
    * moved one down (the plan's depth slopes read the rows above and
    * below) */
@@ -764,6 +775,26 @@ static int fused_fit_strip(const fused_frame *ff, int u, float *scratch) {
   return 1;
 }
 
+/* The first row of the inputs' colour and albedo that unit u reads: its
+ * own first row, or the two rows above its block row that TAA's box reads,
+ * if earlier. */
+static int unit_first_row(const bmfr_grid *grid, const fused_row *rows, int u) {
+  const int y0 = u ? rows[u - 1].end : 0;
+  if (u == 0) return 0;
+  int a0 = grid->y0 + u * grid->block - 2;
+  a0 = a0 < 0 ? 0 : a0;
+  return a0 < y0 ? a0 : y0;
+}
+
+/* Rows y0 .. y0 + n - 1 of v as a view of their own. */
+static hush_image_view view_rows(const hush_image_view *v, int y0, int n) {
+  hush_image_view r = *v;
+  r.row_stride = hush__view_row_stride(v);
+  r.byte_offset += (size_t)y0 * r.row_stride;
+  r.height = (uint32_t)n;
+  return r;
+}
+
 /* Unit u on thread me (its scratch and TAA ring); each phase's time (the
  * waits included in the phase that waits) into its phase_ms. */
 static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
@@ -782,13 +813,38 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
     ff->bad[(size_t)me * FUSED_STRIDE] += hush__gbuffer_import_rows(ff->gbuffer, g0, g1);
     __atomic_store_n(&rows[u].done_import, 1, __ATOMIC_RELEASE);
   }
-  if (ff->colour)
+  const float *const *sample = ff->sample;
+  int sample_row0 = 0;
+  const hush_taa_job *taa = ff->taa;
+  hush_taa_job unit_taa;
+  if (ff->colour && ff->unit_rows) {
+    /* the unit's rows in the thread's own buffers, where they stay cached
+     * for the blend and TAA (imported into the frame's planes, they went
+     * out to memory and came back) */
+    hush_planar *colour = &ff->unit_rows[2 * me], *albedo = &ff->unit_rows[2 * me + 1];
+    const int a0 = unit_first_row(&fr->grid, rows, u);
+    const hush_image_view cv = view_rows(ff->colour, a0, y1 - a0),
+                          av = view_rows(ff->albedo_view, a0, y1 - a0);
+    /* (from the rows above the unit's own that TAA's box reads: their
+     * NaN/Inf counted twice, which changes nothing) */
+    ff->bad[(size_t)me * FUSED_STRIDE] +=
+        hush__import_albedo_demodulated_rows(&cv, colour, &av, albedo, 0, y1 - a0, 0);
+    sample = (const float *const *)colour->plane;
+    sample_row0 = a0;
+    if (taa) {
+      unit_taa = *taa;
+      unit_taa.albedo = (const float *const *)albedo->plane;
+      unit_taa.albedo_row0 = a0;
+      taa = &unit_taa;
+    }
+  } else if (ff->colour) {
     ff->bad[(size_t)me * FUSED_STRIDE] += hush__import_albedo_demodulated_rows(
-        ff->colour, ff->colour_dst, ff->albedo_view, ff->albedo_dst, y0, y1);
+        ff->colour, ff->colour_dst, ff->albedo_view, ff->albedo_dst, y0, y1, 1);
+  }
   if (ff->gbuffer && u > 0) /* rows y0 - 1 and y0 */
     while (!__atomic_load_n(&rows[u - 1].done_import, __ATOMIC_ACQUIRE)) spin_pause();
   hush__reproject_rows(ff->job, ff->plan, y0, y1);
-  hush__accum_blend_rows(ff->acc, ff->plan, ff->sample, ff->ap, y0, y1, 0);
+  hush__accum_blend_rows(ff->acc, ff->plan, sample, sample_row0, ff->ap, y0, y1, 0);
   __atomic_store_n(&rows[u].done, 1, __ATOMIC_RELEASE);
   double t1 = hush__now_ms();
   ms[FUSED_ACCUMULATE] += t1 - t0;
@@ -807,17 +863,44 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   r1 = r1 > H ? H : r1;
   /* with TAA next, phase III's rows stay in the caches for it */
   hush__temporal_blend_range(ff->plan, ff->prev3, (const float *const *)fr->out, BMFR_CHANNELS,
-                             ff->age, ff->alpha3, ff->out3, r0, r1, ff->taa == NULL);
+                             ff->age, ff->alpha3, ff->out3, r0, r1, taa == NULL);
   t1 = hush__now_ms();
   ms[FUSED_ACCUMULATE_FITTED] += t1 - t0;
-  if (!ff->taa) return;
+  if (!taa) return;
   /* TAA's rows r0 - 1 .. r1 - 2: its 3x3 box reads phase III's rows r0 - 2
    * .. r1 - 1, the first two of the block row above (at least two rows) */
   __atomic_store_n(&rows[u].done3, 1, __ATOMIC_RELEASE);
   if (u > 0)
     while (!__atomic_load_n(&rows[u - 1].done3, __ATOMIC_ACQUIRE)) spin_pause();
-  hush__taa_rows(ff->taa, me, u > 0 ? r0 - 1 : 0, u == ff->units - 1 ? H : r1 - 1);
+  hush__taa_rows(taa, me, u > 0 ? r0 - 1 : 0, u == ff->units - 1 ? H : r1 - 1);
   ms[FUSED_TAA] += hush__now_ms() - t1;
+}
+
+/* The per-thread unit rows for the units of rows (fused_units), grown as
+ * needed; NULL where they cannot be had (the frame's planes serve then). */
+static hush_planar *unit_rows_for(bmfr_state *st, hush_device device, const bmfr_grid *grid,
+                                  const fused_row *rows) {
+  int cap = 0;
+  for (int u = 0; u < grid->ny; u++) {
+    const int n = rows[u].end - unit_first_row(grid, rows, u);
+    cap = n > cap ? n : cap;
+  }
+  if (st->unit_rows && cap <= st->unit_rows_cap) return st->unit_rows;
+  if (st->unit_rows)
+    for (int k = 0; k < 2 * st->threads; k++) hush__planar_free(&st->unit_rows[k]);
+  free(st->unit_rows);
+  st->unit_rows_cap = 0;
+  st->unit_rows = calloc(2 * (size_t)st->threads, sizeof *st->unit_rows);
+  if (!st->unit_rows) return NULL;
+  for (int k = 0; k < 2 * st->threads; k++)
+    if (hush__planar_init(device, &st->unit_rows[k], 3, (uint32_t)grid->width, (uint32_t)cap)) {
+      for (int j = 0; j <= k; j++) hush__planar_free(&st->unit_rows[j]);
+      free(st->unit_rows);
+      st->unit_rows = NULL;
+      return NULL;
+    }
+  st->unit_rows_cap = cap;
+  return st->unit_rows;
 }
 
 static void fused_frame_run(fused_frame *ff, float *scratch, int threads) {
@@ -1065,6 +1148,12 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.albedo_view = hush__filter_view(f, I_ALBEDO);
       ff.colour_dst = &st->color;
       ff.albedo_dst = &st->albedo;
+      /* the colour and albedo in per-unit rows where nothing reads them
+       * after the unit: TAA remodulates (no export of the albedo), no
+       * feature takes the albedo */
+      ff.unit_rows = deferred && fused_taa && !(set.needs & (1u << BMFR_SRC_ALBEDO))
+                         ? unit_rows_for(st, f->device, &fr.grid, st->rows)
+                         : NULL;
       ff.bad = st->unit_bad;
       ff.per = strip_blocks(&fr);
       ff.strips = (fr.grid.nx + ff.per - 1) / ff.per;
