@@ -620,6 +620,10 @@ static void fit_strip(const fit_frame *fr, int bx0, int count, int by, float *sc
   for (int k = 0; k < count; k++) {
     block_geom_of(&fr->grid, bx0 + k, by, &g[k]);
     b[k] = block_cols_of(scratch + (size_t)k * span, ld);
+    /* the features and the augmented matrix live only while the block is
+     * fitted: one set for the strip, kept in L2 from block to block */
+    b[k].T = b[0].T;
+    b[k].A = b[0].A;
   }
   const size_t base_col = (size_t)(b[0].base - scratch), zb_col = (size_t)(b[0].zb - scratch),
                spare_col = (size_t)(b[0].spare - scratch);
