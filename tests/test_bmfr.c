@@ -758,9 +758,10 @@ static void frame_info_moving(hush_frame_info *fi, uint64_t index) {
 /*
  * Where nothing needs a whole-frame pass between them, the import of the
  * inputs, phase I's plan and blend, the fit, phase III and TAA run block
- * row by block row (bmfr.c, fused_frame; the colour and albedo of each
- * block row in its thread's own rows, TAA's box reading the two rows
- * above imported again there); an 'spp' image
+ * row by block row (bmfr.c, fused_frame; the colour imported into the
+ * blend's output and blended in place, the albedo into its thread's own
+ * rows, TAA's box reading the two rows above imported again there); an
+ * 'spp' image
  * bound without holes takes the pass-by-pass path (its demodulation is a
  * pass of its own). Both give the same bits, under a moving camera, over
  * all 16 grid offsets, for blocks of 16 and 32 and 1 to 3 threads (the

@@ -278,10 +278,11 @@ typedef struct bmfr_state {
   hush_taa taa;
   bmfr_adaptive ad;    /* temporal_gradients */
   fused_row *rows;  /* fused_frame's, per block row */
-  /* fused_frame's unit rows, per thread: the demodulated colour and the
-   * albedo of the unit it runs (unit_rows_cap rows each) */
+  /* fused_frame's unit rows, per thread: spare rows for the colour of the
+   * rows above a unit (unit_rows_above), the albedo of the unit it runs
+   * (unit_rows_cap rows) */
   hush_planar *unit_rows;
-  int unit_rows_cap;
+  int unit_rows_cap, unit_rows_above;
   double *phase_ms; /* fused_frame's, per thread */
   size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
@@ -728,9 +729,10 @@ typedef struct fused_frame {
    * (FUSED_STRIDE apart) */
   const hush_image_view *colour, *albedo_view;
   hush_planar *colour_dst, *albedo_dst;
-  /* NULL, or per thread (2 me, 2 me + 1) the colour's and albedo's rows
-   * of its unit (unit_first_row's on), which then go there instead, kept
-   * in the caches for the blend and TAA */
+  /* NULL, or per thread (2 me, 2 me + 1) spare rows for the colour of
+   * the rows above its unit, and its unit's albedo rows (unit_first_row's
+   * on): the albedo goes there instead, kept in the caches for TAA, and
+   * the colour into the blend's output rows */
   hush_planar *unit_rows;
   /* the G-buffer imported by each unit (NULL: imported before): its rows
    * moved one down (the plan's depth slopes read the rows above and
@@ -822,19 +824,35 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   const hush_taa_job *taa = ff->taa;
   hush_taa_job unit_taa;
   if (ff->colour && ff->unit_rows) {
-    /* the unit's rows in the thread's own buffers, where they stay cached
-     * for the blend and TAA (imported into the frame's planes, they went
-     * out to memory and came back) */
-    hush_planar *colour = &ff->unit_rows[2 * me], *albedo = &ff->unit_rows[2 * me + 1];
+    /* the albedo into the thread's unit rows, cached for TAA; the
+     * demodulated colour into the blend's own output rows, which it blends
+     * in place (each pixel's sample is read before its result is written):
+     * imported into the frame's planes, both went out to memory and came
+     * back, and rows of their own were one more set of lines to keep */
+    hush_planar *albedo = &ff->unit_rows[2 * me + 1];
+    const hush_planar *out = &ff->acc->color[1 - ff->acc->latest];
     const int a0 = unit_first_row(&fr->grid, rows, u);
-    const hush_image_view cv = view_rows(ff->colour, a0, y1 - a0),
-                          av = view_rows(ff->albedo_view, a0, y1 - a0);
-    /* (from the rows above the unit's own that TAA's box reads: their
-     * NaN/Inf counted twice, which changes nothing) */
+    const size_t W = (size_t)fr->grid.width;
+    if (a0 < y0) {
+      /* the rows above the unit's own that TAA's box reads: their albedo
+       * (the colour into spare rows; their NaN/Inf counted again, which
+       * changes nothing) */
+      const hush_image_view cv = view_rows(ff->colour, a0, y0 - a0),
+                            av = view_rows(ff->albedo_view, a0, y0 - a0);
+      ff->bad[(size_t)me * FUSED_STRIDE] += hush__import_albedo_demodulated_rows(
+          &cv, &ff->unit_rows[2 * me], &av, albedo, 0, y0 - a0, 0);
+    }
+    const hush_image_view cv = view_rows(ff->colour, y0, y1 - y0),
+                          av = view_rows(ff->albedo_view, y0, y1 - y0);
+    hush_planar own = *out, own_albedo = *albedo;
+    own.height = own_albedo.height = (uint32_t)(y1 - y0);
+    for (int c = 0; c < 3; c++) {
+      own.plane[c] = out->plane[c] + (size_t)y0 * W;
+      own_albedo.plane[c] = albedo->plane[c] + (size_t)(y0 - a0) * W;
+    }
     ff->bad[(size_t)me * FUSED_STRIDE] +=
-        hush__import_albedo_demodulated_rows(&cv, colour, &av, albedo, 0, y1 - a0, 0);
-    sample = (const float *const *)colour->plane;
-    sample_row0 = a0;
+        hush__import_albedo_demodulated_rows(&cv, &own, &av, &own_albedo, 0, y1 - y0, 0);
+    sample = (const float *const *)out->plane;
     if (taa) {
       unit_taa = *taa;
       unit_taa.albedo = (const float *const *)albedo->plane;
@@ -884,12 +902,14 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
  * needed; NULL where they cannot be had (the frame's planes serve then). */
 static hush_planar *unit_rows_for(bmfr_state *st, hush_device device, const bmfr_grid *grid,
                                   const fused_row *rows) {
-  int cap = 0;
+  int cap = 0, above = 1; /* the albedo's rows; the rows above a unit's own */
   for (int u = 0; u < grid->ny; u++) {
-    const int n = rows[u].end - unit_first_row(grid, rows, u);
-    cap = n > cap ? n : cap;
+    const int a0 = unit_first_row(grid, rows, u), y0 = u ? rows[u - 1].end : 0;
+    cap = rows[u].end - a0 > cap ? rows[u].end - a0 : cap;
+    above = y0 - a0 > above ? y0 - a0 : above;
   }
-  if (st->unit_rows && cap <= st->unit_rows_cap) return st->unit_rows;
+  if (st->unit_rows && cap <= st->unit_rows_cap && above <= st->unit_rows_above)
+    return st->unit_rows;
   if (st->unit_rows)
     for (int k = 0; k < 2 * st->threads; k++) hush__planar_free(&st->unit_rows[k]);
   free(st->unit_rows);
@@ -897,13 +917,15 @@ static hush_planar *unit_rows_for(bmfr_state *st, hush_device device, const bmfr
   st->unit_rows = calloc(2 * (size_t)st->threads, sizeof *st->unit_rows);
   if (!st->unit_rows) return NULL;
   for (int k = 0; k < 2 * st->threads; k++)
-    if (hush__planar_init(device, &st->unit_rows[k], 3, (uint32_t)grid->width, (uint32_t)cap)) {
+    if (hush__planar_init(device, &st->unit_rows[k], 3, (uint32_t)grid->width,
+                          (uint32_t)(k % 2 ? cap : above))) {
       for (int j = 0; j <= k; j++) hush__planar_free(&st->unit_rows[j]);
       free(st->unit_rows);
       st->unit_rows = NULL;
       return NULL;
     }
   st->unit_rows_cap = cap;
+  st->unit_rows_above = above;
   return st->unit_rows;
 }
 
