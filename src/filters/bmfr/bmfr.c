@@ -729,6 +729,9 @@ typedef struct fused_frame {
    * (FUSED_STRIDE apart) */
   const hush_image_view *colour, *albedo_view;
   hush_planar *colour_dst, *albedo_dst;
+  /* the 'fitted' view (NULL: not bound), exported block row by block row
+   * (the fit goes into phase III's output, blended over right after) */
+  const hush_image_view *fit_view;
   /* NULL, or per thread (2 me, 2 me + 1) spare rows for the colour of
    * the rows above its unit, and its unit's albedo rows (unit_first_row's
    * on): the albedo goes there instead, kept in the caches for TAA, and
@@ -883,7 +886,14 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   int r0 = fr->grid.y0 + u * B, r1 = r0 + B;
   r0 = r0 < 0 ? 0 : r0;
   r1 = r1 > H ? H : r1;
-  /* with TAA next, phase III's rows stay in the caches for it */
+  if (ff->fit_view) /* the block row's fit, before phase III blends over it */
+    for (int y = r0; y < r1; y++) {
+      const size_t i = (size_t)y * (size_t)fr->grid.width;
+      const float *const in[3] = {fr->out[0] + i, fr->out[1] + i, fr->out[2] + i};
+      hush__view_export_span(in, 3, ff->fit_view, (uint32_t)y, 0, (uint32_t)fr->grid.width);
+    }
+  /* in place (fr->out is out3); with TAA next, phase III's rows stay in
+   * the caches for it */
   hush__temporal_blend_range(ff->plan, ff->prev3, (const float *const *)fr->out, BMFR_CHANNELS,
                              ff->age, ff->alpha3, ff->out3, r0, r1, taa == NULL);
   t1 = hush__now_ms();
@@ -1065,6 +1075,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
    * each row */
   tp.out_view = emis ? NULL : hush__filter_view(f, I_OUTPUT);
   int fused_taa = 0;
+  int fit_exported = 0; /* by the fused frame, block row by block row */
   /* the reprojector as it was, should the fused frame have to be redone */
   const int rp_latest = st->rp.latest, rp_had_history = st->rp.has_history;
   /* a second pass only when the fused one met NaN/Inf in the inputs it
@@ -1140,7 +1151,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
     const hush_planar *z = fused ? &st->acc.color[1 - st->acc.latest] : hush__accum_color(&st->acc);
     for (int c = 0; c < BMFR_CHANNELS; c++) {
       fr.z[c] = z->plane[c];
-      fr.out[c] = st->fitted.plane[c];
+      /* fused: the fit into phase III's output, which phase III blends in
+       * place (tblend: each pixel's sample read before its result) */
+      fr.out[c] = fused ? st->fhist[1 - st->flatest].plane[c] : st->fitted.plane[c];
     }
     hush__bmfr_noise_table(st->noise, set.count, fr.n, fr.ld, info->frame_index,
                            hush__param_f(f, P_NOISE));
@@ -1180,6 +1193,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.unit_rows = deferred && fused_taa && !(set.needs & (1u << BMFR_SRC_ALBEDO))
                          ? unit_rows_for(st, f->device, &fr.grid, st->rows)
                          : NULL;
+      ff.fit_view = hush__filter_view(f, I_FITTED);
       ff.bad = st->unit_bad;
       ff.per = strip_blocks(&fr);
       ff.strips = (fr.grid.nx + ff.per - 1) / ff.per;
@@ -1198,6 +1212,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
         continue;
       }
       hush__accum_blend_done(&st->acc);
+      fit_exported = 1;
       st->flatest = 1 - st->flatest;
       if (fused_taa) hush__taa_done(&st->taa);
       /* the stage table as the passes one after the other would give it:
@@ -1258,7 +1273,7 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
   else if (!exported)
     hush__view_export(&rgb, hush__filter_view(f, I_OUTPUT), threads);
   const hush_image_view *fit_view = hush__filter_view(f, I_FITTED);
-  if (fit_view) hush__view_export(&st->fitted, fit_view, threads);
+  if (fit_view && !fit_exported) hush__view_export(&st->fitted, fit_view, threads);
   const hush_image_view *age_view = hush__filter_view(f, I_HISTORY_LENGTH);
   if (age_view) hush__view_export(hush__accum_age(&st->acc), age_view, threads);
   hush__filter_timing_stage(f, "export");
