@@ -58,7 +58,6 @@ typedef struct blend_ctx {
   size_t W;
   size_t size; /* W * height: floats per plane */
   const float *sample[4];
-  size_t sample_skip; /* a pixel index minus this indexes sample (its first rows absent) */
   const float *pc[4], *pm1, *pm2, *pa; /* history: the previous set */
   float *oc[4], *om1, *om2, *oa;       /* this frame's set */
   float *variance;                     /* may be NULL; NULL without moments */
@@ -133,7 +132,7 @@ static void blend_pixel(const blend_ctx *b, size_t i, const int nc) {
   const int n = b->plan ? hush__reproject_taps(b->plan, i, idx, w) : 0;
   float s[4] = {0.0f, 0.0f, 0.0f, 0.0f}, h[4] = {0.0f, 0.0f, 0.0f, 0.0f};
   for (int c = 0; c < nc; c++) {
-    s[c] = b->sample[c][i - b->sample_skip];
+    s[c] = b->sample[c][i];
     if (n) h[c] = hush__reproject_apply(b->pc[c], idx, w, n);
   }
   blend_px q = {s[0], s[1], s[2], s[3], h[0], h[1], h[2], h[3], 0.0f, 0.0f, 0.0f,
@@ -233,9 +232,8 @@ static HUSH_ALWAYS_INLINE void blend_pixels(const blend_ctx *b, size_t row, int 
    * vectorise */
   const float *p0 = b->pc[0], *p1 = b->pc[nc > 1], *p2 = b->pc[nc > 2 ? 2 : 0];
   const float *p3 = b->pc[nc > 3 ? 3 : 0];
-  const size_t srow = row - b->sample_skip;
-  const float *s0 = b->sample[0] + srow, *s1 = b->sample[nc > 1] + srow;
-  const float *s2 = b->sample[nc > 2 ? 2 : 0] + srow, *s3 = b->sample[nc > 3 ? 3 : 0] + srow;
+  const float *s0 = b->sample[0] + row, *s1 = b->sample[nc > 1] + row;
+  const float *s2 = b->sample[nc > 2 ? 2 : 0] + row, *s3 = b->sample[nc > 3 ? 3 : 0] + row;
   float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
   float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
   float st[8][CHUNK] __attribute__((aligned(64)));
@@ -309,17 +307,12 @@ static HUSH_ALWAYS_INLINE void blend_row(const blend_ctx *b, size_t row, const i
   const float *const history[7] = {b->pc[0], nc > 1 ? b->pc[1] : NULL, nc > 2 ? b->pc[2] : NULL,
                                    nc > 3 ? b->pc[3] : NULL, mom ? b->pm1 : NULL,
                                    mom ? b->pm2 : NULL, b->pa};
-  /* the samples' row (sample_skip: its first rows are absent) */
-  const size_t srow = row - b->sample_skip;
-  const float *const samples[4] = {b->sample[0] + srow, nc > 1 ? b->sample[1] + srow : NULL,
-                                   nc > 2 ? b->sample[2] + srow : NULL,
-                                   nc > 3 ? b->sample[3] + srow : NULL};
+  const float *const samples[4] = {b->sample[0], nc > 1 ? b->sample[1] : NULL,
+                                   nc > 2 ? b->sample[2] : NULL, nc > 3 ? b->sample[3] : NULL};
   for (int x0 = 0; x0 < W; x0 += CHUNK) {
     const int x1 = W - x0 < CHUNK ? W : x0 + CHUNK;
     hush__prefetch_taps(history, 7, hush__prefetch_origin(origin, x0, W), W);
-    hush__prefetch_row(b->plan, NULL, 0, row + (size_t)x0);
-    hush__prefetch_planes(samples, nc,
-                          (ptrdiff_t)(x0 + HUSH_PREFETCH_ROW_AHEAD) * (ptrdiff_t)sizeof(float));
+    hush__prefetch_row(b->plan, samples, nc, row + (size_t)x0);
     /* a constant length for full chunks: one vector iteration, no
      * alignment peeling or scalar epilogue */
     if (x1 - x0 < CHUNK) {
@@ -453,11 +446,10 @@ void hush__accum_blend(hush_accum *acc, const hush_reproject_plan *plan,
 }
 
 void hush__accum_blend_rows(const hush_accum *acc, const hush_reproject_plan *plan,
-                            const float *const *sample, int sample_row0,
-                            const hush_accum_params *params, int y0, int y1, int stream) {
+                            const float *const *sample, const hush_accum_params *params, int y0,
+                            int y1, int stream) {
   blend_ctx b;
   blend_setup(&b, acc, plan, sample, params, NULL);
-  b.sample_skip = (size_t)sample_row0 * b.W;
   b.stream = stream;
   for (int y = y0; y < y1; y++) {
     if (b.mom) {
@@ -500,7 +492,7 @@ static int blend_pixel_holes(const blend_ctx *b, size_t i, const float *spp, con
   const float inv = has ? 1.0f / wsum : 0.0f;
   float s[4] = {0.0f, 0.0f, 0.0f, 0.0f}, h[4] = {0.0f, 0.0f, 0.0f, 0.0f};
   for (int c = 0; c < nc; c++) {
-    s[c] = b->sample[c][i - b->sample_skip];
+    s[c] = b->sample[c][i];
     if (has) h[c] = hush__reproject_apply(b->pc[c], idx, w, n) * inv;
   }
   blend_px q = {s[0], s[1], s[2], s[3], h[0], h[1], h[2], h[3], 0.0f, 0.0f, 0.0f,
@@ -559,9 +551,8 @@ static HUSH_ALWAYS_INLINE int blend_row_holes(const blend_ctx *b, size_t row, co
   float *var = mom && b->variance ? b->variance + row : NULL;
   const float *p0 = b->pc[0], *p1 = b->pc[nc > 1], *p2 = b->pc[nc > 2 ? 2 : 0];
   const float *p3 = b->pc[nc > 3 ? 3 : 0];
-  const size_t srow = row - b->sample_skip;
-  const float *s0 = b->sample[0] + srow, *s1 = b->sample[nc > 1] + srow;
-  const float *s2 = b->sample[nc > 2 ? 2 : 0] + srow, *s3 = b->sample[nc > 3 ? 3 : 0] + srow;
+  const float *s0 = b->sample[0] + row, *s1 = b->sample[nc > 1] + row;
+  const float *s2 = b->sample[nc > 2 ? 2 : 0] + row, *s3 = b->sample[nc > 3 ? 3 : 0] + row;
   float *o0 = b->oc[0] + row, *o1 = b->oc[nc > 1] + row;
   float *o2 = b->oc[nc > 2 ? 2 : 0] + row, *o3 = b->oc[nc > 3 ? 3 : 0] + row;
   int empty = 0;

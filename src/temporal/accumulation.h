@@ -101,12 +101,13 @@ void hush__accum_blend_holes(hush_accum *acc, const hush_reproject_plan *plan,
  * would call hush__accum_blend); no variance. stream 1: the outputs bypass
  * the caches (hush__accum_blend's choice: nothing reads them before the
  * frame is done); 0: cached, for a caller that reads the rows right away.
- * sample holds the rows from sample_row0 on (row y at (y - sample_row0)
- * W): a caller may keep just the rows it blends.
+ * sample may be this blend's own output (acc->color[1 - latest]), blended
+ * in place: each pixel's sample is read before its result is written (a
+ * 3X3 pixel's chunk result is its sample, which its own blend reads).
  */
 void hush__accum_blend_rows(const hush_accum *acc, const hush_reproject_plan *plan,
-                            const float *const *sample, int sample_row0,
-                            const hush_accum_params *params, int y0, int y1, int stream);
+                            const float *const *sample, const hush_accum_params *params, int y0,
+                            int y1, int stream);
 void hush__accum_blend_done(hush_accum *acc);
 
 static inline hush_planar *hush__accum_color(hush_accum *acc) { return &acc->color[acc->latest]; }

@@ -823,7 +823,6 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
     __atomic_store_n(&rows[u].done_import, 1, __ATOMIC_RELEASE);
   }
   const float *const *sample = ff->sample;
-  int sample_row0 = 0;
   const hush_taa_job *taa = ff->taa;
   hush_taa_job unit_taa;
   if (ff->colour && ff->unit_rows) {
@@ -869,7 +868,7 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
   if (ff->gbuffer && u > 0) /* rows y0 - 1 and y0 */
     while (!__atomic_load_n(&rows[u - 1].done_import, __ATOMIC_ACQUIRE)) spin_pause();
   hush__reproject_rows(ff->job, ff->plan, y0, y1);
-  hush__accum_blend_rows(ff->acc, ff->plan, sample, sample_row0, ff->ap, y0, y1, 0);
+  hush__accum_blend_rows(ff->acc, ff->plan, sample, ff->ap, y0, y1, 0);
   __atomic_store_n(&rows[u].done, 1, __ATOMIC_RELEASE);
   double t1 = hush__now_ms();
   ms[FUSED_ACCUMULATE] += t1 - t0;
