@@ -310,6 +310,40 @@ static HUSH_INLINE void gram_block(const float *const *X, const int na, const fl
     for (int b = 0; b < nb; b++) out[a][b] = vf_sum(acc[a][b]);
 }
 
+/* out[p] = sum over the ld rows of c[pa[p]][i] c[pb[p]][i] for the np <=
+ * 21 pairs of the nc <= 9 columns c (constants at each call: the loops
+ * unroll, each column's vector loaded once a row vector for all its
+ * pairs, the sums in registers). The same FMA chain per pair as
+ * gram_block's: the same bits. */
+static HUSH_INLINE void gram_pairs(const float *const *c, const int nc, const int *pa,
+                                   const int *pb, const int np, size_t ld, float *out) {
+  vf acc[21];
+#pragma GCC unroll 21
+  for (int p = 0; p < np; p++) acc[p] = (vf){0};
+  for (size_t i = 0; i < ld; i += VF_LANES) {
+    vf x[9];
+#pragma GCC unroll 9
+    for (int k = 0; k < nc; k++) x[k] = vf_load(c[k] + i);
+#pragma GCC unroll 21
+    for (int p = 0; p < np; p++) acc[p] = vf_fma(x[pa[p]], x[pb[p]], acc[p]);
+  }
+#pragma GCC unroll 21
+  for (int p = 0; p < np; p++) out[p] = vf_sum(acc[p]);
+}
+
+/* The sums of pairs (ga[p], gb[p]) of [T | z]'s columns (ga < 10 <= gb:
+ * into h) into G (both halves) and h, for the default ten features. */
+static void gram_store(const int *ga, const int *gb, int np, const float *o,
+                       double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
+                       double h[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  for (int p = 0; p < np; p++) {
+    if (gb[p] >= 10)
+      h[gb[p] - 10][ga[p]] = o[p];
+    else
+      G[ga[p]][gb[p]] = G[gb[p]][ga[p]] = o[p];
+  }
+}
+
 /* A tile of the generic Gram pass: GRAM_RA x GRAM_RB sums, as many as the
  * register file holds with the loads (32 vectors with AVX-512, 16 else). */
 #if VF_LANES == 16
@@ -328,10 +362,9 @@ static const float gram_zero[GRAM_ZERO_LD];
 /*
  * The refinement's Gram matrix G = T^T T (count x count) and h[c] = T^T
  * z_c over the ld rows (T is 0 on holes and past n, so z needs no mask).
- * AVX-512 builds take the default ten features in six register-blocked
- * passes (98 FMAs a row vector for the 85 sums: P = features 0-3, Q = 4-7,
- * R = 8-9: P x (P, R), Q x (Q, R), P x Q, (P, R) x z, Q x z, R x R); other
- * sets and builds tile the upper triangle of [T | z]'s columns GRAM_RA x
+ * AVX-512 builds take the default ten features in five register-blocked
+ * passes, one FMA a row vector for each of the 85 sums (gram_pairs; six
+ * passes of rectangular tiles took 98); other sets and builds tile the upper triangle of [T | z]'s columns GRAM_RA x
  * GRAM_RB at a time, padding with zero columns.
  */
 static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS], size_t ld,
@@ -343,32 +376,61 @@ static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS],
   float o[6][6];
 #if VF_LANES == 16
   if (count == 10) {
-    const float *P[4] = {t[0], t[1], t[2], t[3]}, *Q[4] = {t[4], t[5], t[6], t[7]};
-    const float *PR[6] = {t[0], t[1], t[2], t[3], t[8], t[9]};
-    const float *QR[6] = {t[4], t[5], t[6], t[7], t[8], t[9]};
-    const float *R[2] = {t[8], t[9]};
-    gram_block(P, 4, PR, 6, ld, o);
-    for (int a = 0; a < 4; a++)
-      for (int b = 0; b < 6; b++) {
-        const int j = b < 4 ? b : b + 4;
-        G[a][j] = G[j][a] = o[a][b];
-      }
-    gram_block(Q, 4, QR, 6, ld, o);
-    for (int a = 0; a < 4; a++)
-      for (int b = 0; b < 6; b++) G[4 + a][4 + b] = G[4 + b][4 + a] = o[a][b];
-    gram_block(P, 4, Q, 4, ld, o);
-    for (int a = 0; a < 4; a++)
-      for (int b = 0; b < 4; b++) G[a][4 + b] = G[4 + b][a] = o[a][b];
-    gram_block(PR, 6, z, 3, ld, o);
-    for (int a = 0; a < 6; a++)
-      for (int c = 0; c < 3; c++) h[c][a < 4 ? a : a + 4] = o[a][c];
-    gram_block(Q, 4, z, 3, ld, o);
-    for (int a = 0; a < 4; a++)
-      for (int c = 0; c < 3; c++) h[c][4 + a] = o[a][c];
-    gram_block(R, 2, R, 2, ld, o);
-    G[8][8] = o[0][0];
-    G[8][9] = G[9][8] = o[0][1];
-    G[9][9] = o[1][1];
+    /* the 85 sums of the default set in five register-blocked passes (85
+     * FMAs a row vector, each pass's columns loaded once): P = features
+     * 0-3, Q = 4-7, R = 8-9, z the radiance: P x (P, R), Q x (Q, R), P x Q,
+     * (P, R) x z with R x R, Q x z, the diagonal blocks' upper triangles
+     * alone */
+    {
+      static const int pa[18] = {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3};
+      static const int pb[18] = {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 4, 5, 4, 5, 4, 5, 4, 5};
+      static const int ga[18] = {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3};
+      static const int gb[18] = {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 8, 9, 8, 9, 8, 9, 8, 9};
+      const float *c[6] = {t[0], t[1], t[2], t[3], t[8], t[9]};
+      float sums[18];
+      gram_pairs(c, 6, pa, pb, 18, ld, sums);
+      gram_store(ga, gb, 18, sums, G, h);
+    }
+    {
+      static const int pa[18] = {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3};
+      static const int pb[18] = {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 4, 5, 4, 5, 4, 5, 4, 5};
+      static const int ga[18] = {4, 4, 4, 4, 5, 5, 5, 6, 6, 7, 4, 4, 5, 5, 6, 6, 7, 7};
+      static const int gb[18] = {4, 5, 6, 7, 5, 6, 7, 6, 7, 7, 8, 9, 8, 9, 8, 9, 8, 9};
+      const float *c[6] = {t[4], t[5], t[6], t[7], t[8], t[9]};
+      float sums[18];
+      gram_pairs(c, 6, pa, pb, 18, ld, sums);
+      gram_store(ga, gb, 18, sums, G, h);
+    }
+    {
+      static const int pa[16] = {0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3};
+      static const int pb[16] = {4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7};
+      static const int ga[16] = {0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3};
+      static const int gb[16] = {4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7};
+      const float *c[8] = {t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7]};
+      float sums[16];
+      gram_pairs(c, 8, pa, pb, 16, ld, sums);
+      gram_store(ga, gb, 16, sums, G, h);
+    }
+    {
+      static const int pa[21] = {4, 4, 5, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5};
+      static const int pb[21] = {4, 5, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8};
+      static const int ga[21] = {8, 8, 9, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 8, 8, 8, 9, 9, 9};
+      static const int gb[21] = {8, 9, 9, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12};
+      const float *c[9] = {t[0], t[1], t[2], t[3], t[8], t[9], t[10], t[11], t[12]};
+      float sums[21];
+      gram_pairs(c, 9, pa, pb, 21, ld, sums);
+      gram_store(ga, gb, 21, sums, G, h);
+    }
+    {
+      static const int pa[12] = {0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3};
+      static const int pb[12] = {4, 5, 6, 4, 5, 6, 4, 5, 6, 4, 5, 6};
+      static const int ga[12] = {4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7};
+      static const int gb[12] = {10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12};
+      const float *c[7] = {t[4], t[5], t[6], t[7], t[10], t[11], t[12]};
+      float sums[12];
+      gram_pairs(c, 7, pa, pb, 12, ld, sums);
+      gram_store(ga, gb, 12, sums, G, h);
+    }
     return;
   }
 #endif
@@ -447,7 +509,7 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
    * (near-collinear features), R^T R is dominated by the noise and the
    * step stays small, so the regularisation keeps its effect there.
    * T^T (z - T a) is taken as h - G a from the Gram matrix G = T^T T and
-   * h = T^T z, summed once in float (one register-blocked pass set, 98
+   * h = T^T z, summed once in float (one register-blocked pass set, 85
    * FMAs a row vector) where each step's residuals and their dot products
    * took 60 FMAs a row vector and step, and loads of broadcast weights:
    * the stand-alone fit with two steps 13.7k -> 13.0k TSC ticks, the fit
