@@ -364,8 +364,9 @@ static const float gram_zero[GRAM_ZERO_LD];
  * z_c over the ld rows (T is 0 on holes and past n, so z needs no mask).
  * AVX-512 builds take the default ten features in five register-blocked
  * passes, one FMA a row vector for each of the 85 sums (gram_pairs; six
- * passes of rectangular tiles took 98); other sets and builds tile the upper triangle of [T | z]'s columns GRAM_RA x
- * GRAM_RB at a time, padding with zero columns.
+ * passes of rectangular tiles took 98); other sets and builds tile the
+ * upper triangle of [T | z]'s columns GRAM_RA x GRAM_RB at a time,
+ * padding with zero columns.
  */
 static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS], size_t ld,
                  double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
@@ -415,7 +416,8 @@ static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS],
       static const int pa[21] = {4, 4, 5, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5};
       static const int pb[21] = {4, 5, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8};
       static const int ga[21] = {8, 8, 9, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 8, 8, 8, 9, 9, 9};
-      static const int gb[21] = {8, 9, 9, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12};
+      static const int gb[21] = {8, 9, 9, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11,
+                                12, 10, 11, 12};
       const float *c[9] = {t[0], t[1], t[2], t[3], t[8], t[9], t[10], t[11], t[12]};
       float sums[21];
       gram_pairs(c, 9, pa, pb, 21, ld, sums);
