@@ -400,8 +400,11 @@ static HUSH_ALWAYS_INLINE void hush__prefetch_taps(const float *const *planes, i
  * (sequential streams, but a dozen of them beside the history's) are
  * prefetched (hush__prefetch_row): svgf's blend 4.77 -> 4.62 ms, TAA's
  * resolve 4.69 -> 4.62 (medians of five alternated pairs, 2 threads,
- * 1280x720, Zen 3; docs/svgf-speed.md, twenty-first round). */
-#define HUSH_PREFETCH_ROW_AHEAD 64
+ * 1280x720, Zen 3; docs/svgf-speed.md, twenty-first round). 128 on the
+ * Zen 5, where bmfr's blends read the plan back from memory right after
+ * its streamed stores: bmfr 12.08 -> 11.97 ms, p5 11.50 -> 11.36 (eight
+ * alternated runs; 256 no better than 64), svgf unchanged. */
+#define HUSH_PREFETCH_ROW_AHEAD 128
 
 /* Prefetches pixel i + HUSH_PREFETCH_ROW_AHEAD of the plan's origins and
  * weights and of planes[0..n-1] (NULL: skipped); near the frame's end it
