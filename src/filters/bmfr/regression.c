@@ -310,6 +310,7 @@ static HUSH_INLINE void gram_block(const float *const *X, const int na, const fl
     for (int b = 0; b < nb; b++) out[a][b] = vf_sum(acc[a][b]);
 }
 
+#if VF_LANES == 16
 /* out[p] = sum over the ld rows of c[pa[p]][i] c[pb[p]][i] for the np <=
  * 21 pairs of the nc <= 9 columns c (constants at each call: the loops
  * unroll, each column's vector loaded once a row vector for all its
@@ -343,6 +344,7 @@ static void gram_store(const int *ga, const int *gb, int np, const float *o,
       G[ga[p]][gb[p]] = G[gb[p]][ga[p]] = o[p];
   }
 }
+#endif
 
 /* A tile of the generic Gram pass: GRAM_RA x GRAM_RB sums, as many as the
  * register file holds with the loads (32 vectors with AVX-512, 16 else). */
