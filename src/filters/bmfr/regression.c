@@ -344,6 +344,55 @@ static void gram_store(const int *ga, const int *gb, int np, const float *o,
       G[ga[p]][gb[p]] = G[gb[p]][ga[p]] = o[p];
   }
 }
+/* The default set's Gram passes (gram): per pass its columns of [T | z]
+ * and its pairs, as indices into those columns (pa, pb) and into [T | z]
+ * (ga, gb). */
+typedef struct gram_pass_def {
+  int nc, np;
+  int cols[9];
+  int pa[21], pb[21], ga[21], gb[21];
+} gram_pass_def;
+
+static const gram_pass_def gram_passes[5] = {
+    {6, 18, {0, 1, 2, 3, 8, 9},
+     {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3},
+     {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 4, 5, 4, 5, 4, 5, 4, 5},
+     {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3},
+     {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 8, 9, 8, 9, 8, 9, 8, 9}},
+    {6, 18, {4, 5, 6, 7, 8, 9},
+     {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3},
+     {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 4, 5, 4, 5, 4, 5, 4, 5},
+     {4, 4, 4, 4, 5, 5, 5, 6, 6, 7, 4, 4, 5, 5, 6, 6, 7, 7},
+     {4, 5, 6, 7, 5, 6, 7, 6, 7, 7, 8, 9, 8, 9, 8, 9, 8, 9}},
+    {8, 16, {0, 1, 2, 3, 4, 5, 6, 7},
+     {0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3},
+     {4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7},
+     {0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3},
+     {4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7}},
+    {9, 21, {0, 1, 2, 3, 8, 9, 10, 11, 12},
+     {4, 4, 5, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5},
+     {4, 5, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8},
+     {8, 8, 9, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 8, 8, 8, 9, 9, 9},
+     {8, 9, 9, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12}},
+    {7, 12, {4, 5, 6, 7, 10, 11, 12},
+     {0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3},
+     {4, 5, 6, 4, 5, 6, 4, 5, 6, 4, 5, 6},
+     {4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7},
+     {10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12}},
+};
+
+/* Pass k of gram_passes (k a constant: the pass's sizes are then too, and
+ * gram_pairs unrolls). */
+static HUSH_INLINE void gram_pass(const float *const *t, const int k, size_t ld,
+                                  double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
+                                  double h[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+  const gram_pass_def *d = &gram_passes[k];
+  const float *c[9];
+  for (int q = 0; q < d->nc; q++) c[q] = t[d->cols[q]];
+  float sums[21];
+  gram_pairs(c, d->nc, d->pa, d->pb, d->np, ld, sums);
+  gram_store(d->ga, d->gb, d->np, sums, G, h);
+}
 #endif
 
 /* A tile of the generic Gram pass: GRAM_RA x GRAM_RB sums, as many as the
@@ -383,58 +432,12 @@ static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS],
      * FMAs a row vector, each pass's columns loaded once): P = features
      * 0-3, Q = 4-7, R = 8-9, z the radiance: P x (P, R), Q x (Q, R), P x Q,
      * (P, R) x z with R x R, Q x z, the diagonal blocks' upper triangles
-     * alone */
-    {
-      static const int pa[18] = {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3};
-      static const int pb[18] = {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 4, 5, 4, 5, 4, 5, 4, 5};
-      static const int ga[18] = {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3};
-      static const int gb[18] = {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 8, 9, 8, 9, 8, 9, 8, 9};
-      const float *c[6] = {t[0], t[1], t[2], t[3], t[8], t[9]};
-      float sums[18];
-      gram_pairs(c, 6, pa, pb, 18, ld, sums);
-      gram_store(ga, gb, 18, sums, G, h);
-    }
-    {
-      static const int pa[18] = {0, 0, 0, 0, 1, 1, 1, 2, 2, 3, 0, 0, 1, 1, 2, 2, 3, 3};
-      static const int pb[18] = {0, 1, 2, 3, 1, 2, 3, 2, 3, 3, 4, 5, 4, 5, 4, 5, 4, 5};
-      static const int ga[18] = {4, 4, 4, 4, 5, 5, 5, 6, 6, 7, 4, 4, 5, 5, 6, 6, 7, 7};
-      static const int gb[18] = {4, 5, 6, 7, 5, 6, 7, 6, 7, 7, 8, 9, 8, 9, 8, 9, 8, 9};
-      const float *c[6] = {t[4], t[5], t[6], t[7], t[8], t[9]};
-      float sums[18];
-      gram_pairs(c, 6, pa, pb, 18, ld, sums);
-      gram_store(ga, gb, 18, sums, G, h);
-    }
-    {
-      static const int pa[16] = {0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3};
-      static const int pb[16] = {4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7};
-      static const int ga[16] = {0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3};
-      static const int gb[16] = {4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7, 4, 5, 6, 7};
-      const float *c[8] = {t[0], t[1], t[2], t[3], t[4], t[5], t[6], t[7]};
-      float sums[16];
-      gram_pairs(c, 8, pa, pb, 16, ld, sums);
-      gram_store(ga, gb, 16, sums, G, h);
-    }
-    {
-      static const int pa[21] = {4, 4, 5, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 4, 4, 4, 5, 5, 5};
-      static const int pb[21] = {4, 5, 5, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8, 6, 7, 8};
-      static const int ga[21] = {8, 8, 9, 0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3, 8, 8, 8, 9, 9, 9};
-      static const int gb[21] = {8, 9, 9, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11,
-                                12, 10, 11, 12};
-      const float *c[9] = {t[0], t[1], t[2], t[3], t[8], t[9], t[10], t[11], t[12]};
-      float sums[21];
-      gram_pairs(c, 9, pa, pb, 21, ld, sums);
-      gram_store(ga, gb, 21, sums, G, h);
-    }
-    {
-      static const int pa[12] = {0, 0, 0, 1, 1, 1, 2, 2, 2, 3, 3, 3};
-      static const int pb[12] = {4, 5, 6, 4, 5, 6, 4, 5, 6, 4, 5, 6};
-      static const int ga[12] = {4, 4, 4, 5, 5, 5, 6, 6, 6, 7, 7, 7};
-      static const int gb[12] = {10, 11, 12, 10, 11, 12, 10, 11, 12, 10, 11, 12};
-      const float *c[7] = {t[4], t[5], t[6], t[7], t[10], t[11], t[12]};
-      float sums[12];
-      gram_pairs(c, 7, pa, pb, 12, ld, sums);
-      gram_store(ga, gb, 12, sums, G, h);
-    }
+     * alone (gram_passes) */
+    gram_pass(t, 0, ld, G, h);
+    gram_pass(t, 1, ld, G, h);
+    gram_pass(t, 2, ld, G, h);
+    gram_pass(t, 3, ld, G, h);
+    gram_pass(t, 4, ld, G, h);
     return;
   }
 #endif
