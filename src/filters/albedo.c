@@ -69,22 +69,30 @@ hush_status hush__import_demodulated(hush_device device, const hush_image_view *
   return HUSH_OK;
 }
 
+/* Row y of the albedo into albedo and of the radiance into dst divided by
+ * it: the pair from the registers where it can (stream as
+ * hush__view_import_row_pair_divided), else the albedo's row kept in the
+ * cache for the division. Adds the NaN/Inf counts to *bad and *bad_albedo. */
+static void import_pair_row(const hush_image_view *view, hush_planar *dst,
+                            const hush_image_view *albedo_view, hush_planar *albedo, int y,
+                            int stream, size_t *bad, size_t *bad_albedo) {
+  size_t row_bad = 0, row_bad_albedo = 0;
+  if (!hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
+                                          HUSH_ALBEDO_EPS, stream, &row_bad, &row_bad_albedo)) {
+    row_bad_albedo = hush__view_import_row_cached(albedo_view, (uint32_t)y, albedo);
+    row_bad = import_row_demodulated(view, (uint32_t)y, dst, albedo);
+  }
+  *bad += row_bad;
+  *bad_albedo += row_bad_albedo;
+}
+
 size_t hush__import_albedo_demodulated_rows(const hush_image_view *view, hush_planar *dst,
                                             const hush_image_view *albedo_view,
                                             hush_planar *albedo, int y0, int y1, int stream) {
-  size_t bad = 0;
-  for (int y = y0; y < y1; y++) {
-    size_t row_bad = 0, row_bad_albedo = 0;
-    if (hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
-                                           HUSH_ALBEDO_EPS, stream, &row_bad, &row_bad_albedo)) {
-      bad += row_bad + row_bad_albedo;
-      continue;
-    }
-    /* the albedo's row kept in the cache for the division */
-    bad += hush__view_import_row_cached(albedo_view, (uint32_t)y, albedo);
-    bad += import_row_demodulated(view, (uint32_t)y, dst, albedo);
-  }
-  return bad;
+  size_t bad = 0, bad_albedo = 0;
+  for (int y = y0; y < y1; y++)
+    import_pair_row(view, dst, albedo_view, albedo, y, stream, &bad, &bad_albedo);
+  return bad + bad_albedo;
 }
 
 hush_status hush__import_albedo_demodulated(hush_device device, const hush_image_view *view,
@@ -96,18 +104,8 @@ hush_status hush__import_albedo_demodulated(hush_device device, const hush_image
   const int H = (int)view->height;
   size_t bad = 0, bad_albedo = 0;
 #pragma omp parallel for schedule(static) num_threads(threads) reduction(+ : bad, bad_albedo)
-  for (int y = 0; y < H; y++) {
-    size_t row_bad = 0, row_bad_albedo = 0;
-    if (hush__view_import_row_pair_divided(view, albedo_view, (uint32_t)y, dst, albedo,
-                                           HUSH_ALBEDO_EPS, 1, &row_bad, &row_bad_albedo)) {
-      bad += row_bad;
-      bad_albedo += row_bad_albedo;
-      continue;
-    }
-    /* the albedo's row kept in the cache for the division */
-    bad_albedo += hush__view_import_row_cached(albedo_view, (uint32_t)y, albedo);
-    bad += import_row_demodulated(view, (uint32_t)y, dst, albedo);
-  }
+  for (int y = 0; y < H; y++)
+    import_pair_row(view, dst, albedo_view, albedo, y, 1, &bad, &bad_albedo);
   if (replaced) *replaced = bad;
   if (replaced_albedo) *replaced_albedo = bad_albedo;
   hush_status s =

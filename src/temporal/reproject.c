@@ -722,10 +722,7 @@ static HUSH_ALWAYS_INLINE __m512i chunk_load(const int32_t *a) {
 static HUSH_ALWAYS_INLINE int chunk_contiguous(const span_taps *o, int k0, int k1) {
 #if defined(__AVX512F__)
   if (k1 - k0 == CHUNK) {
-    const __m512i want = _mm512_add_epi32(
-        _mm512_set1_epi32(o->origin[k0]),
-        _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0));
-    const __mmask16 run = _mm512_cmpeq_epi32_mask(chunk_load(o->origin + k0), want);
+    const __mmask16 run = hush__run_mask16(chunk_load(o->origin + k0), o->origin[k0]);
     const __mmask16 in = _mm512_test_epi32_mask(chunk_load(o->inside + k0),
                                                 chunk_load(o->inside + k0));
     return (run & in) == 0xFFFF;

@@ -283,15 +283,23 @@ static inline int32_t hush__reproject_block_origin(const hush_reproject_plan *pl
  * motion), so their taps load as vectors. A fixed count, so that it
  * vectorises: the loop to a variable end ran scalar, about 5 % of
  * accumulate's blend (docs/svgf-speed.md, twenty-sixth round). */
+#if defined(__AVX512F__)
+/* The lanes k of the 16 origins o whose origin is first + k: a chunk's
+ * footprints that follow each other (the common case of smooth motion). */
+static HUSH_ALWAYS_INLINE __mmask16 hush__run_mask16(__m512i o, int32_t first) {
+  const __m512i want = _mm512_add_epi32(
+      _mm512_set1_epi32(first),
+      _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0));
+  return _mm512_cmpeq_epi32_mask(o, want);
+}
+#endif
+
 static HUSH_ALWAYS_INLINE int hush__chunk_contiguous(const int32_t *origin, const uint8_t *kind) {
 #if defined(__AVX512F__) && defined(__AVX512BW__) && defined(__AVX512VL__) && HUSH_CHUNK == 16
   /* two compares into mask registers: with the bytes in it, gcc vectorised
    * the loop below at 16 bytes, the origins' compares in four pieces */
-  const __m512i o = _mm512_loadu_si512((const void *)origin);
-  const __m512i want = _mm512_add_epi32(_mm512_set1_epi32(origin[0]),
-                                        _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5,
-                                                         4, 3, 2, 1, 0));
-  const __mmask16 run = _mm512_cmpeq_epi32_mask(o, want);
+  const __mmask16 run =
+      hush__run_mask16(_mm512_loadu_si512((const void *)origin), origin[0]);
   const __mmask16 bil = _mm_cmpeq_epi8_mask(_mm_loadu_si128((const __m128i *)(const void *)kind),
                                             _mm_set1_epi8((char)HUSH_FOOTPRINT_BILINEAR));
   return (run & bil) == 0xFFFF;

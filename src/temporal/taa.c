@@ -264,10 +264,7 @@ static HUSH_ALWAYS_INLINE void interior_span(const taa_row *t, const hush_reproj
       const __m512i o = _mm512_loadu_si512((const void *)(origin + x));
       _mm512_storeu_si512((void *)has, _mm512_maskz_mov_epi32(bil, _mm512_set1_epi32(1)));
       _mm512_storeu_si512((void *)j, _mm512_maskz_mov_epi32(bil, o));
-      const __m512i want = _mm512_add_epi32(
-          _mm512_set1_epi32(origin[x]),
-          _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0));
-      run = (bil & _mm512_cmpeq_epi32_mask(o, want)) == 0xFFFF;
+      run = (bil & hush__run_mask16(o, origin[x])) == 0xFFFF;
     } else
 #endif
     for (int l = 0; l < n; l++) {

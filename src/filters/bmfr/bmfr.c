@@ -278,14 +278,26 @@ typedef struct bmfr_state {
   hush_taa taa;
   bmfr_adaptive ad;    /* temporal_gradients */
   fused_row *rows;  /* fused_frame's, per block row */
-  /* fused_frame's unit rows, per thread: spare rows for the colour of the
-   * rows above a unit (unit_rows_above), the albedo of the unit it runs
-   * (unit_rows_cap rows) */
+  /* fused_frame's unit rows, UNIT_ROWS per thread: spare rows for the
+   * colour of the rows above a unit (unit_rows_above), the albedo of the
+   * unit it runs (unit_rows_cap rows) */
   hush_planar *unit_rows;
   int unit_rows_cap, unit_rows_above;
   double *phase_ms; /* fused_frame's, per thread */
   size_t *unit_bad; /* fused_frame's, per thread */
 } bmfr_state;
+
+/* Unit rows per thread (bmfr_state, fused_frame): the spare colour rows
+ * (UNIT_SPARE), the albedo rows (UNIT_ALBEDO). */
+enum { UNIT_SPARE, UNIT_ALBEDO, UNIT_ROWS };
+
+static void unit_rows_free(bmfr_state *st) {
+  if (st->unit_rows)
+    for (int k = 0; k < UNIT_ROWS * st->threads; k++) hush__planar_free(&st->unit_rows[k]);
+  free(st->unit_rows);
+  st->unit_rows = NULL;
+  st->unit_rows_cap = st->unit_rows_above = 0;
+}
 
 static void bmfr_destroy(void *state) {
   bmfr_state *st = state;
@@ -305,9 +317,7 @@ static void bmfr_destroy(void *state) {
   hush__taa_free(&st->taa);
   bmfr_adaptive_free(&st->ad);
   free(st->rows);
-  if (st->unit_rows)
-    for (int k = 0; k < 2 * st->threads; k++) hush__planar_free(&st->unit_rows[k]);
-  free(st->unit_rows);
+  unit_rows_free(st);
   free(st->phase_ms);
   free(st->unit_bad);
   free(st);
@@ -732,10 +742,10 @@ typedef struct fused_frame {
   /* the 'fitted' view (NULL: not bound), exported block row by block row
    * (the fit goes into phase III's output, blended over right after) */
   const hush_image_view *fit_view;
-  /* NULL, or per thread (2 me, 2 me + 1) spare rows for the colour of
-   * the rows above its unit, and its unit's albedo rows (unit_first_row's
-   * on): the albedo goes there instead, kept in the caches for TAA, and
-   * the colour into the blend's output rows */
+  /* NULL, or per thread (UNIT_ROWS me + UNIT_SPARE, UNIT_ALBEDO) spare
+   * rows for the colour of the rows above its unit, and its unit's albedo
+   * rows (unit_first_row's on): the albedo goes there instead, kept in the
+   * caches for TAA, and the colour into the blend's output rows */
   hush_planar *unit_rows;
   /* the G-buffer imported by each unit (NULL: imported before): its rows
    * moved one down (the plan's depth slopes read the rows above and
@@ -788,8 +798,8 @@ static int fused_fit_strip(const fused_frame *ff, int u, float *scratch) {
  * own first row, or the two rows above its block row that TAA's box reads,
  * if earlier. */
 static int unit_first_row(const bmfr_grid *grid, const fused_row *rows, int u) {
-  const int y0 = u ? rows[u - 1].end : 0;
   if (u == 0) return 0;
+  const int y0 = rows[u - 1].end;
   int a0 = grid->y0 + u * grid->block - 2;
   a0 = a0 < 0 ? 0 : a0;
   return a0 < y0 ? a0 : y0;
@@ -800,6 +810,14 @@ static hush_image_view view_rows(const hush_image_view *v, int y0, int n) {
   hush_image_view r = *v;
   r.row_stride = hush__view_row_stride(v);
   r.byte_offset += (size_t)y0 * r.row_stride;
+  r.height = (uint32_t)n;
+  return r;
+}
+
+/* Rows y0 .. y0 + n - 1 of p as a planar image of their own. */
+static hush_planar planar_rows(const hush_planar *p, int y0, int n) {
+  hush_planar r = *p;
+  for (int c = 0; c < p->channels; c++) r.plane[c] = p->plane[c] + (size_t)y0 * p->width;
   r.height = (uint32_t)n;
   return r;
 }
@@ -831,10 +849,9 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
      * in place (each pixel's sample is read before its result is written):
      * imported into the frame's planes, both went out to memory and came
      * back, and rows of their own were one more set of lines to keep */
-    hush_planar *albedo = &ff->unit_rows[2 * me + 1];
+    hush_planar *albedo = &ff->unit_rows[UNIT_ROWS * me + UNIT_ALBEDO];
     const hush_planar *out = &ff->acc->color[1 - ff->acc->latest];
     const int a0 = unit_first_row(&fr->grid, rows, u);
-    const size_t W = (size_t)fr->grid.width;
     if (a0 < y0) {
       /* the rows above the unit's own that TAA's box reads: their albedo
        * (the colour into spare rows; their NaN/Inf counted again, which
@@ -842,16 +859,12 @@ static void fused_unit(const fused_frame *ff, int u, int me, float *scratch) {
       const hush_image_view cv = view_rows(ff->colour, a0, y0 - a0),
                             av = view_rows(ff->albedo_view, a0, y0 - a0);
       ff->bad[(size_t)me * FUSED_STRIDE] += hush__import_albedo_demodulated_rows(
-          &cv, &ff->unit_rows[2 * me], &av, albedo, 0, y0 - a0, 0);
+          &cv, &ff->unit_rows[UNIT_ROWS * me + UNIT_SPARE], &av, albedo, 0, y0 - a0, 0);
     }
     const hush_image_view cv = view_rows(ff->colour, y0, y1 - y0),
                           av = view_rows(ff->albedo_view, y0, y1 - y0);
-    hush_planar own = *out, own_albedo = *albedo;
-    own.height = own_albedo.height = (uint32_t)(y1 - y0);
-    for (int c = 0; c < 3; c++) {
-      own.plane[c] = out->plane[c] + (size_t)y0 * W;
-      own_albedo.plane[c] = albedo->plane[c] + (size_t)(y0 - a0) * W;
-    }
+    hush_planar own = planar_rows(out, y0, y1 - y0),
+                own_albedo = planar_rows(albedo, y0 - a0, y1 - y0);
     ff->bad[(size_t)me * FUSED_STRIDE] +=
         hush__import_albedo_demodulated_rows(&cv, &own, &av, &own_albedo, 0, y1 - y0, 0);
     sample = (const float *const *)out->plane;
@@ -919,18 +932,13 @@ static hush_planar *unit_rows_for(bmfr_state *st, hush_device device, const bmfr
   }
   if (st->unit_rows && cap <= st->unit_rows_cap && above <= st->unit_rows_above)
     return st->unit_rows;
-  if (st->unit_rows)
-    for (int k = 0; k < 2 * st->threads; k++) hush__planar_free(&st->unit_rows[k]);
-  free(st->unit_rows);
-  st->unit_rows_cap = 0;
-  st->unit_rows = calloc(2 * (size_t)st->threads, sizeof *st->unit_rows);
+  unit_rows_free(st);
+  st->unit_rows = calloc(UNIT_ROWS * (size_t)st->threads, sizeof *st->unit_rows);
   if (!st->unit_rows) return NULL;
-  for (int k = 0; k < 2 * st->threads; k++)
+  for (int k = 0; k < UNIT_ROWS * st->threads; k++)
     if (hush__planar_init(device, &st->unit_rows[k], 3, (uint32_t)grid->width,
-                          (uint32_t)(k % 2 ? cap : above))) {
-      for (int j = 0; j <= k; j++) hush__planar_free(&st->unit_rows[j]);
-      free(st->unit_rows);
-      st->unit_rows = NULL;
+                          (uint32_t)(k % UNIT_ROWS == UNIT_ALBEDO ? cap : above))) {
+      unit_rows_free(st);
       return NULL;
     }
   st->unit_rows_cap = cap;
@@ -1186,9 +1194,9 @@ static hush_status bmfr_execute(hush_filter f, void *state, const hush_frame_inf
       ff.albedo_view = hush__filter_view(f, I_ALBEDO);
       ff.colour_dst = &st->color;
       ff.albedo_dst = &st->albedo;
-      /* the colour and albedo in per-unit rows where nothing reads them
-       * after the unit: TAA remodulates (no export of the albedo), no
-       * feature takes the albedo */
+      /* the albedo in per-thread unit rows where nothing reads it after
+       * the unit: TAA remodulates (no export of the albedo), no feature
+       * takes the albedo */
       ff.unit_rows = deferred && fused_taa && !(set.needs & (1u << BMFR_SRC_ALBEDO))
                          ? unit_rows_for(st, f->device, &fr.grid, st->rows)
                          : NULL;
