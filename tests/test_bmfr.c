@@ -372,6 +372,18 @@ static void test_fit_reference(void) {
           for (int m = 0; m < M; m++) g[m] += T[m * ld + i] * r;
         }
         spd_solve(G, M, g, d);
+        /* kept only if it lowers the residual */
+        double before = 0.0, after = 0.0;
+        for (int i = 0; i < n; i++) {
+          double r0 = mask[i] * z[c * ld + i], r1 = r0;
+          for (int m = 0; m < M; m++) {
+            r0 -= alpha[m] * T[m * ld + i];
+            r1 -= (alpha[m] + d[m]) * T[m * ld + i];
+          }
+          before += r0 * r0;
+          after += r1 * r1;
+        }
+        if (!(after < before)) break;
         for (int m = 0; m < M; m++) alpha[m] += d[m];
       }
       for (int i = 0; i < n; i++) {
@@ -421,6 +433,73 @@ static void fit_with_ld(size_t ld, int refine, float coef[BMFR_CHANNELS][BMFR_MA
   hush__bmfr_synthesize(T, M, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   for (int c = 0; c < 3; c++) memcpy(y_out + c * n, yc[c], (size_t)n * sizeof *y_out);
   fit_bufs_free(&fb);
+}
+
+/*
+ * A block with only a few valid pixels (an object's corner against the
+ * sky): with about as many pixels as features, the refinement's iteration
+ * can diverge (the noise's cross terms in R^T R), which gave weights of
+ * 1e4 to 1e12 and fitted values hundreds of times the radiance. A step is
+ * kept only when it lowers the residual, so the refined fit is never
+ * further from the data than the plain solve, and stays in its range.
+ */
+static void test_few_valid_block(void) {
+  bmfr_feature_set set;
+  default_set(&set);
+  const int M = set.count, n = 32 * 32;
+  const size_t ld = 1040;
+  const int counts[] = {3, 6, 9, 10, 12, 16, 20, 40};
+  for (size_t t = 0; t < sizeof counts / sizeof *counts; t++) {
+    fit_bufs fb;
+    fit_bufs_alloc(&fb, ld);
+    rng_state = 31u + (uint32_t)t;
+    int nvalid = 0;
+    for (int i = 0; i < n; i++) {
+      const float u = (float)(i % 32) / 32, v = (float)(i / 32) / 32;
+      hush_vec3 nn = hush_v3_normalize(hush_v3(rnd() - 0.5f, rnd() - 0.5f, 1));
+      fb.base[(BMFR_BASE_NORMAL + 0) * ld + i] = nn.x;
+      fb.base[(BMFR_BASE_NORMAL + 1) * ld + i] = nn.y;
+      fb.base[(BMFR_BASE_NORMAL + 2) * ld + i] = nn.z;
+      fb.base[(BMFR_BASE_POSITION + 0) * ld + i] = 3.0f + u;
+      fb.base[(BMFR_BASE_POSITION + 1) * ld + i] = 1.0f - v + 0.2f * u * u;
+      fb.base[(BMFR_BASE_POSITION + 2) * ld + i] = 0.5f * sinf(3 * u + 2 * v);
+      /* the valid pixels in the block's top-left corner, 6 a row */
+      const int valid = i % 32 < 6 && (i / 32) * 6 + i % 32 < counts[t];
+      fb.mask[i] = valid ? 1.0f : 0.0f;
+      nvalid += valid;
+      for (int c = 0; c < 3; c++) fb.z[c * ld + i] = valid ? (0.6f + 0.1f * (float)c) * (0.5f + rnd()) : 0.0f;
+    }
+    REQUIRE(nvalid == counts[t]);
+    const float *zc[3] = {fb.z, fb.z + ld, fb.z + 2 * ld};
+    float *yc[3] = {fb.y, fb.y + ld, fb.y + 2 * ld};
+    hush__bmfr_noise_table(fb.noise, M, n, ld, 3, 0.01f);
+    hush__bmfr_features_block(&set, fb.base, fb.mask, n, ld, fb.T, fb.scratch);
+    double residual[3] = {0, 0, 0}, ymax = 0.0, zmax = 0.0;
+    for (int refine = 0; refine <= 2; refine += 2) {
+      float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
+      hush__bmfr_fit(fb.T, M, zc, fb.noise, fb.mask, n, nvalid, ld, fb.A, refine, coef);
+      hush__bmfr_synthesize(fb.T, M, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
+      for (int c = 0; c < 3; c++) {
+        double r = 0.0;
+        for (int i = 0; i < n; i++)
+          if (fb.mask[i] > 0.0f) {
+            const double e = (double)yc[c][i] - zc[c][i];
+            r += e * e;
+            zmax = fmax(zmax, zc[c][i]);
+            if (refine) ymax = fmax(ymax, yc[c][i]);
+          }
+        if (!refine)
+          residual[c] = r;
+        else
+          CHECK_MSG(r <= residual[c] * (1.0 + 1e-4) + 1e-9,
+                    "%d valid pixels, channel %d: residual %g refined, %g plain", nvalid, c, r,
+                    residual[c]);
+      }
+    }
+    CHECK_MSG(ymax <= 4.0 * zmax, "%d valid pixels: fitted up to %g, radiance up to %g", nvalid,
+              ymax, zmax);
+    fit_bufs_free(&fb);
+  }
 }
 
 /* bmfr.c pads the block's column stride past a multiple of 1 KiB (4K
@@ -1226,6 +1305,7 @@ int main(void) {
   test_feature_sets();
   test_fit_reference();
   test_fit_padded_ld();
+  test_few_valid_block();
   test_offsets();
   hush_device dev = hush_device_new("threads=2");
   REQUIRE(dev);

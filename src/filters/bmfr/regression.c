@@ -12,6 +12,12 @@
 #include <math.h>
 #include <string.h>
 
+/* Rows of the small double matrices (R's inverse, the Gram matrix): the
+ * largest feature set rounded up to whole vectors of eight doubles. */
+#define RW 24
+_Static_assert(BMFR_MAX_FEATURES <= RW, "a row holds every feature");
+_Static_assert(RW % (3 * VD_LANES) == 0, "rows of a third of RW are whole vectors");
+
 /* Inlined, so that a constant argument (y == NULL) selects its loop. */
 #if defined(__GNUC__)
 #  define HUSH_INLINE inline __attribute__((always_inline))
@@ -227,7 +233,7 @@ static inline double clamp_coef(double v) {
 }
 
 /* R of the factorised A (upper triangle, rows 0..count-1) as a dense
- * row-major double matrix, read many times by the substitutions. */
+ * row-major double matrix. */
 typedef struct r_factor {
   double r[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES];
   int count;
@@ -241,33 +247,49 @@ static void r_factor_of(r_factor *R, const float *A, size_t ld, int count, doubl
     for (int j = k; j < count; j++) R->r[k][j] = (double)A[(size_t)j * ld + k];
 }
 
-/* x[c] = R^-1 b[c] by back substitution for the three channels together
- * (independent chains: the divisions of one overlap the others'). */
-static void back_substitute(const r_factor *R, const double b[BMFR_CHANNELS][BMFR_MAX_FEATURES],
-                            double x[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
-  for (int k = R->count - 1; k >= 0; k--) {
+/*
+ * B = R^-1, by back substitution on the identity's columns all at once,
+ * rows padded with zeros to NV vectors of doubles (NV a constant at each
+ * call). A pivot at or below the cut-off gives a zero row: b -> B b is
+ * then back substitution with that feature's weight set to 0, and b -> B^T
+ * b forward substitution with the same rule. Substituting each right-hand
+ * side in turn waited, row by row, on a chain of dependent multiply-adds
+ * and a division; here a row is one vector operation on the rows below
+ * (the fit's solves and refinement: 11.5k -> 10.8k TSC ticks a 32x32
+ * block on its own, docs/bmfr.md, thirteenth round).
+ */
+static HUSH_INLINE void r_inverse(const r_factor *R, double B[][RW], const int NV) {
+  const int n = R->count;
+  for (int k = n - 1; k >= 0; k--) {
     const double rkk = R->r[k][k];
-    const int use = fabs(rkk) > R->tol;
-    for (int c = 0; c < BMFR_CHANNELS; c++) {
-      double s = b[c][k];
-      for (int j = k + 1; j < R->count; j++) s -= R->r[k][j] * x[c][j];
-      x[c][k] = clamp_coef(use ? s / rkk : 0.0);
+    const double inv = fabs(rkk) > R->tol ? 1.0 / rkk : 0.0;
+    double row[RW];
+    for (int i = 0; i < NV * VD_LANES; i++) row[i] = i == k ? 1.0 : 0.0;
+    /* the row just finished (k + 1) last: the others' terms need not wait
+     * for it */
+    for (int j = n - 1; j > k; j--) {
+      const double r = R->r[k][j];
+      for (int i = 0; i < NV * VD_LANES; i++) row[i] -= r * B[j][i];
     }
+    for (int i = 0; i < NV * VD_LANES; i++) B[k][i] = row[i] * inv;
   }
 }
 
-/* x[c] = R^-T b[c] by forward substitution, the three channels together. */
-static void forward_substitute(const r_factor *R, const double b[BMFR_CHANNELS][BMFR_MAX_FEATURES],
-                               double x[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
-  for (int k = 0; k < R->count; k++) {
-    const double rkk = R->r[k][k];
-    const int use = fabs(rkk) > R->tol;
-    for (int c = 0; c < BMFR_CHANNELS; c++) {
-      double s = b[c][k];
-      for (int j = 0; j < k; j++) s -= R->r[j][k] * x[c][j];
-      x[c][k] = clamp_coef(use ? s / rkk : 0.0);
+/* out = sum_j x[j] M[j] over count rows of NV vectors: two running sums
+ * per vector (even and odd rows), as the loops over a block's rows. */
+static HUSH_INLINE void vd_combine(const double *x, const double (*M)[RW], int count, const int NV,
+                                   vd out[RW / VD_LANES]) {
+  vd even[RW / VD_LANES], odd[RW / VD_LANES];
+  for (int v = 0; v < NV; v++) even[v] = odd[v] = (vd){0};
+  int j = 0;
+  for (; j + 1 < count; j += 2)
+    for (int v = 0; v < NV; v++) {
+      even[v] += x[j] * vd_load(M[j] + v * VD_LANES);
+      odd[v] += x[j + 1] * vd_load(M[j + 1] + v * VD_LANES);
     }
-  }
+  if (j < count)
+    for (int v = 0; v < NV; v++) even[v] += x[j] * vd_load(M[j] + v * VD_LANES);
+  for (int v = 0; v < NV; v++) out[v] = even[v] + odd[v];
 }
 
 /*
@@ -335,8 +357,8 @@ static HUSH_INLINE void gram_pairs(const float *const *c, const int nc, const in
 /* The sums of pairs (ga[p], gb[p]) of [T | z]'s columns (ga < 10 <= gb:
  * into h) into G (both halves) and h, for the default ten features. */
 static void gram_store(const int *ga, const int *gb, int np, const float *o,
-                       double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
-                       double h[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+                       double G[BMFR_MAX_FEATURES][RW],
+                       double h[BMFR_CHANNELS][RW]) {
   for (int p = 0; p < np; p++) {
     if (gb[p] >= 10)
       h[gb[p] - 10][ga[p]] = o[p];
@@ -384,8 +406,8 @@ static const gram_pass_def gram_passes[5] = {
 /* Pass k of gram_passes (k a constant: the pass's sizes are then too, and
  * gram_pairs unrolls). */
 static HUSH_INLINE void gram_pass(const float *const *t, const int k, size_t ld,
-                                  double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
-                                  double h[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+                                  double G[BMFR_MAX_FEATURES][RW],
+                                  double h[BMFR_CHANNELS][RW]) {
   const gram_pass_def *d = &gram_passes[k];
   const float *c[9];
   for (int q = 0; q < d->nc; q++) c[q] = t[d->cols[q]];
@@ -420,8 +442,8 @@ static const float gram_zero[GRAM_ZERO_LD];
  * padding with zero columns.
  */
 static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS], size_t ld,
-                 double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES],
-                 double h[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
+                 double G[BMFR_MAX_FEATURES][RW],
+                 double h[BMFR_CHANNELS][RW]) {
   const float *t[BMFR_MAX_FEATURES + BMFR_CHANNELS];
   for (int m = 0; m < count; m++) t[m] = T + (size_t)m * ld;
   for (int c = 0; c < BMFR_CHANNELS; c++) t[count + c] = z[c];
@@ -470,6 +492,75 @@ static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS],
     }
 }
 
+/*
+ * The weights w[c] (rows of NV vectors, a constant at each call) from the
+ * factorised A: w = R^-1 r (eq. 5), then `refine` steps towards eq. 2's
+ * solution on the noise-free features. The noise that keeps the
+ * factorisation stable also perturbs the weights (errors in the
+ * variables, about eps / sqrt(n) of each). A step of
+ * w += (R^T R)^-1 T^T (z - T w) with the noisy R as the preconditioner
+ * removes that to first order; in the directions the noise regularises
+ * (near-collinear features), R^T R is dominated by the noise and the step
+ * stays small, so the regularisation keeps its effect there.
+ * T^T (z - T w) is taken as h - G w from the Gram matrix G = T^T T and
+ * h = T^T z, summed once in float (gram). The difference of two float sums
+ * loses the residual's own precision: an exact combination of the features
+ * comes out to about 2e-6 instead of 1e-6 (test_bmfr), far inside the
+ * 1e-3 asked.
+ * A step is kept only if it lowers the residual |z - T w|^2, which changes
+ * by d^T G d - 2 d^T (h - G w): with fewer valid pixels than about twice
+ * the features, the noise's cross terms in R^T R can make the iteration
+ * diverge (weights of 1e4 to 1e12 and fitted values hundreds of times the
+ * block's radiance with 9 valid pixels, test_bmfr); there the first
+ * rejected step ends the channel's refinement.
+ */
+static HUSH_INLINE void solve(const r_factor *R, const float *A, size_t ld, const float *T,
+                              const float *const z[BMFR_CHANNELS], int refine, const int NV,
+                              double w[BMFR_CHANNELS][RW]) {
+  const int count = R->count;
+  double B[BMFR_MAX_FEATURES][RW], BT[BMFR_MAX_FEATURES][RW];
+  r_inverse(R, B, NV);
+  for (int j = 0; j < count; j++)
+    for (int i = 0; i < NV * VD_LANES; i++) BT[j][i] = i < count ? B[i][j] : 0.0;
+  for (int c = 0; c < BMFR_CHANNELS; c++) {
+    double r[BMFR_MAX_FEATURES];
+    for (int k = 0; k < count; k++) r[k] = A[(size_t)(count + c) * ld + k];
+    vd x[RW / VD_LANES];
+    vd_combine(r, (const double(*)[RW])BT, count, NV, x);
+    for (int v = 0; v < NV; v++) vd_store(w[c] + v * VD_LANES, x[v]);
+    for (int k = 0; k < count; k++) w[c][k] = clamp_coef(w[c][k]);
+  }
+  if (refine <= 0) return;
+  double G[BMFR_MAX_FEATURES][RW], h[BMFR_CHANNELS][RW];
+  for (int j = 0; j < count; j++)
+    for (int i = count; i < NV * VD_LANES; i++) G[j][i] = 0.0;
+  for (int c = 0; c < BMFR_CHANNELS; c++)
+    for (int i = count; i < NV * VD_LANES; i++) h[c][i] = 0.0;
+  gram(T, count, z, ld, G, h);
+  for (int c = 0; c < BMFR_CHANNELS; c++)
+    for (int it = 0; it < refine; it++) {
+      vd gw[RW / VD_LANES], g[RW / VD_LANES], u[RW / VD_LANES], d[RW / VD_LANES];
+      vd gd[RW / VD_LANES];
+      double gs[RW], us[RW], ds[RW];
+      vd_combine(w[c], (const double(*)[RW])G, count, NV, gw);
+      for (int v = 0; v < NV; v++) {
+        g[v] = vd_load(h[c] + v * VD_LANES) - gw[v];
+        vd_store(gs + v * VD_LANES, g[v]);
+      }
+      vd_combine(gs, (const double(*)[RW])B, count, NV, u); /* R^-T g */
+      for (int v = 0; v < NV; v++) vd_store(us + v * VD_LANES, u[v]);
+      vd_combine(us, (const double(*)[RW])BT, count, NV, d); /* R^-1 R^-T g */
+      for (int v = 0; v < NV; v++) vd_store(ds + v * VD_LANES, d[v]);
+      vd_combine(ds, (const double(*)[RW])G, count, NV, gd);
+      vd e = {0};
+      for (int v = 0; v < NV; v++) e += d[v] * (gd[v] - 2.0 * g[v]);
+      double change = 0.0;
+      for (int l = 0; l < VD_LANES; l++) change += e[l];
+      if (!(change < 0.0)) break;
+      for (int k = 0; k < count; k++) w[c][k] = clamp_coef(w[c][k] + ds[k]);
+    }
+}
+
 void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNELS],
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
                     int refine, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
@@ -503,45 +594,14 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
   const double tol = 1e-4 * sqrt((double)(nvalid > 0 ? nvalid : 1));
   r_factor R;
   r_factor_of(&R, A, ld, count, tol);
-  double w[BMFR_CHANNELS][BMFR_MAX_FEATURES], r[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-  for (int c = 0; c < BMFR_CHANNELS; c++)
-    for (int k = 0; k < count; k++) r[c][k] = A[(size_t)(count + c) * ld + k];
-  back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])r, w);
-
-  /* Refinement towards eq. 2's solution on the noise-free features: the
-   * noise that keeps the factorisation stable also perturbs the weights
-   * (errors in the variables, about eps / sqrt(n) of each). One step of
-   * a += (R^T R)^-1 T^T (z - T a) with the noisy R as the preconditioner
-   * removes that to first order; in the directions the noise regularises
-   * (near-collinear features), R^T R is dominated by the noise and the
-   * step stays small, so the regularisation keeps its effect there.
-   * T^T (z - T a) is taken as h - G a from the Gram matrix G = T^T T and
-   * h = T^T z, summed once in float (one register-blocked pass set, 85
-   * FMAs a row vector) where each step's residuals and their dot products
-   * took 60 FMAs a row vector and step, and loads of broadcast weights:
-   * the stand-alone fit with two steps 13.7k -> 13.0k TSC ticks, the fit
-   * stage -2.6 % (docs/bmfr.md, tenth round). The difference of two
-   * float sums loses the residual's own precision: an exact combination
-   * of the features comes out to about 2e-6 instead of 1e-6 (test_bmfr),
-   * far inside the 1e-3 asked. */
-  if (refine > 0) {
-    double G[BMFR_MAX_FEATURES][BMFR_MAX_FEATURES], h[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-    gram(T, count, z, ld, G, h);
-    for (int it = 0; it < refine; it++) {
-      double g[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-      for (int c = 0; c < BMFR_CHANNELS; c++)
-        for (int m = 0; m < count; m++) {
-          double sum = h[c][m];
-          for (int j = 0; j < count; j++) sum -= G[m][j] * w[c][j];
-          g[c][m] = sum;
-        }
-      double u[BMFR_CHANNELS][BMFR_MAX_FEATURES], d[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-      forward_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])g, u);
-      back_substitute(&R, (const double(*)[BMFR_MAX_FEATURES])u, d);
-      for (int c = 0; c < BMFR_CHANNELS; c++)
-        for (int m = 0; m < count; m++) w[c][m] = clamp_coef(w[c][m] + d[c][m]);
-    }
-  }
+  double w[BMFR_CHANNELS][RW];
+  /* rows of 8, 16 or 24 doubles: NV a constant in each */
+  if (count <= RW / 3)
+    solve(&R, A, ld, T, z, refine, RW / 3 / VD_LANES, w);
+  else if (count <= 2 * RW / 3)
+    solve(&R, A, ld, T, z, refine, 2 * RW / 3 / VD_LANES, w);
+  else
+    solve(&R, A, ld, T, z, refine, RW / VD_LANES, w);
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
 }

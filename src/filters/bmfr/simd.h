@@ -64,6 +64,17 @@ static inline vf vf_fnma(vf a, vf b, vf c) {
 
 typedef int vi __attribute__((vector_size(VF_LANES * 4)));
 
+/* One register of doubles, for the fit's small solves (regression.c). */
+#define VD_LANES (VF_LANES / 2)
+typedef double vd __attribute__((vector_size(VD_LANES * 8)));
+
+static inline vd vd_load(const double *p) {
+  vd v;
+  __builtin_memcpy(&v, p, sizeof v);
+  return v;
+}
+static inline void vd_store(double *p, vd v) { __builtin_memcpy(p, &v, sizeof v); }
+
 /* m ? a : b per lane, m from a comparison (all bits set or clear) */
 static inline vf vf_select(vi m, vf a, vf b) { return (vf)(((vi)a & m) | ((vi)b & ~m)); }
 
