@@ -145,24 +145,31 @@ static HUSH_INLINE vf column_vector(float *restrict a, const float *restrict t,
   return v;
 }
 
-/* One column of the augmented matrix: a = t + mask (u - mean) (t NULL: 0),
- * returning sum_{i >= 1} mask[i] a[i], the first reflection's dot product
- * with column 0 (the mask), taken while the column is written; in two
- * running sums (even and odd vectors), as reflect_group's. */
+/* One column of the augmented matrix after the first reflection, rows 1..
+ * (fit_first_reflection): a = t + mask (u - mean) (t NULL: 0), returning
+ * sum_{i >= 2} y[i] a[i], the second reflection's dot product with its
+ * pivot column y (NULL: this column is y), taken while the column is
+ * written; in two running sums (even and odd vectors), as
+ * reflect_group's. Row 0 is the caller's. */
 static float build_column(float *restrict a, const float *restrict t, const float *restrict u,
-                          float mean, const float *restrict mask, size_t ld) {
+                          float mean, const float *restrict mask, const float *restrict y,
+                          size_t ld) {
   const vf mv = vf_set1(mean);
   const vf mk0 = vf_load(mask);
-  vf s = vf_from(0, 1) * mk0 * column_vector(a, t, u, mv, mk0, 0), odd = {0};
+  const vf v0 = column_vector(a, t, u, mv, mk0, 0);
+  vf s = vf_from(0, 2) * (y ? vf_load(y) : v0) * v0, odd = {0};
   size_t i = VF_LANES;
   for (; i + VF_LANES < ld; i += 2 * VF_LANES) {
     const vf mk = vf_load(mask + i), mk1 = vf_load(mask + i + VF_LANES);
-    s = vf_fma(mk, column_vector(a, t, u, mv, mk, i), s);
-    odd = vf_fma(mk1, column_vector(a, t, u, mv, mk1, i + VF_LANES), odd);
+    const vf v = column_vector(a, t, u, mv, mk, i);
+    const vf w = column_vector(a, t, u, mv, mk1, i + VF_LANES);
+    s = vf_fma(y ? vf_load(y + i) : v, v, s);
+    odd = vf_fma(y ? vf_load(y + i + VF_LANES) : w, w, odd);
   }
   for (; i < ld; i += VF_LANES) {
     const vf mk = vf_load(mask + i);
-    s = vf_fma(mk, column_vector(a, t, u, mv, mk, i), s);
+    const vf v = column_vector(a, t, u, mv, mk, i);
+    s = vf_fma(y ? vf_load(y + i) : v, v, s);
   }
   return vf_sum(s + odd);
 }
@@ -181,10 +188,11 @@ static float build_column(float *restrict a, const float *restrict t, const floa
  * column k + 1 (the next pivot column, whose updated rows the others'
  * next dot products need).
  */
-static void householder_r(float *A, size_t ld, int n, int m, int ncols, const float *dots0) {
+static void householder_r(float *A, size_t ld, int n, int k0, int m, int ncols,
+                          const float *dots0) {
   float dots[BMFR_MAX_FEATURES + BMFR_CHANNELS]; /* sum_{i > k} x_i a_ij, this step */
   memcpy(dots, dots0, (size_t)ncols * sizeof *dots);
-  for (int k = 0; k < m && k < n; k++) {
+  for (int k = k0; k < m && k < n; k++) {
     float *restrict x = A + (size_t)k * ld;
     const float xk = x[k], sigma = dots[k];
     const float norm = sqrtf(xk * xk + sigma);
@@ -514,9 +522,9 @@ static void gram(const float *T, int count, const float *const z[BMFR_CHANNELS],
  * block's radiance with 9 valid pixels, test_bmfr); there the first
  * rejected step ends the channel's refinement.
  */
-static HUSH_INLINE void solve(const r_factor *R, const float *A, size_t ld, const float *T,
-                              const float *const z[BMFR_CHANNELS], int refine, const int NV,
-                              double w[BMFR_CHANNELS][RW]) {
+static HUSH_INLINE void solve(const r_factor *R, const float *A, size_t ld, int refine,
+                              double G[BMFR_MAX_FEATURES][RW], double h[BMFR_CHANNELS][RW],
+                              const int NV, double w[BMFR_CHANNELS][RW]) {
   const int count = R->count;
   double B[BMFR_MAX_FEATURES][RW], BT[BMFR_MAX_FEATURES][RW];
   r_inverse(R, B, NV);
@@ -531,12 +539,10 @@ static HUSH_INLINE void solve(const r_factor *R, const float *A, size_t ld, cons
     for (int k = 0; k < count; k++) w[c][k] = clamp_coef(w[c][k]);
   }
   if (refine <= 0) return;
-  double G[BMFR_MAX_FEATURES][RW], h[BMFR_CHANNELS][RW];
   for (int j = 0; j < count; j++)
     for (int i = count; i < NV * VD_LANES; i++) G[j][i] = 0.0;
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int i = count; i < NV * VD_LANES; i++) h[c][i] = 0.0;
-  gram(T, count, z, ld, G, h);
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int it = 0; it < refine; it++) {
       vd gw[RW / VD_LANES], g[RW / VD_LANES], u[RW / VD_LANES], d[RW / VD_LANES];
@@ -561,30 +567,80 @@ static HUSH_INLINE void solve(const r_factor *R, const float *A, size_t ld, cons
     }
 }
 
+/* sums[j] = sum over the ld rows of column j of [T | mask z] (T is 0 on
+ * holes), for the first reflection when there is no Gram matrix. */
+static void column_sums(const float *T, int count, const float *const z[BMFR_CHANNELS],
+                        const float *mask, size_t ld, double *sums) {
+  for (int j = 0; j < count + BMFR_CHANNELS; j++) {
+    const float *t = j < count ? T + (size_t)j * ld : z[j - count];
+    vf s = {0}, odd = {0};
+    size_t i = 0;
+    for (; i + VF_LANES < ld; i += 2 * VF_LANES) {
+      s = vf_fma(vf_load(mask + i), vf_load(t + i), s);
+      odd = vf_fma(vf_load(mask + i + VF_LANES), vf_load(t + i + VF_LANES), odd);
+    }
+    for (; i < ld; i += VF_LANES) s = vf_fma(vf_load(mask + i), vf_load(t + i), s);
+    sums[j] = vf_sum(s + odd);
+  }
+}
+
 void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNELS],
                     const float *noise, const float *mask, int n, int nvalid, size_t ld, float *A,
                     int refine, float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES]) {
-  /* A = [T + N, z] (eq. 7), holes zero in every column; while each column
-   * is written, its dot product with column 0 below row 0 (the first
-   * reflection's) is taken, which saves the QR a pass per column */
-  float dots0[BMFR_MAX_FEATURES + BMFR_CHANNELS];
-  dots0[0] = build_column(A, NULL, mask, 0.0f, mask, ld);
-  for (int m = 1; m < count; m++) {
-    const float *restrict nz = noise + (size_t)m * ld;
+  const int ncols = count + BMFR_CHANNELS;
+  /* the refinement's Gram matrix first: its row 0 holds the column sums
+   * the first reflection needs (T's column 0 is the mask) */
+  double G[BMFR_MAX_FEATURES][RW], h[BMFR_CHANNELS][RW], sums[BMFR_MAX_FEATURES + BMFR_CHANNELS];
+  if (refine > 0) {
+    gram(T, count, z, ld, G, h);
+    for (int j = 0; j < count; j++) sums[j] = G[0][j];
+    for (int c = 0; c < BMFR_CHANNELS; c++) sums[count + c] = h[c][0];
+  } else {
+    column_sums(T, count, z, mask, ld, sums);
+  }
+  /* The augmented matrix A = [T + N, z] (eq. 7), holes zero in every
+   * column, is never formed: each column is written as the first
+   * Householder reflection leaves it. Column 0 is the mask (the constant
+   * feature, no noise), x = mask: with alpha = -sign(x_0) sqrt(nvalid) and
+   * v = x - alpha e_0, a column a becomes a - c v, c = 2 v.a / v.v, and
+   * v.a = vk a_0 + sum_{i >= 1} mask_i a_i comes from the column's sum
+   * over the valid rows. The noise is zero-mean there (re-centred below
+   * when there are holes), so a feature column's sum is T's (up to the
+   * rounding of the noise's mean, about 1e-9 of it); rows 1.. of a - c v
+   * are then t + mask (u - (mean + c)), a build with another mean. Where
+   * the build and the QR's first pass wrote each column and then updated
+   * it, one pass writes it, and column 0 is not written at all: a 32x32
+   * block's fit stand-alone 11.07k -> 9.99k TSC ticks, the fit stage 4.09
+   * -> 3.90 ms (docs/bmfr.md, thirteenth round). The results move by
+   * rounding only (about 1e-7 of the output). */
+  const float m0 = mask[0];
+  const double norm = sqrt((double)nvalid);
+  const double alpha = nvalid > 0 ? (m0 > 0.0f ? -norm : norm) : 0.0;
+  const double vk = m0 - alpha;
+  const double scale = nvalid > 0 ? 2.0 / ((double)(nvalid - (m0 > 0.0f)) + vk * vk) : 0.0;
+  float dots[BMFR_MAX_FEATURES + BMFR_CHANNELS];
+  A[0] = (float)alpha;
+  for (int j = 1; j < ncols; j++) {
+    const int feature = j < count;
+    const float *t = feature ? T + (size_t)j * ld : NULL;
+    const float *u = feature ? noise + (size_t)j * ld : z[j - count];
     float mean = 0.0f;
-    if (nvalid < n && nvalid > 0) {
+    if (feature && nvalid < n && nvalid > 0) {
       /* keep the noise zero-mean over the rows that take part */
       double s = 0.0;
 #pragma omp simd reduction(+ : s)
-      for (int i = 0; i < n; i++) s += (double)(mask[i] * nz[i]);
+      for (int i = 0; i < n; i++) s += (double)(mask[i] * u[i]);
       mean = (float)(s / nvalid);
     }
-    dots0[m] = build_column(A + (size_t)m * ld, T + (size_t)m * ld, nz, mean, mask, ld);
+    /* the column's row 0 as built, then v.a and c */
+    const float a0 = fmaf(m0, u[0] - mean, t ? t[0] : 0.0f);
+    const double va = vk * a0 + (sums[j] - (double)m0 * a0);
+    const double c = va * scale;
+    float *a = A + (size_t)j * ld;
+    dots[j] = build_column(a, t, u, (float)(mean + c), mask, j == 1 ? NULL : A + ld, ld);
+    a[0] = (float)(a0 - c * vk);
   }
-  for (int c = 0; c < BMFR_CHANNELS; c++)
-    dots0[count + c] = build_column(A + (size_t)(count + c) * ld, NULL, z[c], 0.0f, mask, ld);
-
-  householder_r(A, ld, n, count, count + BMFR_CHANNELS, dots0);
+  householder_r(A, ld, n, 1, count, ncols, dots);
 
   /* R alpha = r per channel (eq. 5). A pivot below the cut-off is a
    * direction the block does not determine: its weight is 0 (the feature
@@ -597,11 +653,11 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
   double w[BMFR_CHANNELS][RW];
   /* rows of 8, 16 or 24 doubles: NV a constant in each */
   if (count <= RW / 3)
-    solve(&R, A, ld, T, z, refine, RW / 3 / VD_LANES, w);
+    solve(&R, A, ld, refine, G, h, RW / 3 / VD_LANES, w);
   else if (count <= 2 * RW / 3)
-    solve(&R, A, ld, T, z, refine, 2 * RW / 3 / VD_LANES, w);
+    solve(&R, A, ld, refine, G, h, 2 * RW / 3 / VD_LANES, w);
   else
-    solve(&R, A, ld, T, z, refine, RW / VD_LANES, w);
+    solve(&R, A, ld, refine, G, h, RW / VD_LANES, w);
   for (int c = 0; c < BMFR_CHANNELS; c++)
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
 }
