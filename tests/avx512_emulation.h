@@ -141,6 +141,36 @@ static inline uint16_t hush_emu_test_epi8(simde__m128i a, simde__m128i b) {
 #undef _mm_test_epi8_mask
 #define _mm_test_epi8_mask(a, b) hush_emu_test_epi8((a), (b))
 
+/* Integer lane compares into masks that SIMDe 0.7.4 does not alias
+ * (the reprojection's and TAA's chunk tests). */
+static inline simde__mmask16 hush_emu_cmpneq_epi32(simde__m512i a, simde__m512i b) {
+  int32_t x[16], y[16];
+  hush_emu_get_i(x, a);
+  hush_emu_get_i(y, b);
+  simde__mmask16 m = 0;
+  for (int i = 0; i < 16; i++) m |= (simde__mmask16)((x[i] != y[i]) << i);
+  return m;
+}
+#undef _mm512_cmpneq_epi32_mask
+#define _mm512_cmpneq_epi32_mask(a, b) hush_emu_cmpneq_epi32((a), (b))
+
+static inline simde__mmask16 hush_emu_testn_epi32(simde__m512i a, simde__m512i b) {
+  int32_t x[16], y[16];
+  hush_emu_get_i(x, a);
+  hush_emu_get_i(y, b);
+  simde__mmask16 m = 0;
+  for (int i = 0; i < 16; i++) m |= (simde__mmask16)(((x[i] & y[i]) == 0) << i);
+  return m;
+}
+#undef _mm512_testn_epi32_mask
+#define _mm512_testn_epi32_mask(a, b) hush_emu_testn_epi32((a), (b))
+
+static inline uint16_t hush_emu_cmpeq_epi8(simde__m128i a, simde__m128i b) {
+  return (uint16_t)(simde_mm_movemask_epi8(simde_mm_cmpeq_epi8(a, b)) & 0xffff);
+}
+#undef _mm_cmpeq_epi8_mask
+#define _mm_cmpeq_epi8_mask(a, b) hush_emu_cmpeq_epi8((a), (b))
+
 /* vrcp14ps and vrsqrt14ps: exact, within the hardware's 2^-14. */
 #undef _mm512_rcp14_ps
 #define _mm512_rcp14_ps(a) simde_mm512_div_ps(simde_mm512_set1_ps(1.0f), (a))
