@@ -685,3 +685,25 @@ void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
       vf_store(y[c] + i, vf_select(sums[c][0] > zero, sums[c][0], zero));
   }
 }
+
+void hush__bmfr_synthesize_rows(const float *T, int count, size_t ld, int B,
+                                const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                                const float *mask, const float *const z[BMFR_CHANNELS], int r0,
+                                int r1, float *const out[BMFR_CHANNELS], size_t stride) {
+  const float *const k[BMFR_CHANNELS] = {coef[0], coef[1], coef[2]};
+  const vf zero = {0};
+  for (int r = r0; r < r1; r++)
+    for (int x = 0; x < B; x += 2 * VF_LANES) {
+      const size_t i = (size_t)r * (size_t)B + (size_t)x, o = (size_t)(r - r0) * stride + (size_t)x;
+      vf sums[BMFR_CHANNELS][2] = {{zero, zero}, {zero, zero}, {zero, zero}};
+      feature_sums(T, count, ld, i, k, 2, sums);
+      for (int v = 0; v < 2; v++) {
+        const size_t iv = i + (size_t)v * VF_LANES;
+        const vi valid = vf_load(mask + iv) > zero;
+        for (int c = 0; c < BMFR_CHANNELS; c++) {
+          const vf y = vf_select(sums[c][v] > zero, sums[c][v], zero);
+          vf_store(out[c] + o + (size_t)v * VF_LANES, vf_select(valid, y, vf_load(z[c] + iv)));
+        }
+      }
+    }
+}

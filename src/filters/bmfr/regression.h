@@ -59,4 +59,13 @@ void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
                            const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
                            float *const y[BMFR_CHANNELS]);
 
+/* The fit of rows r0..r1-1 of a B x B block (B a multiple of two vectors)
+ * straight into an image: out[c][(r - r0) stride + x] = mask ? y : z[c],
+ * y as hush__bmfr_synthesize's (the same bits), z[c] the block's columns
+ * (what a pixel out of the fit keeps). */
+void hush__bmfr_synthesize_rows(const float *T, int count, size_t ld, int B,
+                                const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
+                                const float *mask, const float *const z[BMFR_CHANNELS], int r0,
+                                int r1, float *const out[BMFR_CHANNELS], size_t stride);
+
 #endif
