@@ -441,7 +441,8 @@ static void fit_with_ld(size_t ld, int refine, float coef[BMFR_CHANNELS][BMFR_MA
  * can diverge (the noise's cross terms in R^T R), which gave weights of
  * 1e4 to 1e12 and fitted values hundreds of times the radiance. A step is
  * kept only when it lowers the residual, so the refined fit is never
- * further from the data than the plain solve, and stays in its range.
+ * further from the data than the plain solve (up to rounding), and stays
+ * in its range.
  */
 static void test_few_valid_block(void) {
   bmfr_feature_set set;
@@ -491,7 +492,11 @@ static void test_few_valid_block(void) {
         if (!refine)
           residual[c] = r;
         else
-          CHECK_MSG(r <= residual[c] * (1.0 + 1e-4) + 1e-9,
+          /* (the step's test uses the Gram's float sums: near singular
+           * blocks may keep a step that changes the residual by its
+           * rounding, 2e-4 of it with clang -O1 -ffp-contract=off; the
+           * divergence this guards against multiplied it by up to 1e10) */
+          CHECK_MSG(r <= residual[c] * 1.01 + 1e-9,
                     "%d valid pixels, channel %d: residual %g refined, %g plain", nvalid, c, r,
                     residual[c]);
       }
