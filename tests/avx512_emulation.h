@@ -63,19 +63,31 @@ static inline simde__m512 hush_emu_reduce_floor(simde__m512 a) {
 #undef _mm512_reduce_ps
 #define _mm512_reduce_ps(a, imm) hush_emu_reduce_floor(a)
 
-static inline simde__mmask16 hush_emu_cmplt_epi32(simde__m512i a, simde__m512i b) {
+/* Integer lane tests into masks: a < b, a != b, (a & b) == 0 (the last
+ * two have no SIMDe 0.7.4 alias; the reprojection's and TAA's chunk tests
+ * use them). */
+enum { HUSH_EMU_LT, HUSH_EMU_NE, HUSH_EMU_TESTN };
+static inline simde__mmask16 hush_emu_lanes_epi32(simde__m512i a, simde__m512i b, int op) {
   int32_t x[16], y[16];
   hush_emu_get_i(x, a);
   hush_emu_get_i(y, b);
   simde__mmask16 m = 0;
-  for (int i = 0; i < 16; i++) m |= (simde__mmask16)((x[i] < y[i]) << i);
+  for (int i = 0; i < 16; i++) {
+    const int t = op == HUSH_EMU_LT ? x[i] < y[i] : op == HUSH_EMU_NE ? x[i] != y[i]
+                                                                      : (x[i] & y[i]) == 0;
+    m |= (simde__mmask16)(t << i);
+  }
   return m;
 }
 #undef _mm512_cmplt_epi32_mask
-#define _mm512_cmplt_epi32_mask(a, b) hush_emu_cmplt_epi32((a), (b))
+#define _mm512_cmplt_epi32_mask(a, b) hush_emu_lanes_epi32((a), (b), HUSH_EMU_LT)
 #undef _mm512_mask_cmplt_epi32_mask
 #define _mm512_mask_cmplt_epi32_mask(k, a, b) \
-  ((simde__mmask16)((k) & hush_emu_cmplt_epi32((a), (b))))
+  ((simde__mmask16)((k) & hush_emu_lanes_epi32((a), (b), HUSH_EMU_LT)))
+#undef _mm512_cmpneq_epi32_mask
+#define _mm512_cmpneq_epi32_mask(a, b) hush_emu_lanes_epi32((a), (b), HUSH_EMU_NE)
+#undef _mm512_testn_epi32_mask
+#define _mm512_testn_epi32_mask(a, b) hush_emu_lanes_epi32((a), (b), HUSH_EMU_TESTN)
 
 /* The minimum or maximum of the lanes in k (INT_MAX or INT_MIN for none). */
 static inline int hush_emu_mask_reduce(simde__mmask16 k, simde__m512i a, int want_max) {
@@ -141,30 +153,8 @@ static inline uint16_t hush_emu_test_epi8(simde__m128i a, simde__m128i b) {
 #undef _mm_test_epi8_mask
 #define _mm_test_epi8_mask(a, b) hush_emu_test_epi8((a), (b))
 
-/* Integer lane compares into masks that SIMDe 0.7.4 does not alias
- * (the reprojection's and TAA's chunk tests). */
-static inline simde__mmask16 hush_emu_cmpneq_epi32(simde__m512i a, simde__m512i b) {
-  int32_t x[16], y[16];
-  hush_emu_get_i(x, a);
-  hush_emu_get_i(y, b);
-  simde__mmask16 m = 0;
-  for (int i = 0; i < 16; i++) m |= (simde__mmask16)((x[i] != y[i]) << i);
-  return m;
-}
-#undef _mm512_cmpneq_epi32_mask
-#define _mm512_cmpneq_epi32_mask(a, b) hush_emu_cmpneq_epi32((a), (b))
-
-static inline simde__mmask16 hush_emu_testn_epi32(simde__m512i a, simde__m512i b) {
-  int32_t x[16], y[16];
-  hush_emu_get_i(x, a);
-  hush_emu_get_i(y, b);
-  simde__mmask16 m = 0;
-  for (int i = 0; i < 16; i++) m |= (simde__mmask16)(((x[i] & y[i]) == 0) << i);
-  return m;
-}
-#undef _mm512_testn_epi32_mask
-#define _mm512_testn_epi32_mask(a, b) hush_emu_testn_epi32((a), (b))
-
+/* No SIMDe 0.7.4 alias either (the kind bytes of the blends' and TAA's
+ * contiguity tests). */
 static inline uint16_t hush_emu_cmpeq_epi8(simde__m128i a, simde__m128i b) {
   return (uint16_t)(simde_mm_movemask_epi8(simde_mm_cmpeq_epi8(a, b)) & 0xffff);
 }

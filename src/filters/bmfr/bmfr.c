@@ -563,7 +563,7 @@ static block_cols block_cols_of(float *scratch, size_t ld) {
  * image and has a valid pixel goes straight into the fitted planes (its
  * rows in the image; returns 1): the weighted sum stored where the
  * write-back would have put it, without the round trip through y (the
- * fit stage 3.90 -> 3.79 ms, docs/bmfr.md, thirteenth round). Otherwise
+ * fit stage 3.81 -> 3.71 ms, docs/bmfr.md, thirteenth round). Otherwise
  * leaves the fit in y (where the mask is 1) for fit_strip's write-back. */
 static int fit_gathered(const fit_frame *fr, const block_geom *g, block_cols *b) {
   const int B = fr->grid.block, n = fr->n;
@@ -590,8 +590,6 @@ static int fit_gathered(const fit_frame *fr, const block_geom *g, block_cols *b)
   if (nvalid > 0) {
     const int count = fr->set->count;
     float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES];
-    float *yc[BMFR_CHANNELS];
-    for (int c = 0; c < BMFR_CHANNELS; c++) yc[c] = b->y + (size_t)c * ld;
     hush__bmfr_features_block(fr->set, b->base, b->mask, n, ld, b->T, b->spare);
     hush__bmfr_fit(b->T, count, (const float *const *)zc, fr->noise, b->mask, n, nvalid, ld, b->A,
                    fr->refine, coef);
@@ -604,6 +602,8 @@ static int fit_gathered(const fit_frame *fr, const block_geom *g, block_cols *b)
                                  b->mask, (const float *const *)zc, g->r0, g->r1, out, (size_t)W);
       return 1;
     }
+    float *yc[BMFR_CHANNELS];
+    for (int c = 0; c < BMFR_CHANNELS; c++) yc[c] = b->y + (size_t)c * ld;
     hush__bmfr_synthesize(b->T, count, n, ld, (const float(*)[BMFR_MAX_FEATURES])coef, yc);
   }
   return 0;

@@ -146,7 +146,7 @@ static HUSH_INLINE vf column_vector(float *restrict a, const float *restrict t,
 }
 
 /* One column of the augmented matrix after the first reflection, rows 1..
- * (fit_first_reflection): a = t + mask (u - mean) (t NULL: 0), returning
+ * (hush__bmfr_fit): a = t + mask (u - mean) (t NULL: 0), returning
  * sum_{i >= 2} y[i] a[i], the second reflection's dot product with its
  * pivot column y (NULL: this column is y), taken while the column is
  * written; in two running sums (even and odd vectors), as
@@ -662,6 +662,11 @@ void hush__bmfr_fit(const float *T, int count, const float *const z[BMFR_CHANNEL
     for (int k = 0; k < count; k++) coef[c][k] = (float)w[c][k];
 }
 
+/* The weighted sum clamped below at 0, as the published code does
+ * (radiance is not negative); > 0 also maps a NaN (impossible with finite
+ * inputs) to 0. */
+static inline vf positive(vf s) { return vf_select(s > (vf){0}, s, (vf){0}); }
+
 void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
                            const float coef[BMFR_CHANNELS][BMFR_MAX_FEATURES],
                            float *const y[BMFR_CHANNELS]) {
@@ -676,13 +681,13 @@ void hush__bmfr_synthesize(const float *T, int count, int n, size_t ld,
     feature_sums(T, count, ld, i, k, 2, sums);
     for (int v = 0; v < 2; v++)
       for (int c = 0; c < BMFR_CHANNELS; c++)
-        vf_store(y[c] + i + (size_t)v * VF_LANES, vf_select(sums[c][v] > zero, sums[c][v], zero));
+        vf_store(y[c] + i + (size_t)v * VF_LANES, positive(sums[c][v]));
   }
   for (; i < ld; i += VF_LANES) {
     vf sums[BMFR_CHANNELS][2] = {{zero, zero}, {zero, zero}, {zero, zero}};
     feature_sums(T, count, ld, i, k, 1, sums);
     for (int c = 0; c < BMFR_CHANNELS; c++)
-      vf_store(y[c] + i, vf_select(sums[c][0] > zero, sums[c][0], zero));
+      vf_store(y[c] + i, positive(sums[c][0]));
   }
 }
 
@@ -701,8 +706,8 @@ void hush__bmfr_synthesize_rows(const float *T, int count, size_t ld, int B,
         const size_t iv = i + (size_t)v * VF_LANES;
         const vi valid = vf_load(mask + iv) > zero;
         for (int c = 0; c < BMFR_CHANNELS; c++) {
-          const vf y = vf_select(sums[c][v] > zero, sums[c][v], zero);
-          vf_store(out[c] + o + (size_t)v * VF_LANES, vf_select(valid, y, vf_load(z[c] + iv)));
+          vf_store(out[c] + o + (size_t)v * VF_LANES,
+                   vf_select(valid, positive(sums[c][v]), vf_load(z[c] + iv)));
         }
       }
     }
