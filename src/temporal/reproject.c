@@ -917,20 +917,17 @@ static int window_read(const int32_t *origin, const uint8_t *use, int32_t W, siz
  * base. Two mask compares, where a loop over the pixels with a branch each
  * had taken 70 % of chunk_mode's samples (a profile of the bench frames). */
 static HUSH_ALWAYS_INLINE int chunk_bases(const span_taps *o, int k0, int32_t base[2]) {
-  const __m512i inside = chunk_load(o->inside + k0);
+  const __m512i inside = chunk_load(o->inside + k0), origin = chunk_load(o->origin + k0);
   const __mmask16 in = _mm512_test_epi32_mask(inside, inside);
   if (!in) return 0;
-  const __m512i b = _mm512_sub_epi32(
-      chunk_load(o->origin + k0),
-      _mm512_add_epi32(_mm512_set1_epi32(k0),
-                       _mm512_set_epi32(15, 14, 13, 12, 11, 10, 9, 8, 7, 6, 5, 4, 3, 2, 1, 0)));
+  /* the pixels whose origin is base + k: a run from base + k0 */
   const int first = __builtin_ctz(in);
   base[0] = o->origin[k0 + first] - (k0 + first);
-  const __mmask16 rest = in & ~_mm512_mask_cmpeq_epi32_mask(in, b, _mm512_set1_epi32(base[0]));
+  const __mmask16 rest = in & ~hush__run_mask16(origin, base[0] + k0);
   if (!rest) return 1;
   const int second = __builtin_ctz(rest);
   base[1] = o->origin[k0 + second] - (k0 + second);
-  return rest & ~_mm512_mask_cmpeq_epi32_mask(rest, b, _mm512_set1_epi32(base[1])) ? 3 : 2;
+  return rest & ~hush__run_mask16(origin, base[1] + k0) ? 3 : 2;
 }
 
 /*
